@@ -1,0 +1,18 @@
+//! Time, durations and dynamically typed values shared by every KPL layer.
+//!
+//! Everything above this crate (syntax, semantic analysis, the MTL engine, the runtime, anchoring)
+//! speaks of time as integer microseconds ([`Time`]) and of data as [`Value`]s whose shape is given
+//! by a [`ValueType`]. This crate has no I/O and no clock.
+//!
+//! ```
+//! use kpl_core::{TimeUnit, Value};
+//! assert_eq!(TimeUnit::Ms.to_micros(250), Some(250_000));
+//! let v = Value::vec2(3.0, 4.0);
+//! assert_eq!(v.as_vec2(), Some([3.0, 4.0]));
+//! ```
+
+mod time;
+mod value;
+
+pub use time::{Time, TimeUnit, format_micros};
+pub use value::{BBox, FieldType, JsonError, Record, RecordType, Value, ValueType};

@@ -1,0 +1,4 @@
+//! One module per subcommand; each has its clap `Args` (or `Command`) and a `run` returning the
+//! process exit code: 0 success, 1 the input has errors, 2 usage or I/O errors.
+
+pub mod cater;

@@ -1,0 +1,46 @@
+//! The `kpl` command: the only crate that prints. It parses arguments, loads files, renders
+//! diagnostics and wires the library crates together; each subcommand lives in its own module
+//! under `cmd/`.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// KPL: stream-based knowledge processing with hierarchical anchoring.
+#[derive(Debug, Parser)]
+#[command(name = "kpl", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
+    #[command(subcommand)]
+    Cater(cmd::cater::Command),
+}
+
+fn main() -> ExitCode {
+    init_tracing();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(err) => {
+            // clap prints help and version to stdout with exit 0, usage errors to stderr with 2.
+            let _ = err.print();
+            return if err.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
+        }
+    };
+    match cli.command {
+        Command::Cater(command) => cmd::cater::run(command),
+    }
+}
+
+/// Logs go to stderr; `RUST_LOG` selects what is shown (default: warnings).
+fn init_tracing() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
