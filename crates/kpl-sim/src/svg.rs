@@ -1,0 +1,173 @@
+//! SVG pictures of a road network with tracks drawn over it (ground truth, percepts, anchored
+//! objects: any list of point lists), so that a user can look at what was anchored.
+//!
+//! ```
+//! use kpl_sim::{RoadNetwork, scenarios, svg};
+//! let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
+//! let truth = svg::Layer::line("car1", "#1f77b4", vec![vec![[-100.0, -1.75], [100.0, -1.75]]]);
+//! let picture = svg::render(&net, &[truth], &svg::SvgOptions::default());
+//! assert!(picture.starts_with("<svg"));
+//! ```
+
+use std::fmt::Write;
+
+use crate::format::OccluderKind;
+use crate::geom::Point;
+use crate::network::RoadNetwork;
+
+/// How a layer's tracks are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mark {
+    /// A polyline through each track's points.
+    Line,
+    /// A dot at each point.
+    Dots,
+}
+
+/// One legend entry: tracks in one colour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layer {
+    pub label: String,
+    /// Any SVG colour (`#d62728`, `red`).
+    pub color: String,
+    pub mark: Mark,
+    pub tracks: Vec<Vec<Point>>,
+}
+
+impl Layer {
+    pub fn line(label: &str, color: &str, tracks: Vec<Vec<Point>>) -> Layer {
+        Layer { label: label.to_string(), color: color.to_string(), mark: Mark::Line, tracks }
+    }
+
+    pub fn dots(label: &str, color: &str, tracks: Vec<Vec<Point>>) -> Layer {
+        Layer { label: label.to_string(), color: color.to_string(), mark: Mark::Dots, tracks }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct SvgOptions {
+    /// Width of the picture in pixels; the height follows the network's aspect ratio.
+    pub width_px: f64,
+    /// Draw only this part of the world (`(min, max)` in metres) instead of the whole network.
+    pub view: Option<(Point, Point)>,
+}
+
+impl Default for SvgOptions {
+    fn default() -> SvgOptions {
+        SvgOptions { width_px: 1000.0, view: None }
+    }
+}
+
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+struct View {
+    lo: Point,
+    hi: Point,
+    scale: f64,
+}
+
+impl View {
+    fn px(&self, p: Point) -> (f64, f64) {
+        ((p[0] - self.lo[0]) * self.scale, (self.hi[1] - p[1]) * self.scale)
+    }
+
+    fn path(&self, points: &[Point]) -> String {
+        let mut d = String::new();
+        for (i, &p) in points.iter().enumerate() {
+            let (x, y) = self.px(p);
+            let _ = write!(d, "{}{x:.1},{y:.1}", if i == 0 { "M" } else { " L" });
+        }
+        d
+    }
+}
+
+/// Draws the network (roads by level, crossings, bridges and tunnels) and the layers over it.
+pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> String {
+    let (lo, hi) = options.view.unwrap_or_else(|| net.bounds());
+    let world_width = (hi[0] - lo[0]).max(1.0);
+    let world_height = (hi[1] - lo[1]).max(1.0);
+    let width_px = if options.width_px.is_finite() { options.width_px.clamp(50.0, 20_000.0) } else { 1000.0 };
+    let view = View { lo, hi, scale: width_px / world_width };
+    let height_px = world_height * view.scale;
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{width_px:.0}" height="{height_px:.0}" viewBox="0 0 {width_px:.1} {height_px:.1}">"##
+    );
+    let _ = writeln!(svg, r##"<rect width="100%" height="100%" fill="#eef3e8"/>"##);
+
+    let mut levels: Vec<i32> = net.roads().iter().map(|r| r.level).collect();
+    levels.sort_unstable();
+    levels.dedup();
+    let ground = levels.first().copied().unwrap_or(0);
+    for &level in &levels {
+        for road in net.roads().iter().filter(|r| r.level == level) {
+            let d = view.path(road.centerline.points());
+            let w = road.width_m * view.scale;
+            let _ = writeln!(svg, r##"<path d="{d}" fill="none" stroke="#8a8a8a" stroke-width="{w:.1}"/>"##);
+            let _ = writeln!(
+                svg,
+                r##"<path d="{d}" fill="none" stroke="#ffffff" stroke-width="{:.1}" stroke-dasharray="{:.1}"/>"##,
+                (0.15 * view.scale).max(0.5),
+                3.0 * view.scale
+            );
+        }
+        if level == ground {
+            for node in net.nodes().iter().filter(|n| n.area.len() >= 3) {
+                let _ = writeln!(svg, r##"<path d="{} Z" fill="#8a8a8a"/>"##, view.path(&node.area));
+            }
+            for occluder in net.occluders() {
+                let (fill, opacity) = match occluder.kind {
+                    OccluderKind::Bridge => ("#6b5a45", 0.8),
+                    OccluderKind::Tunnel => ("#3a3a3a", 0.9),
+                };
+                let _ = writeln!(
+                    svg,
+                    r##"<path d="{} Z" fill="{fill}" fill-opacity="{opacity}"><title>{}</title></path>"##,
+                    view.path(&occluder.area),
+                    escape(&occluder.name)
+                );
+            }
+        }
+    }
+
+    let dot_radius = (0.8 * view.scale).clamp(1.0, 4.0);
+    for layer in layers {
+        let color = escape(&layer.color);
+        for track in &layer.tracks {
+            match layer.mark {
+                Mark::Line if track.len() >= 2 => {
+                    let _ = writeln!(
+                        svg,
+                        r##"<path d="{}" fill="none" stroke="{color}" stroke-width="1.5"/>"##,
+                        view.path(track)
+                    );
+                }
+                Mark::Line | Mark::Dots => {
+                    for &p in track {
+                        let (x, y) = view.px(p);
+                        let _ = writeln!(
+                            svg,
+                            r##"<circle cx="{x:.1}" cy="{y:.1}" r="{dot_radius:.1}" fill="{color}"/>"##
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    for (i, layer) in layers.iter().enumerate() {
+        let y = 16.0 + 18.0 * i as f64;
+        let _ = writeln!(
+            svg,
+            r##"<rect x="8" y="{:.0}" width="12" height="12" fill="{}"/><text x="26" y="{y:.0}" font-family="sans-serif" font-size="13" dominant-baseline="central">{}</text>"##,
+            y - 6.0,
+            escape(&layer.color),
+            escape(&layer.label)
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}

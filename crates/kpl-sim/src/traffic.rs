@@ -1,0 +1,397 @@
+//! Cars driving through the road network: each keeps its lane (with a little lateral wander),
+//! follows the car ahead with the Intelligent Driver Model, slows down for turns, picks a random
+//! branch at every crossing, and leaves the map at boundary nodes, where a new car (with a new id)
+//! enters at a free entry lane to keep the count constant. This module owns the ground truth.
+//!
+//! Cars do not yield to each other inside crossings; the model is meant to give a tracker
+//! plausible motion, not to study traffic.
+
+use std::fmt;
+
+use kpl_core::{Record, Value};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use crate::error::ParamsError;
+use crate::geom::{self, Point};
+use crate::network::{LaneId, Place, RoadNetwork};
+
+/// A car's identity; shown as `car1`, `car2`, ... and never reused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct CarId(pub u32);
+
+impl fmt::Display for CarId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "car{}", self.0)
+    }
+}
+
+/// The true state of one car at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CarState {
+    pub id: CarId,
+    pub pos: Point,
+    pub vel: Point,
+    /// Direction of travel in radians, counter-clockwise from east.
+    pub heading: f64,
+    pub speed_mps: f64,
+    pub lane: LaneId,
+    pub place: Place,
+    /// Arc length along `lane`.
+    pub offset_m: f64,
+    pub length_m: f64,
+}
+
+impl CarState {
+    /// The ground truth as a record: `id` `carN`, fields `pos`, `vel`, `heading`, `speed`, and
+    /// `road` and `lane` (the road index and lane number; -1 inside a crossing), `node` (the
+    /// crossing's index, -1 on a road).
+    pub fn to_value(&self) -> Value {
+        let (road, lane, node) = match self.place {
+            Place::Road { road, lane } => (i64::from(road.0), i64::from(lane), -1),
+            Place::Crossing { node } => (-1, -1, i64::from(node.0)),
+        };
+        Value::Record(std::sync::Arc::new(Record {
+            id: Some(self.id.to_string().into()),
+            fields: vec![
+                ("pos".into(), Value::Vec2(self.pos)),
+                ("vel".into(), Value::Vec2(self.vel)),
+                ("heading".into(), Value::Float(self.heading)),
+                ("speed".into(), Value::Float(self.speed_mps)),
+                ("road".into(), Value::Int(road)),
+                ("lane".into(), Value::Int(lane)),
+                ("node".into(), Value::Int(node)),
+            ],
+        }))
+    }
+}
+
+// Intelligent Driver Model constants (Treiber et al.), typical urban values.
+const MAX_ACCEL: f64 = 1.5;
+const COMFORT_DECEL: f64 = 2.0;
+const MAX_DECEL: f64 = 8.0;
+const TIME_HEADWAY_S: f64 = 1.2;
+const MIN_GAP_M: f64 = 2.0;
+/// Free road needed at the start of an entry lane before a new car may enter.
+const ENTRY_CLEARANCE_M: f64 = 15.0;
+/// Lane length per car that a network must offer for a requested number of cars.
+const LANE_M_PER_CAR: f64 = 15.0;
+/// Slow drift of each car's desired speed: relative standard deviation and time constant.
+const SPEED_DRIFT_SD: f64 = 0.03;
+const SPEED_DRIFT_TAU_S: f64 = 5.0;
+/// Lateral wander around the lane centre: standard deviation, time constant and bound.
+const WANDER_SD_M: f64 = 0.15;
+const WANDER_TAU_S: f64 = 3.0;
+const WANDER_MAX_M: f64 = 0.5;
+
+#[derive(Debug, Clone)]
+struct Car {
+    id: CarId,
+    lane: LaneId,
+    offset: f64,
+    speed: f64,
+    /// Desired speed as a fraction of the speed limit, fixed per car.
+    speed_factor: f64,
+    /// Slowly drifting deviation from `speed_factor`.
+    speed_drift: f64,
+    lateral: f64,
+    /// The branch this car will take at the end of its lane (`None`: it leaves the map there).
+    next_lane: Option<LaneId>,
+    length: f64,
+}
+
+/// All cars on a network.
+#[derive(Debug, Clone)]
+pub struct Traffic {
+    cars: Vec<Car>,
+    next_id: u32,
+    rng: ChaCha8Rng,
+    speed_sd: f64,
+    /// Cars that left the map and still have to be replaced.
+    pending_entries: u32,
+    /// Scratch: car indices sorted by (lane, offset), and the first of each lane in that order.
+    order: Vec<u32>,
+    first_in_lane: Vec<u32>,
+    /// Lanes whose `first_in_lane` entry is set.
+    marked_lanes: Vec<u32>,
+}
+
+fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    rng.sample(StandardNormal)
+}
+
+impl Traffic {
+    /// Places `n_cars` cars on random road lanes, spaced apart where possible.
+    pub fn new(
+        net: &RoadNetwork,
+        n_cars: u32,
+        speed_sd: f64,
+        rng: ChaCha8Rng,
+    ) -> Result<Traffic, ParamsError> {
+        let lane_m = net.road_lane_length_m();
+        let capacity = (lane_m / LANE_M_PER_CAR).floor() as u64;
+        if u64::from(n_cars) > capacity {
+            return Err(ParamsError::TooManyCars { n_cars, lane_km: lane_m / 1000.0, capacity });
+        }
+        let mut traffic = Traffic {
+            cars: Vec::with_capacity(n_cars as usize),
+            next_id: 1,
+            rng,
+            speed_sd,
+            pending_entries: 0,
+            order: Vec::new(),
+            first_in_lane: vec![u32::MAX; net.lanes().len()],
+            marked_lanes: Vec::new(),
+        };
+        let mut taken: std::collections::HashMap<LaneId, Vec<f64>> = std::collections::HashMap::new();
+        for _ in 0..n_cars {
+            let mut chosen = None;
+            for _attempt in 0..20 {
+                let u: f64 = traffic.rng.random();
+                let Some(position) = net.road_lane_position_at_fraction(u) else { break };
+                let free = taken
+                    .get(&position.lane)
+                    .is_none_or(|offsets| offsets.iter().all(|o| (o - position.offset_m).abs() >= 10.0));
+                chosen = Some(position);
+                if free {
+                    break;
+                }
+            }
+            let Some(position) = chosen else { break };
+            taken.entry(position.lane).or_default().push(position.offset_m);
+            traffic.add_car(net, position.lane, position.offset_m);
+        }
+        Ok(traffic)
+    }
+
+    fn add_car(&mut self, net: &RoadNetwork, lane: LaneId, offset: f64) {
+        let speed_factor = (1.0 + self.speed_sd * normal(&mut self.rng)).clamp(0.5, 1.5);
+        let length = self.rng.random_range(4.0..5.0);
+        let next_lane = self.choose_branch(net, lane);
+        let speed = net.lane(lane).speed_limit_mps * speed_factor;
+        self.cars.push(Car {
+            id: CarId(self.next_id),
+            lane,
+            offset,
+            speed,
+            speed_factor,
+            speed_drift: 0.0,
+            lateral: 0.0,
+            next_lane,
+            length,
+        });
+        self.next_id += 1;
+    }
+
+    fn choose_branch(&mut self, net: &RoadNetwork, lane: LaneId) -> Option<LaneId> {
+        let successors = &net.lane(lane).successors;
+        if successors.is_empty() {
+            None
+        } else {
+            Some(successors[self.rng.random_range(0..successors.len())])
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.cars.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.cars.is_empty()
+    }
+
+    /// Sorts cars by lane and offset and records where each lane's cars start.
+    fn sort(&mut self) {
+        for &lane in &self.marked_lanes {
+            self.first_in_lane[lane as usize] = u32::MAX;
+        }
+        self.marked_lanes.clear();
+        self.order.clear();
+        self.order.extend(0..self.cars.len() as u32);
+        let cars = &self.cars;
+        self.order.sort_unstable_by(|&a, &b| {
+            let (a, b) = (&cars[a as usize], &cars[b as usize]);
+            a.lane.cmp(&b.lane).then(a.offset.total_cmp(&b.offset)).then(a.id.cmp(&b.id))
+        });
+        for (rank, &i) in self.order.iter().enumerate() {
+            let lane = self.cars[i as usize].lane.0;
+            if self.first_in_lane[lane as usize] == u32::MAX {
+                self.first_in_lane[lane as usize] = rank as u32;
+                self.marked_lanes.push(lane);
+            }
+        }
+    }
+
+    /// Lets replacement cars enter at free entry lanes.
+    fn enter_pending(&mut self, net: &RoadNetwork) -> bool {
+        let entries = net.entry_lanes();
+        if self.pending_entries == 0 || entries.is_empty() {
+            return false;
+        }
+        let mut entered = false;
+        let mut used: Vec<LaneId> = Vec::new();
+        // A few tries per pending car; the rest wait for the next step.
+        for _ in 0..self.pending_entries.saturating_mul(3).min(1000) {
+            if self.pending_entries == 0 {
+                break;
+            }
+            let lane = entries[self.rng.random_range(0..entries.len())];
+            if used.contains(&lane) {
+                continue;
+            }
+            let first = self.first_in_lane[lane.0 as usize];
+            let clear = first == u32::MAX || {
+                let car = &self.cars[self.order[first as usize] as usize];
+                car.offset - car.length > ENTRY_CLEARANCE_M
+            };
+            if clear {
+                used.push(lane);
+                self.add_car(net, lane, 0.0);
+                self.pending_entries -= 1;
+                entered = true;
+            }
+        }
+        entered
+    }
+
+    /// The first car on `lane` or, when that lane is empty and leads on to exactly one lane, on
+    /// that one (so a car sees through an empty connector): its gap from a car `distance` before
+    /// the lane's start, and its speed.
+    fn first_car_ahead(
+        &self,
+        net: &RoadNetwork,
+        mut lane: Option<LaneId>,
+        mut distance: f64,
+    ) -> Option<(f64, f64)> {
+        for _ in 0..2 {
+            let current = lane?;
+            let first = self.first_in_lane[current.0 as usize];
+            if first != u32::MAX {
+                let next = &self.cars[self.order[first as usize] as usize];
+                return Some((distance + next.offset - next.length, next.speed));
+            }
+            let current = net.lane(current);
+            distance += current.path.length();
+            lane = match current.successors.as_slice() {
+                [only] => Some(*only),
+                _ => None,
+            };
+        }
+        None
+    }
+
+    /// Advances every car by `dt_s` seconds. Returns the cars that left the map.
+    pub fn step(&mut self, net: &RoadNetwork, dt_s: f64) -> Vec<CarId> {
+        self.sort();
+        if self.enter_pending(net) {
+            self.sort();
+        }
+        let n = self.cars.len();
+        let mut accelerations = vec![0.0; n];
+        for rank in 0..n {
+            let car = &self.cars[self.order[rank] as usize];
+            let lane = net.lane(car.lane);
+            let to_lane_end = (lane.path.length() - car.offset).max(0.0);
+            // The car ahead: the next on this lane, else the first on the lane it turns into.
+            let leader = match self.order.get(rank + 1).map(|&j| &self.cars[j as usize]) {
+                Some(next) if next.lane == car.lane => {
+                    Some((next.offset - next.length - car.offset, next.speed))
+                }
+                _ => self.first_car_ahead(net, car.next_lane, to_lane_end),
+            };
+            let factor = car.speed_factor + car.speed_drift;
+            let mut desired = lane.speed_limit_mps * factor;
+            if let Some(next_lane) = car.next_lane {
+                // Slow down in time for a turn.
+                let v_next = net.lane(next_lane).speed_limit_mps * factor;
+                desired = desired.min((v_next * v_next + 2.0 * COMFORT_DECEL * to_lane_end).sqrt());
+            }
+            let desired = desired.max(0.5);
+            let v = car.speed;
+            let mut accel = MAX_ACCEL * (1.0 - (v / desired).powi(4));
+            if let Some((gap, v_leader)) = leader {
+                let gap = gap.max(0.1);
+                let wanted_gap = MIN_GAP_M
+                    + (v * TIME_HEADWAY_S + v * (v - v_leader) / (2.0 * (MAX_ACCEL * COMFORT_DECEL).sqrt()))
+                        .max(0.0);
+                accel -= MAX_ACCEL * (wanted_gap / gap).powi(2);
+            }
+            accelerations[self.order[rank] as usize] = accel.max(-MAX_DECEL);
+        }
+
+        let mut left_map = Vec::new();
+        let drift_keep = 1.0 - dt_s / SPEED_DRIFT_TAU_S;
+        let drift_kick = SPEED_DRIFT_SD * (2.0 * dt_s / SPEED_DRIFT_TAU_S).sqrt();
+        let wander_keep = 1.0 - dt_s / WANDER_TAU_S;
+        let wander_kick = WANDER_SD_M * (2.0 * dt_s / WANDER_TAU_S).sqrt();
+        let mut i = 0;
+        while i < self.cars.len() {
+            let accel = accelerations[i];
+            let drift_noise = normal(&mut self.rng);
+            let wander_noise = normal(&mut self.rng);
+            let car = &mut self.cars[i];
+            let new_speed = (car.speed + accel * dt_s).max(0.0);
+            car.offset += (car.speed + new_speed) / 2.0 * dt_s;
+            car.speed = new_speed;
+            car.speed_drift = car.speed_drift * drift_keep + drift_kick * drift_noise;
+            car.lateral =
+                (car.lateral * wander_keep + wander_kick * wander_noise).clamp(-WANDER_MAX_M, WANDER_MAX_M);
+            let mut exited = false;
+            loop {
+                let car = &mut self.cars[i];
+                let length = net.lane(car.lane).path.length();
+                if car.offset <= length {
+                    break;
+                }
+                match car.next_lane {
+                    Some(next) => {
+                        car.offset -= length;
+                        car.lane = next;
+                        let branch = self.choose_branch(net, next);
+                        self.cars[i].next_lane = branch;
+                    }
+                    None => {
+                        exited = true;
+                        break;
+                    }
+                }
+            }
+            if exited {
+                left_map.push(self.cars[i].id);
+                // Keep `accelerations` aligned with `cars` when swapping the last car in.
+                self.cars.swap_remove(i);
+                accelerations.swap_remove(i);
+                self.pending_entries += 1;
+            } else {
+                i += 1;
+            }
+        }
+        left_map
+    }
+
+    /// The true state of every car, in a deterministic order.
+    pub fn states(&self, net: &RoadNetwork) -> Vec<CarState> {
+        self.cars
+            .iter()
+            .map(|car| {
+                let lane = net.lane(car.lane);
+                let centre = lane.path.point_at(car.offset);
+                let heading = lane.path.heading_at(car.offset);
+                let direction = geom::unit(heading);
+                let pos = geom::add(centre, geom::scale(geom::left_normal(direction), car.lateral));
+                CarState {
+                    id: car.id,
+                    pos,
+                    vel: geom::scale(direction, car.speed),
+                    heading,
+                    speed_mps: car.speed,
+                    lane: car.lane,
+                    place: net.place_of(car.lane),
+                    offset_m: car.offset,
+                    length_m: car.length,
+                }
+            })
+            .collect()
+    }
+}
