@@ -1,0 +1,479 @@
+//! Terms: the non-temporal expressions inside atoms (`x > 3.5`, `xydist(from.pos, to.pos) < 10`,
+//! `on_road(from.pos)`), the functions they may call, and their evaluation over one state.
+//!
+//! Numbers follow one rule everywhere: `int op int` stays an `int` for `+ - * %` (overflow is an
+//! error), `/` always gives a `float`, and anything mixed with a `float` is a `float`. A result
+//! that is not finite (division by zero) is an [`EvalError::Arithmetic`], never a NaN.
+
+use std::fmt;
+use std::sync::Arc;
+
+use kpl_core::Value;
+
+use crate::error::EvalError;
+use crate::state::State;
+
+/// The index of a name of the state (a field, or a variable such as `from`), assigned by the
+/// [`crate::Context`] the formula is compiled against.
+pub type SlotId = u32;
+/// The index of an object type that `forall`/`exists` range over.
+pub type DomainId = u32;
+/// A variable bound by `forall`/`exists`: its nesting depth, 0 for the outermost quantifier.
+pub type VarId = u32;
+/// The index of a function in the [`crate::Context`].
+pub type FuncId = u32;
+
+/// A term, as built by the lowering or by hand.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Term {
+    Const(Value),
+    /// A named value of the state.
+    Slot(SlotId),
+    /// The object bound by an enclosing quantifier.
+    Var(VarId),
+    /// Attribute access: a record field, `x`/`y` of a vector, a box's corners.
+    Field(Box<Term>, Arc<str>),
+    Neg(Box<Term>),
+    Not(Box<Term>),
+    Binary(BinOp, Box<Term>, Box<Term>),
+    Call(FuncId, Vec<Term>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Rem,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    Eq,
+    Ne,
+    And,
+    Or,
+}
+
+impl BinOp {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
+            BinOp::Div => "/",
+            BinOp::Rem => "%",
+            BinOp::Lt => "<",
+            BinOp::Le => "<=",
+            BinOp::Gt => ">",
+            BinOp::Ge => ">=",
+            BinOp::Eq => "==",
+            BinOp::Ne => "!=",
+            BinOp::And => "and",
+            BinOp::Or => "or",
+        }
+    }
+}
+
+impl Term {
+    pub fn slot(slot: SlotId) -> Term {
+        Term::Slot(slot)
+    }
+    pub fn num(x: f64) -> Term {
+        Term::Const(Value::Float(x))
+    }
+    pub fn int(i: i64) -> Term {
+        Term::Const(Value::Int(i))
+    }
+    pub fn field(self, name: &str) -> Term {
+        Term::Field(Box::new(self), Arc::from(name))
+    }
+    pub fn binary(op: BinOp, lhs: Term, rhs: Term) -> Term {
+        Term::Binary(op, Box::new(lhs), Box::new(rhs))
+    }
+    pub fn call(func: FuncId, args: Vec<Term>) -> Term {
+        Term::Call(func, args)
+    }
+}
+
+/// The body of a function: its arguments in, a value or a message out.
+pub type FunctionBody = Arc<dyn Fn(&[Value]) -> Result<Value, String> + Send + Sync>;
+
+/// A function a formula may call: a built-in or one the host registered (`on_road`).
+#[derive(Clone)]
+pub struct Function {
+    pub name: Arc<str>,
+    /// Smallest and largest number of arguments (`None`: no upper limit).
+    pub arity: (usize, Option<usize>),
+    pub body: FunctionBody,
+}
+
+impl fmt::Debug for Function {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Function").field("name", &self.name).field("arity", &self.arity).finish()
+    }
+}
+
+impl Function {
+    pub fn new(
+        name: &str,
+        arity: (usize, Option<usize>),
+        body: impl Fn(&[Value]) -> Result<Value, String> + Send + Sync + 'static,
+    ) -> Function {
+        Function { name: Arc::from(name), arity, body: Arc::new(body) }
+    }
+
+    pub fn accepts(&self, n: usize) -> bool {
+        n >= self.arity.0 && self.arity.1.is_none_or(|max| n <= max)
+    }
+
+    pub fn arity_text(&self) -> String {
+        match self.arity {
+            (lo, Some(hi)) if lo == hi => lo.to_string(),
+            (lo, Some(hi)) => format!("{lo} to {hi}"),
+            (lo, None) => format!("at least {lo}"),
+        }
+    }
+}
+
+fn number(v: &Value, func: &str) -> Result<f64, String> {
+    v.as_f64().ok_or_else(|| format!("{func} needs numbers, found {}", v.kind()))
+}
+
+fn point(v: &Value, func: &str) -> Result<[f64; 2], String> {
+    match v {
+        Value::Vec2(p) => Ok(*p),
+        // A record with a `pos` attribute stands for its position (`xydist(from, to)`).
+        Value::Record(r) => match r.get("pos") {
+            Some(Value::Vec2(p)) => Ok(*p),
+            _ => Err(format!("{func} needs vec2 positions, found a record without a vec2 `pos`")),
+        },
+        other => Err(format!("{func} needs vec2 positions, found {}", other.kind())),
+    }
+}
+
+fn finite(x: f64, func: &str) -> Result<Value, String> {
+    if x.is_finite() { Ok(Value::Float(x)) } else { Err(format!("{func} gives a non-finite result")) }
+}
+
+/// The built-in functions: `abs`, `sqrt`, `min`, `max`, `floor`, `ceil`, `norm` (length of a
+/// vec2), `dist` and `xydist` (Euclidean distance of two vec2 positions, or of two records' `pos`;
+/// `dist` of two numbers is `|a - b|`).
+pub fn builtins() -> Vec<Function> {
+    vec![
+        Function::new("abs", (1, Some(1)), |a| match &a[0] {
+            Value::Int(i) => i.checked_abs().map(Value::Int).ok_or_else(|| "abs overflows".to_string()),
+            v => Ok(Value::Float(number(v, "abs")?.abs())),
+        }),
+        Function::new("sqrt", (1, Some(1)), |a| {
+            let x = number(&a[0], "sqrt")?;
+            if x < 0.0 { Err(format!("sqrt of a negative number ({x})")) } else { Ok(Value::Float(x.sqrt())) }
+        }),
+        Function::new("min", (1, None), |a| fold_numbers(a, "min", |x, y| x < y)),
+        Function::new("max", (1, None), |a| fold_numbers(a, "max", |x, y| x > y)),
+        Function::new("floor", (1, Some(1)), |a| finite(number(&a[0], "floor")?.floor(), "floor")),
+        Function::new("ceil", (1, Some(1)), |a| finite(number(&a[0], "ceil")?.ceil(), "ceil")),
+        Function::new("norm", (1, Some(1)), |a| {
+            let [x, y] = point(&a[0], "norm")?;
+            finite(x.hypot(y), "norm")
+        }),
+        Function::new("xydist", (2, Some(2)), |a| {
+            let [x1, y1] = point(&a[0], "xydist")?;
+            let [x2, y2] = point(&a[1], "xydist")?;
+            finite((x1 - x2).hypot(y1 - y2), "xydist")
+        }),
+        Function::new("dist", (2, Some(2)), |a| match (&a[0], &a[1]) {
+            (l, r) if l.as_f64().is_some() && r.as_f64().is_some() => {
+                finite((number(l, "dist")? - number(r, "dist")?).abs(), "dist")
+            }
+            (l, r) => {
+                let [x1, y1] = point(l, "dist")?;
+                let [x2, y2] = point(r, "dist")?;
+                finite((x1 - x2).hypot(y1 - y2), "dist")
+            }
+        }),
+    ]
+}
+
+/// `min`/`max`: ints stay ints when all arguments are ints.
+fn fold_numbers(args: &[Value], func: &str, better: fn(f64, f64) -> bool) -> Result<Value, String> {
+    let mut best = args[0].clone();
+    let mut best_f = number(&best, func)?;
+    for v in &args[1..] {
+        let x = number(v, func)?;
+        if better(x, best_f) {
+            best = v.clone();
+            best_f = x;
+        }
+    }
+    if args.iter().all(|v| matches!(v, Value::Int(_))) { Ok(best) } else { Ok(Value::Float(best_f)) }
+}
+
+/// What a term is evaluated against: the state, the objects bound by quantifiers, and the
+/// formula's functions and names (for messages).
+pub(crate) struct TermEnv<'a, S: State + ?Sized> {
+    pub state: &'a S,
+    pub bindings: &'a [Binding],
+    pub functions: &'a [Function],
+    pub slot_names: &'a [Arc<str>],
+    pub domain_names: &'a [Arc<str>],
+}
+
+/// An object bound by `forall`/`exists`: its type and its identity.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct Binding {
+    pub domain: DomainId,
+    pub id: Arc<str>,
+}
+
+impl<S: State + ?Sized> TermEnv<'_, S> {
+    fn slot_name(&self, slot: SlotId) -> String {
+        self.slot_names.get(slot as usize).map_or_else(|| format!("#{slot}"), |n| n.to_string())
+    }
+
+    /// Evaluates an atom: a term that must give a `bool`.
+    pub fn eval_bool(&self, term: &Term) -> Result<bool, EvalError> {
+        // The commonest atoms, a boolean field and a comparison, skip the `Value` round trip.
+        match term {
+            Term::Slot(slot) => match self.state.value(*slot) {
+                Some(Value::Bool(b)) => Ok(*b),
+                Some(other) => Err(EvalError::Type {
+                    context: format!("`{}`", self.slot_name(*slot)),
+                    expected: "bool".into(),
+                    found: other.kind().into(),
+                }),
+                None => Err(EvalError::Missing { name: self.slot_name(*slot) }),
+            },
+            _ => match self.eval(term)? {
+                Value::Bool(b) => Ok(b),
+                other => Err(EvalError::Type {
+                    context: "a condition".into(),
+                    expected: "bool".into(),
+                    found: other.kind().into(),
+                }),
+            },
+        }
+    }
+
+    pub fn eval(&self, term: &Term) -> Result<Value, EvalError> {
+        match term {
+            Term::Const(v) => Ok(v.clone()),
+            Term::Slot(slot) => {
+                self.state.value(*slot).cloned().ok_or_else(|| EvalError::Missing { name: self.slot_name(*slot) })
+            }
+            Term::Var(var) => {
+                let binding = self.bindings.get(*var as usize).ok_or_else(|| EvalError::Missing {
+                    name: format!("quantified variable #{var}"),
+                })?;
+                self.state.object(binding.domain, &binding.id).cloned().ok_or_else(|| EvalError::MissingObject {
+                    domain: self
+                        .domain_names
+                        .get(binding.domain as usize)
+                        .map_or_else(|| format!("#{}", binding.domain), |n| n.to_string()),
+                    id: binding.id.to_string(),
+                })
+            }
+            Term::Field(base, field) => {
+                let value = self.eval(base)?;
+                value.field(field).ok_or_else(|| EvalError::NoField {
+                    path: describe(base, self.slot_names),
+                    field: field.to_string(),
+                })
+            }
+            Term::Neg(inner) => match self.eval(inner)? {
+                Value::Int(i) => {
+                    i.checked_neg().map(Value::Int).ok_or_else(|| EvalError::Arithmetic("integer overflow".into()))
+                }
+                Value::Float(x) => Ok(Value::Float(-x)),
+                Value::Vec2([x, y]) => Ok(Value::Vec2([-x, -y])),
+                other => Err(type_error("`-`", "a number or vec2", &other)),
+            },
+            Term::Not(inner) => match self.eval(inner)? {
+                Value::Bool(b) => Ok(Value::Bool(!b)),
+                other => Err(type_error("`not`", "bool", &other)),
+            },
+            Term::Binary(op, lhs, rhs) => {
+                // `and`/`or` inside a term short-circuit like the connectives of formulas.
+                if matches!(op, BinOp::And | BinOp::Or) {
+                    let l = self.eval(lhs)?;
+                    let Value::Bool(l) = l else { return Err(type_error(op.symbol(), "bool", &l)) };
+                    if (*op == BinOp::And && !l) || (*op == BinOp::Or && l) {
+                        return Ok(Value::Bool(l));
+                    }
+                    let r = self.eval(rhs)?;
+                    return match r {
+                        Value::Bool(r) => Ok(Value::Bool(r)),
+                        other => Err(type_error(op.symbol(), "bool", &other)),
+                    };
+                }
+                let l = self.eval(lhs)?;
+                let r = self.eval(rhs)?;
+                binary(*op, &l, &r)
+            }
+            Term::Call(func, args) => {
+                let function = self.functions.get(*func as usize).ok_or_else(|| EvalError::Function {
+                    func: format!("#{func}"),
+                    message: "no such function".into(),
+                })?;
+                let mut values = Vec::with_capacity(args.len());
+                for arg in args {
+                    values.push(self.eval(arg)?);
+                }
+                match (function.body)(&values) {
+                    Ok(Value::Float(x)) if !x.is_finite() => Err(EvalError::Function {
+                        func: function.name.to_string(),
+                        message: "returned a non-finite number".into(),
+                    }),
+                    Ok(v) => Ok(v),
+                    Err(message) => Err(EvalError::Function { func: function.name.to_string(), message }),
+                }
+            }
+        }
+    }
+}
+
+fn type_error(context: &str, expected: &str, found: &Value) -> EvalError {
+    EvalError::Type { context: context.to_string(), expected: expected.to_string(), found: found.kind().into() }
+}
+
+/// A short text for a term, used in messages (`from.pos`).
+fn describe(term: &Term, slot_names: &[Arc<str>]) -> String {
+    match term {
+        Term::Slot(s) => slot_names.get(*s as usize).map_or_else(|| format!("#{s}"), |n| n.to_string()),
+        Term::Var(v) => format!("variable #{v}"),
+        Term::Field(base, f) => format!("{}.{f}", describe(base, slot_names)),
+        _ => "the value".to_string(),
+    }
+}
+
+fn arithmetic(message: &str) -> EvalError {
+    EvalError::Arithmetic(message.to_string())
+}
+
+fn float_result(x: f64, op: BinOp) -> Result<Value, EvalError> {
+    if x.is_finite() {
+        Ok(Value::Float(x))
+    } else {
+        Err(EvalError::Arithmetic(format!("`{}` gives a non-finite result (division by zero?)", op.symbol())))
+    }
+}
+
+/// Applies an arithmetic or comparison operator to two values.
+pub(crate) fn binary(op: BinOp, l: &Value, r: &Value) -> Result<Value, EvalError> {
+    use BinOp::*;
+    match op {
+        Eq | Ne => {
+            let equal = match (l, r) {
+                (Value::Int(a), Value::Int(b)) => a == b,
+                (a, b) if a.as_f64().is_some() && b.as_f64().is_some() => a.as_f64() == b.as_f64(),
+                (a, b) if std::mem::discriminant(a) == std::mem::discriminant(b) => a == b,
+                (a, b) => {
+                    return Err(EvalError::Type {
+                        context: format!("`{}`", op.symbol()),
+                        expected: format!("two values of one kind ({} on the left)", a.kind()),
+                        found: b.kind().into(),
+                    });
+                }
+            };
+            Ok(Value::Bool(if op == Eq { equal } else { !equal }))
+        }
+        Lt | Le | Gt | Ge => {
+            let ordering = match (l, r) {
+                (Value::Int(a), Value::Int(b)) => a.cmp(b),
+                (Value::Str(a), Value::Str(b)) => a.cmp(b),
+                (Value::Duration(a), Value::Duration(b)) => a.cmp(b),
+                (a, b) => match (a.as_f64(), b.as_f64()) {
+                    (Some(x), Some(y)) => x.partial_cmp(&y).ok_or_else(|| arithmetic("comparison with NaN"))?,
+                    _ => {
+                        let bad = if a.as_f64().is_none() { a } else { b };
+                        return Err(type_error(&format!("`{}`", op.symbol()), "numbers", bad));
+                    }
+                },
+            };
+            use std::cmp::Ordering::*;
+            Ok(Value::Bool(match op {
+                Lt => ordering == Less,
+                Le => ordering != Greater,
+                Gt => ordering == Greater,
+                _ => ordering != Less,
+            }))
+        }
+        Add | Sub | Mul | Div | Rem => match (l, r) {
+            (Value::Int(a), Value::Int(b)) if op != Div => {
+                let result = match op {
+                    Add => a.checked_add(*b),
+                    Sub => a.checked_sub(*b),
+                    Mul => a.checked_mul(*b),
+                    _ => {
+                        if *b == 0 {
+                            return Err(arithmetic("`%` by zero"));
+                        }
+                        a.checked_rem(*b)
+                    }
+                };
+                result.map(Value::Int).ok_or_else(|| arithmetic("integer overflow"))
+            }
+            (Value::Vec2([x1, y1]), Value::Vec2([x2, y2])) if matches!(op, Add | Sub) => {
+                let s = if op == Add { 1.0 } else { -1.0 };
+                Ok(Value::Vec2([x1 + s * x2, y1 + s * y2]))
+            }
+            (Value::Vec2([x, y]), k) | (k, Value::Vec2([x, y])) if op == Mul && k.as_f64().is_some() => {
+                let k = k.as_f64().unwrap_or(0.0);
+                Ok(Value::Vec2([x * k, y * k]))
+            }
+            (Value::Duration(a), Value::Duration(b)) if matches!(op, Add | Sub) => {
+                let result = if op == Add { a.checked_add(*b) } else { a.checked_sub(*b) };
+                result.map(Value::Duration).ok_or_else(|| arithmetic("duration overflow"))
+            }
+            (a, b) => match (a.as_f64(), b.as_f64()) {
+                (Some(x), Some(y)) => float_result(
+                    match op {
+                        Add => x + y,
+                        Sub => x - y,
+                        Mul => x * y,
+                        Div => x / y,
+                        _ => x % y,
+                    },
+                    op,
+                ),
+                _ => {
+                    let bad = if a.as_f64().is_none() { a } else { b };
+                    Err(type_error(&format!("`{}`", op.symbol()), "numbers", bad))
+                }
+            },
+        },
+        And | Or => match (l, r) {
+            (Value::Bool(a), Value::Bool(b)) => Ok(Value::Bool(if op == And { *a && *b } else { *a || *b })),
+            (a, b) => Err(type_error(op.symbol(), "bool", if a.as_bool().is_none() { a } else { b })),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_follow_one_rule() {
+        assert_eq!(binary(BinOp::Add, &Value::Int(2), &Value::Int(3)), Ok(Value::Int(5)));
+        assert_eq!(binary(BinOp::Div, &Value::Int(3), &Value::Int(2)), Ok(Value::Float(1.5)));
+        assert_eq!(binary(BinOp::Mul, &Value::Int(2), &Value::Float(0.5)), Ok(Value::Float(1.0)));
+        assert!(matches!(binary(BinOp::Div, &Value::Int(1), &Value::Int(0)), Err(EvalError::Arithmetic(_))));
+        assert!(matches!(binary(BinOp::Add, &Value::Int(i64::MAX), &Value::Int(1)), Err(EvalError::Arithmetic(_))));
+        assert_eq!(binary(BinOp::Lt, &Value::Int(2), &Value::Float(2.5)), Ok(Value::Bool(true)));
+        assert_eq!(binary(BinOp::Eq, &Value::Int(2), &Value::Float(2.0)), Ok(Value::Bool(true)));
+        assert!(matches!(binary(BinOp::Lt, &Value::Bool(true), &Value::Int(1)), Err(EvalError::Type { .. })));
+    }
+
+    #[test]
+    fn builtins_compute_distances() {
+        let f = builtins();
+        let xydist = f.iter().find(|f| &*f.name == "xydist").unwrap();
+        assert_eq!((xydist.body)(&[Value::vec2(0.0, 0.0), Value::vec2(3.0, 4.0)]), Ok(Value::Float(5.0)));
+        assert!((xydist.body)(&[Value::Int(1), Value::vec2(3.0, 4.0)]).is_err());
+        let max = f.iter().find(|f| &*f.name == "max").unwrap();
+        assert_eq!((max.body)(&[Value::Int(1), Value::Int(7), Value::Int(3)]), Ok(Value::Int(7)));
+        assert_eq!((max.body)(&[Value::Int(1), Value::Float(0.5)]), Ok(Value::Float(1.0)));
+    }
+}
