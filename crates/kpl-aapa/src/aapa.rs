@@ -1,0 +1,673 @@
+//! One AAPA cycle (paper III-B): camera movement alignment, consecutive frame alignment, new
+//! anchors, action effects (attachments), hypothesis reasoning (attached, occluded, out of view,
+//! lost), confidence, attachment following and the relations of the world state.
+//!
+//! [`Aapa::step`] is a pure function of the previous world state and this cycle's inputs; the
+//! caller feeds each output back in (paper Fig. 2). No clock is read: time is an argument.
+//!
+//! ```
+//! use kpl_aapa::{Aapa, Params, Percept, WorldState};
+//! use kpl_core::BBox;
+//!
+//! let aapa = Aapa::new(Params::default()).unwrap();
+//! let mut world = WorldState::default();
+//! for (i, x) in [10.0, 12.0, 14.0].into_iter().enumerate() {
+//!     let percepts = [Percept::new("cube0", "cube", BBox::new(x, 10.0, x + 20.0, 30.0))];
+//!     world = aapa.step(i as i64 * 33_333, &percepts, &[], None, &world).unwrap();
+//! }
+//! let cube = world.anchor("cube0").unwrap();
+//! assert!((cube.confidence - 0.2).abs() < 1e-9); // 0 when first seen, +0.1 per aligned cycle
+//! ```
+
+use std::collections::{HashMap, HashSet};
+
+use kpl_core::{BBox, Time};
+
+use crate::align::assign;
+use crate::error::AapaError;
+use crate::geometry::{
+    alignment_cost, bottom_centre, centre, from_bottom_centre, intersects, is_valid, outside, scale, size,
+    translate,
+};
+use crate::params::{ActionRule, ChildPlacement, Effect, Params};
+use crate::types::{
+    Action, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,
+};
+
+/// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
+#[derive(Debug, Clone)]
+pub struct Aapa {
+    params: Params,
+}
+
+/// One anchor while a cycle is being computed.
+#[derive(Debug)]
+struct Work {
+    anchor: Anchor,
+    /// Aligned to a percept (or created from one) this cycle.
+    aligned: bool,
+    /// Box centre last cycle after camera compensation, if the anchor was seen last cycle.
+    previous_centre: Option<[f64; 2]>,
+    /// Confidence at the start of this cycle (`-inf` for anchors created this cycle).
+    previous_confidence: f64,
+    removed: bool,
+}
+
+impl Aapa {
+    pub fn new(params: Params) -> Result<Aapa, AapaError> {
+        validate(&params)?;
+        Ok(Aapa { params })
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// One cycle at `time` (microseconds, after the previous cycle's): `percepts` detected this
+    /// frame, `actions` reported since the last cycle, the camera pose if the camera can move, and
+    /// the world state the previous cycle returned (`WorldState::default()` at the start).
+    pub fn step(
+        &self,
+        time: Time,
+        percepts: &[Percept],
+        actions: &[Action],
+        camera: Option<&CameraPose>,
+        previous: &WorldState,
+    ) -> Result<WorldState, AapaError> {
+        let p = &self.params;
+        self.validate_inputs(time, percepts, actions, previous)?;
+        let dt_seconds = previous.time.map(|t| (time - t) as f64 / 1e6);
+        let mut notes = Vec::new();
+
+        // Anchors of the previous cycle (a malformed state with duplicate symbols keeps the first).
+        let mut seen_symbols = HashSet::new();
+        let mut work: Vec<Work> = Vec::with_capacity(previous.anchors.len() + percepts.len());
+        for anchor in &previous.anchors {
+            if !seen_symbols.insert(anchor.symbol.clone()) {
+                notes.push(format!("duplicate anchor `{}` in the previous state ignored", anchor.symbol));
+                continue;
+            }
+            let seen_last_cycle =
+                anchor.status == AnchorStatus::Visible && Some(anchor.last_seen) == previous.time;
+            work.push(Work {
+                previous_centre: seen_last_cycle.then(|| centre(&anchor.bbox)),
+                previous_confidence: anchor.confidence,
+                anchor: anchor.clone(),
+                aligned: false,
+                removed: false,
+            });
+        }
+
+        // 1a. Camera movement alignment.
+        if let Some(pose) = camera {
+            self.compensate_camera(pose, previous.camera.as_ref(), &mut work)?;
+        }
+
+        // Motion prediction for objects an action is moving (extension).
+        if p.extensions.predict_motion
+            && let Some(previous_time) = previous.time
+        {
+            predict_motion(&mut work, previous_time, time);
+        }
+
+        // 1b. Consecutive frame alignment.
+        let cols = work.len();
+        let mut cost = Vec::with_capacity(percepts.len() * cols);
+        for percept in percepts {
+            for w in &work {
+                let same_type = percept.object_type == w.anchor.object_type;
+                cost.push(alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch));
+            }
+        }
+        let pairs = assign(&cost, percepts.len(), cols, p.theta);
+        let mut percept_used = vec![false; percepts.len()];
+        for (r, c) in pairs {
+            percept_used[r] = true;
+            let percept = &percepts[r];
+            let w = &mut work[c];
+            let new_centre = centre(&percept.bbox);
+            w.anchor.velocity = match (w.previous_centre, dt_seconds) {
+                (Some(old), Some(dt)) if dt > 0.0 => {
+                    let measured = [(new_centre[0] - old[0]) / dt, (new_centre[1] - old[1]) / dt];
+                    let v = w.anchor.velocity;
+                    if v == [0.0, 0.0] {
+                        measured
+                    } else {
+                        [(v[0] + measured[0]) / 2.0, (v[1] + measured[1]) / 2.0]
+                    }
+                }
+                _ => [0.0, 0.0],
+            };
+            w.anchor.bbox = percept.bbox;
+            w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
+            w.anchor.status = AnchorStatus::Visible;
+            w.anchor.last_seen = time;
+            if percept.colour.is_some() {
+                w.anchor.colour = percept.colour;
+            }
+            w.aligned = true;
+        }
+
+        // New percepts become new anchors with confidence 0 (III-B.2c).
+        let mut used_symbols: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+        for (percept, _) in percepts.iter().zip(&percept_used).filter(|(_, used)| !**used) {
+            let symbol = fresh_symbol(percept, &used_symbols);
+            used_symbols.insert(symbol.clone());
+            work.push(Work {
+                anchor: Anchor {
+                    symbol,
+                    object_type: percept.object_type.clone(),
+                    bbox: percept.bbox,
+                    confidence: 0.0,
+                    status: AnchorStatus::Visible,
+                    colour: percept.colour,
+                    first_seen: time,
+                    last_seen: time,
+                    velocity: [0.0, 0.0],
+                    moving: false,
+                    moving_until: None,
+                    attachment: None,
+                    for_inference: false,
+                },
+                aligned: true,
+                previous_centre: None,
+                previous_confidence: f64::NEG_INFINITY,
+                removed: false,
+            });
+        }
+
+        if p.extensions.reacquire {
+            self.reacquire(&mut work, time, &mut notes);
+        }
+
+        // Effects of actions: attachments (III-B.2b) and motion.
+        for action in actions {
+            for rule in self.rules_for(action) {
+                apply_rule(rule, action, &mut work, p.theta_anch, &mut notes);
+            }
+        }
+
+        // 2. Hypothesis reasoning and confidence for anchors not aligned this cycle.
+        let index = symbol_index(&work);
+        let maintained_by_attachment: Vec<bool> =
+            (0..work.len()).map(|i| has_anchored_ancestor(i, &work, &index, p.theta_anch)).collect();
+        for (i, w) in work.iter_mut().enumerate() {
+            if w.aligned {
+                continue;
+            }
+            let anchored = w.anchor.is_anchored(p.theta_anch);
+            w.anchor.status = if maintained_by_attachment[i] {
+                AnchorStatus::Attached
+            } else if anchored && percepts.iter().any(|pc| intersects(&w.anchor.bbox, &pc.bbox)) {
+                AnchorStatus::Occluded
+            } else if anchored && p.image.is_some_and(|img| !inside(&w.anchor.bbox, img.width, img.height)) {
+                AnchorStatus::OutOfView
+            } else {
+                w.anchor.confidence -= p.conf_minus;
+                AnchorStatus::Lost
+            };
+            if w.anchor.confidence < 0.0 {
+                w.removed = true;
+            }
+        }
+        let removed: HashSet<Symbol> =
+            work.iter().filter(|w| w.removed).map(|w| w.anchor.symbol.clone()).collect();
+        work.retain(|w| !w.removed);
+        for w in &mut work {
+            if let Some(att) = &w.anchor.attachment
+                && removed.contains(&att.parent)
+            {
+                notes
+                    .push(format!("`{}` detached: its parent `{}` was dropped", w.anchor.symbol, att.parent));
+                w.anchor.attachment = None;
+            }
+        }
+
+        // Children follow their parents, parents first.
+        self.follow_parents(&mut work);
+
+        // 3. The world state: relations and what is passed on for inference.
+        let mut relations = Vec::new();
+        for w in &mut work {
+            w.anchor.for_inference = w.anchor.confidence >= p.theta_inf;
+            if let Some(att) = &w.anchor.attachment {
+                relations.push(Relation {
+                    name: "attached".into(),
+                    args: [w.anchor.symbol.clone(), att.parent.clone()],
+                });
+                if let Some(rel) = &att.relation {
+                    relations.push(rel.clone());
+                }
+            }
+        }
+        if p.spatial_relations {
+            spatial_relations(&work, &mut relations);
+        }
+        Ok(WorldState {
+            time: Some(time),
+            camera: camera.copied().or(previous.camera),
+            anchors: work.into_iter().map(|w| w.anchor).collect(),
+            relations,
+            notes,
+        })
+    }
+
+    fn validate_inputs(
+        &self,
+        time: Time,
+        percepts: &[Percept],
+        actions: &[Action],
+        previous: &WorldState,
+    ) -> Result<(), AapaError> {
+        if let Some(previous_time) = previous.time
+            && time <= previous_time
+        {
+            return Err(AapaError::TimeNotIncreasing { time, previous: previous_time });
+        }
+        for percept in percepts {
+            if !is_valid(&percept.bbox) {
+                let b = percept.bbox;
+                return Err(AapaError::InvalidBox {
+                    label: percept.label.to_string(),
+                    x1: b.x1,
+                    y1: b.y1,
+                    x2: b.x2,
+                    y2: b.y2,
+                });
+            }
+        }
+        for action in actions {
+            for rule in self.rules_for(action) {
+                let need = rule.arity();
+                if action.args.len() < need {
+                    return Err(AapaError::ActionArity {
+                        name: action.name.to_string(),
+                        got: action.args.len(),
+                        need,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn rules_for<'a>(&'a self, action: &'a Action) -> impl Iterator<Item = &'a ActionRule> + 'a {
+        self.params.action_rules.iter().filter(move |r| *r.action == *action.name && r.phase == action.phase)
+    }
+
+    /// III-B.1a: move every anchor by the image motion the camera's translation causes for points
+    /// on the work surface (`p + |c_{t+1} - c_t|` in the paper, with the depth change as a zoom).
+    fn compensate_camera(
+        &self,
+        pose: &CameraPose,
+        old: Option<&CameraPose>,
+        work: &mut [Work],
+    ) -> Result<(), AapaError> {
+        let model = self.params.camera.ok_or(AapaError::NoCameraModel)?;
+        let depth_new = model.surface_z - pose.z;
+        if !(pose.x.is_finite() && pose.y.is_finite() && depth_new.is_finite() && depth_new > 0.0) {
+            return Err(AapaError::InvalidCameraPose);
+        }
+        let Some(old) = old else { return Ok(()) };
+        let depth_old = model.surface_z - old.z;
+        if depth_old.is_nan() || depth_old <= 0.0 {
+            return Ok(());
+        }
+        let zoom = depth_old / depth_new;
+        let shift =
+            [-model.focal_px * (pose.x - old.x) / depth_new, -model.focal_px * (pose.y - old.y) / depth_new];
+        if zoom == 1.0 && shift == [0.0, 0.0] {
+            return Ok(());
+        }
+        let [cx, cy] = model.principal;
+        let map = |u: f64, v: f64| [cx + (u - cx) * zoom + shift[0], cy + (v - cy) * zoom + shift[1]];
+        for w in work {
+            let b = w.anchor.bbox;
+            let [x1, y1] = map(b.x1, b.y1);
+            let [x2, y2] = map(b.x2, b.y2);
+            w.anchor.bbox = BBox::new(x1, y1, x2, y2);
+            if let Some(c) = w.previous_centre {
+                w.previous_centre = Some(map(c[0], c[1]));
+            }
+            w.anchor.velocity = [w.anchor.velocity[0] * zoom, w.anchor.velocity[1] * zoom];
+            if let Some(att) = &mut w.anchor.attachment {
+                att.offset = [att.offset[0] * zoom, att.offset[1] * zoom];
+                att.size = [att.size[0] * zoom, att.size[1] * zoom];
+                att.parent_scale *= zoom;
+            }
+        }
+        Ok(())
+    }
+
+    /// Extension: a confirmed new anchor of a type whose older anchor is unseen takes the old
+    /// symbol (the object moved out of θ's reach while hidden, or leapt).
+    fn reacquire(&self, work: &mut [Work], time: Time, notes: &mut Vec<String>) {
+        let p = &self.params;
+        let index = symbol_index(work);
+        for n in 0..work.len() {
+            let new_symbol = &work[n].anchor.symbol;
+            let confirmed_now = work[n].aligned
+                && work[n].previous_confidence < p.theta_anch
+                && work[n].anchor.is_anchored(p.theta_anch)
+                && !work[n].removed
+                && work[n].anchor.attachment.is_none()
+                && !work
+                    .iter()
+                    .any(|w| w.anchor.attachment.as_ref().is_some_and(|a| a.parent == *new_symbol));
+            if !confirmed_now {
+                continue;
+            }
+            let best = (0..work.len())
+                .filter(|&m| {
+                    let (old, new) = (&work[m], &work[n]);
+                    m != n
+                        && !old.aligned
+                        && !old.removed
+                        && old.anchor.is_anchored(p.theta_anch)
+                        && old.anchor.object_type == new.anchor.object_type
+                        && old.anchor.first_seen < new.anchor.first_seen
+                        && !has_anchored_ancestor(m, work, &index, p.theta_anch)
+                })
+                .min_by(|&a, &b| {
+                    let cost =
+                        |m: usize| alignment_cost(&work[n].anchor.bbox, &work[m].anchor.bbox, true, 1.0);
+                    cost(a).total_cmp(&cost(b))
+                });
+            let Some(m) = best else { continue };
+            let new = work[n].anchor.clone();
+            let old = &mut work[m];
+            notes.push(format!(
+                "`{}` re-acquired (was anchored as `{}` for {} µs)",
+                old.anchor.symbol,
+                new.symbol,
+                time - new.first_seen
+            ));
+            old.anchor.bbox = new.bbox;
+            old.anchor.velocity = new.velocity;
+            old.anchor.status = AnchorStatus::Visible;
+            old.anchor.last_seen = time;
+            old.anchor.confidence = (old.anchor.confidence + p.conf_plus).min(1.0);
+            old.anchor.moving = false;
+            old.anchor.moving_until = None;
+            if new.colour.is_some() {
+                old.anchor.colour = new.colour;
+            }
+            old.aligned = true;
+            work[n].removed = true;
+        }
+    }
+
+    /// Places every child that is not seen but maintained by its attachment relative to its
+    /// parent; refreshes the geometry of children that are seen.
+    fn follow_parents(&self, work: &mut [Work]) {
+        let index = symbol_index(work);
+        let depth = |mut i: usize| {
+            let mut d = 0;
+            while let Some(att) = &work[i].anchor.attachment {
+                match index.get(&att.parent) {
+                    Some(&parent) if d < work.len() => {
+                        i = parent;
+                        d += 1;
+                    }
+                    _ => break,
+                }
+            }
+            d
+        };
+        let mut order: Vec<usize> =
+            (0..work.len()).filter(|&i| work[i].anchor.attachment.is_some()).collect();
+        let depths: Vec<usize> = (0..work.len()).map(depth).collect();
+        order.sort_by_key(|&i| depths[i]);
+        for i in order {
+            let Some(att) = work[i].anchor.attachment.clone() else { continue };
+            let Some(&parent) = index.get(&att.parent) else { continue };
+            let parent_box = work[parent].anchor.bbox;
+            let w = &mut work[i];
+            if w.aligned {
+                w.anchor.attachment =
+                    Some(geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation));
+            } else if w.anchor.status == AnchorStatus::Attached {
+                let k = if self.params.extensions.scale_attached {
+                    scale(&parent_box) / att.parent_scale
+                } else {
+                    1.0
+                };
+                let base = bottom_centre(&parent_box);
+                let reference = [base[0] + att.offset[0] * k, base[1] + att.offset[1] * k];
+                w.anchor.bbox = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+            }
+        }
+    }
+}
+
+fn validate(p: &Params) -> Result<(), AapaError> {
+    let bad = |name, reason: &str| Err(AapaError::InvalidParam { name, reason: reason.to_owned() });
+    if !(p.theta.is_finite() && p.theta > 0.0) {
+        return bad("theta", "must be a positive number");
+    }
+    if !(p.type_mismatch.is_finite() && p.type_mismatch >= 1.0) {
+        return bad("type_mismatch", "must be a number >= 1");
+    }
+    if !(0.0..=1.0).contains(&p.theta_anch) {
+        return bad("theta_anch", "must be in [0, 1]");
+    }
+    if !(p.theta_anch..=1.0).contains(&p.theta_inf) {
+        return bad("theta_inf", "must be in [theta_anch, 1]");
+    }
+    if !(p.conf_plus > 0.0 && p.conf_plus <= 1.0) {
+        return bad("conf_plus", "must be in (0, 1]");
+    }
+    if !(p.conf_minus > 0.0 && p.conf_minus <= 1.0) {
+        return bad("conf_minus", "must be in (0, 1]");
+    }
+    if let Some(img) = p.image
+        && !(img.width > 0.0 && img.height > 0.0 && img.width.is_finite() && img.height.is_finite())
+    {
+        return bad("image", "width and height must be positive");
+    }
+    if let Some(cam) = p.camera
+        && !(cam.focal_px > 0.0 && cam.focal_px.is_finite() && cam.surface_z.is_finite())
+    {
+        return bad("camera", "focal_px must be positive and surface_z finite");
+    }
+    Ok(())
+}
+
+/// The box is entirely inside the image (a detector misses objects cut by the border).
+fn inside(b: &BBox, width: f64, height: f64) -> bool {
+    !outside(b, width, height) && b.x1 >= 0.0 && b.y1 >= 0.0 && b.x2 <= width && b.y2 <= height
+}
+
+fn predict_motion(work: &mut [Work], previous_time: Time, time: Time) {
+    for w in work.iter_mut().filter(|w| w.anchor.moving) {
+        let end = w.anchor.moving_until.map_or(time, |until| until.min(time));
+        let dt = (end - previous_time).max(0) as f64 / 1e6;
+        if !w.aligned && w.anchor.velocity != [0.0, 0.0] && dt > 0.0 {
+            w.anchor.bbox = translate(&w.anchor.bbox, [w.anchor.velocity[0] * dt, w.anchor.velocity[1] * dt]);
+        }
+        if w.anchor.moving_until.is_some_and(|until| time >= until) {
+            w.anchor.moving = false;
+            w.anchor.moving_until = None;
+        }
+    }
+}
+
+fn symbol_index(work: &[Work]) -> HashMap<Symbol, usize> {
+    work.iter().enumerate().filter(|(_, w)| !w.removed).map(|(i, w)| (w.anchor.symbol.clone(), i)).collect()
+}
+
+/// III-B.2b: kept if some ancestor in the attachment hierarchy is anchored.
+fn has_anchored_ancestor(i: usize, work: &[Work], index: &HashMap<Symbol, usize>, theta_anch: f64) -> bool {
+    let mut current = i;
+    for _ in 0..work.len() {
+        let Some(att) = &work[current].anchor.attachment else { return false };
+        let Some(&parent) = index.get(&att.parent) else { return false };
+        if work[parent].anchor.is_anchored(theta_anch) {
+            return true;
+        }
+        current = parent;
+    }
+    false
+}
+
+fn is_ancestor(candidate: usize, of: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> bool {
+    let mut current = of;
+    for _ in 0..work.len() {
+        let Some(att) = &work[current].anchor.attachment else { return false };
+        let Some(&parent) = index.get(&att.parent) else { return false };
+        if parent == candidate {
+            return true;
+        }
+        current = parent;
+    }
+    false
+}
+
+fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Option<Relation>) -> Attachment {
+    let c = bottom_centre(child);
+    let p = bottom_centre(parent);
+    Attachment {
+        parent: parent_symbol,
+        relation,
+        offset: [c[0] - p[0], c[1] - p[1]],
+        size: size(child),
+        parent_scale: scale(parent),
+    }
+}
+
+/// An anchor named by an action argument: by symbol, else the best anchor of that type.
+fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
+    if let Some(i) = work.iter().position(|w| !w.removed && &*w.anchor.symbol == arg) {
+        return Some(i);
+    }
+    (0..work.len()).filter(|&i| !work[i].removed && &*work[i].anchor.object_type == arg).max_by(|&a, &b| {
+        let (a, b) = (&work[a].anchor, &work[b].anchor);
+        (a.is_anchored(theta_anch), a.last_seen)
+            .cmp(&(b.is_anchored(theta_anch), b.last_seen))
+            .then(a.confidence.total_cmp(&b.confidence))
+            .then(b.first_seen.cmp(&a.first_seen))
+    })
+}
+
+fn apply_rule(
+    rule: &ActionRule,
+    action: &Action,
+    work: &mut [Work],
+    theta_anch: f64,
+    notes: &mut Vec<String>,
+) {
+    let lookup = |k: usize, work: &[Work], notes: &mut Vec<String>| -> Option<usize> {
+        let arg = action.args.get(k)?;
+        let found = resolve(arg, work, theta_anch);
+        if found.is_none() {
+            notes.push(format!("action `{}`: no anchor for `{arg}`", action.name));
+        }
+        found
+    };
+    for effect in &rule.effects {
+        match effect {
+            Effect::Attach { child, parent, relation, place_child } => {
+                let (Some(c), Some(pa)) = (lookup(*child, work, notes), lookup(*parent, work, notes)) else {
+                    continue;
+                };
+                let index = symbol_index(work);
+                if c == pa || is_ancestor(c, pa, work, &index) {
+                    notes.push(format!(
+                        "action `{}`: attaching `{}` to `{}` would make a cycle; ignored",
+                        action.name, work[c].anchor.symbol, work[pa].anchor.symbol
+                    ));
+                    continue;
+                }
+                let parent_box = work[pa].anchor.bbox;
+                let parent_symbol = work[pa].anchor.symbol.clone();
+                let rel = relation.as_ref().and_then(|r| {
+                    let a = lookup(r.args[0], work, notes)?;
+                    let b = lookup(r.args[1], work, notes)?;
+                    Some(Relation {
+                        name: r.name.as_str().into(),
+                        args: [work[a].anchor.symbol.clone(), work[b].anchor.symbol.clone()],
+                    })
+                });
+                let w = &mut work[c];
+                if *place_child == ChildPlacement::AtParentIfApart
+                    && !w.aligned
+                    && !intersects(&w.anchor.bbox, &parent_box)
+                {
+                    w.anchor.bbox = from_bottom_centre(bottom_centre(&parent_box), size(&w.anchor.bbox));
+                }
+                w.anchor.attachment = Some(geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel));
+            }
+            Effect::Detach { child, parent } => {
+                let Some(c) = lookup(*child, work, notes) else { continue };
+                let parent_symbol = match parent {
+                    Some(k) => match lookup(*k, work, notes) {
+                        Some(pa) => Some(work[pa].anchor.symbol.clone()),
+                        None => continue,
+                    },
+                    None => None,
+                };
+                let w = &mut work[c];
+                if parent_symbol.is_none_or(|ps| w.anchor.attachment.as_ref().is_some_and(|a| a.parent == ps))
+                {
+                    w.anchor.attachment = None;
+                }
+            }
+            Effect::DetachChildren { parent } => {
+                if let Some(pa) = lookup(*parent, work, notes) {
+                    let parent_symbol = work[pa].anchor.symbol.clone();
+                    for w in work.iter_mut() {
+                        if w.anchor.attachment.as_ref().is_some_and(|a| a.parent == parent_symbol) {
+                            w.anchor.attachment = None;
+                        }
+                    }
+                }
+            }
+            Effect::StartMoving { object } => {
+                if let Some(o) = lookup(*object, work, notes) {
+                    work[o].anchor.moving = true;
+                    work[o].anchor.moving_until = action.expected_end;
+                }
+            }
+            Effect::StopMoving { object } => {
+                if let Some(o) = lookup(*object, work, notes) {
+                    work[o].anchor.moving = false;
+                    work[o].anchor.moving_until = None;
+                }
+            }
+        }
+    }
+}
+
+/// A new anchor takes the detector's label if no anchor has it, else `<type><n>`.
+fn fresh_symbol(percept: &Percept, used: &HashSet<Symbol>) -> Symbol {
+    if !percept.label.is_empty() && !used.contains(&percept.label) {
+        return percept.label.clone();
+    }
+    (0..)
+        .map(|n| Symbol::from(format!("{}{n}", percept.object_type)))
+        .find(|s| !used.contains(s))
+        .unwrap_or_else(|| percept.label.clone())
+}
+
+/// Image-space spatial relations among anchors passed on for inference: `left_of(a, b)` when a's
+/// box ends before b's begins; `behind(a, b)` when they overlap horizontally and a stands further
+/// up the image (further from a camera looking down on a table) by more than a tenth of b's height.
+fn spatial_relations(work: &[Work], relations: &mut Vec<Relation>) {
+    let candidates: Vec<&Anchor> = work.iter().map(|w| &w.anchor).filter(|a| a.for_inference).collect();
+    for a in &candidates {
+        for b in &candidates {
+            if a.symbol == b.symbol {
+                continue;
+            }
+            let (ab, bb) = (&a.bbox, &b.bbox);
+            if ab.x2 <= bb.x1 {
+                relations
+                    .push(Relation { name: "left_of".into(), args: [a.symbol.clone(), b.symbol.clone()] });
+            }
+            if ab.x1 < bb.x2 && bb.x1 < ab.x2 && ab.y2 < bb.y2 - 0.1 * bb.height() {
+                relations
+                    .push(Relation { name: "behind".into(), args: [a.symbol.clone(), b.symbol.clone()] });
+            }
+        }
+    }
+}

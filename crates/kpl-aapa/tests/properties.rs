@@ -1,0 +1,126 @@
+//! Invariants of the world state over random percept and action sequences.
+#![allow(clippy::unwrap_used, reason = "tests")]
+
+use std::collections::{HashMap, HashSet};
+
+use kpl_aapa::{Aapa, Action, AnchorStatus, Params, Percept, WorldState};
+use kpl_core::BBox;
+use proptest::prelude::*;
+
+const TYPES: [&str; 3] = ["cube", "cone", "hand"];
+const NAMES: [&str; 8] = ["cube0", "cone0", "hand0", "cube1", "cube", "cone", "hand", "nobody"];
+
+#[derive(Debug, Clone)]
+struct Frame {
+    dt: i64,
+    percepts: Vec<(usize, f64, f64, f64, f64)>,
+    actions: Vec<(usize, usize, usize)>,
+}
+
+fn frame() -> impl Strategy<Value = Frame> {
+    let percept = (0..TYPES.len(), 0.0..300.0f64, 0.0..200.0f64, 5.0..60.0f64, 5.0..60.0f64);
+    let action = (0..7usize, 0..NAMES.len(), 0..NAMES.len());
+    (1..4i64, prop::collection::vec(percept, 0..6), prop::collection::vec(action, 0..3))
+        .prop_map(|(dt, percepts, actions)| Frame { dt, percepts, actions })
+}
+
+fn to_action((kind, a, b): (usize, usize, usize)) -> Action {
+    let (x, y) = (NAMES[a], NAMES[b]);
+    match kind {
+        0 => Action::completed("pick_up", &[x, y]),
+        1 => Action::completed("insert", &[x, y]),
+        2 => Action::completed("release", &[x, y]),
+        3 => Action::completed("_contain", &[x, y]),
+        4 => Action::started("_pick_place", &[x], None),
+        5 => Action::started("_slide", &[x], Some(1_000_000)),
+        _ => Action::completed("mount", &[x, y]),
+    }
+}
+
+fn ancestors_anchored(world: &WorldState, symbol: &str, theta_anch: f64) -> bool {
+    let by_symbol: HashMap<&str, _> = world.anchors.iter().map(|a| (&*a.symbol, a)).collect();
+    let mut current = symbol;
+    for _ in 0..world.anchors.len() {
+        let Some(parent) = by_symbol.get(current).and_then(|a| a.attachment.as_ref()).map(|t| &*t.parent)
+        else {
+            return false;
+        };
+        match by_symbol.get(parent) {
+            Some(p) if p.confidence >= theta_anch => return true,
+            Some(_) => current = parent,
+            None => return false,
+        }
+    }
+    false
+}
+
+fn check(previous: &WorldState, world: &WorldState, actions: &[Action], params: &Params) {
+    let mut symbols = HashSet::new();
+    let by_symbol: HashMap<&str, _> = world.anchors.iter().map(|a| (&*a.symbol, a)).collect();
+    for a in &world.anchors {
+        assert!(symbols.insert(a.symbol.clone()), "duplicate symbol {}", a.symbol);
+        assert!((0.0..=1.0).contains(&a.confidence), "confidence {} of {}", a.confidence, a.symbol);
+        assert_eq!(a.for_inference, a.confidence >= params.theta_inf);
+        if a.status == AnchorStatus::Attached {
+            assert!(a.attachment.is_some(), "{} attached without a parent", a.symbol);
+        }
+        if let Some(att) = &a.attachment {
+            assert!(by_symbol.contains_key(&*att.parent), "{}'s parent {} is gone", a.symbol, att.parent);
+            // No cycles: the chain of parents ends.
+            let mut current = &*a.symbol;
+            let mut steps = 0;
+            while let Some(parent) = by_symbol.get(current).and_then(|x| x.attachment.as_ref()) {
+                current = &parent.parent;
+                steps += 1;
+                assert!(steps <= world.anchors.len(), "attachment cycle through {}", a.symbol);
+            }
+        }
+    }
+    // One parent per child: exactly one `attached` relation per attached anchor.
+    let attached = world.relations.iter().filter(|r| &*r.name == "attached").count();
+    assert_eq!(attached, world.anchors.iter().filter(|a| a.attachment.is_some()).count());
+    // No anchor is removed while attached to an anchored ancestor (unless an action this cycle
+    // concerned it or its parents).
+    for a in &previous.anchors {
+        if world.anchor(&a.symbol).is_none()
+            && ancestors_anchored(previous, &a.symbol, params.theta_anch)
+            && actions.is_empty()
+        {
+            let parent = &a.attachment.as_ref().unwrap().parent;
+            let parent_now = world.anchor(parent);
+            assert!(
+                parent_now.is_none_or(|p| p.confidence < params.theta_anch),
+                "{} removed while its parent {} is anchored",
+                a.symbol,
+                parent
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+    #[test]
+    fn world_state_invariants_hold(frames in prop::collection::vec(frame(), 1..40), gearbox in any::<bool>()) {
+        let params = if gearbox { kpl_aapa::gearbox::params() } else { Params::cater() };
+        let params = Params { spatial_relations: true, camera: None, ..params };
+        let aapa = Aapa::new(params.clone()).unwrap();
+        let mut world = WorldState::default();
+        let mut time = 0;
+        for f in &frames {
+            time += f.dt * 33_333;
+            let percepts: Vec<Percept> = f
+                .percepts
+                .iter()
+                .enumerate()
+                .map(|(k, &(t, x, y, w, h))| {
+                    Percept::new(&format!("{}{k}", TYPES[t]), TYPES[t], BBox::new(x, y, x + w, y + h))
+                })
+                .collect();
+            let actions: Vec<Action> = f.actions.iter().copied().map(to_action).collect();
+            let next = aapa.step(time, &percepts, &actions, None, &world).unwrap();
+            check(&world, &next, &actions, &params);
+            world = next;
+        }
+    }
+}

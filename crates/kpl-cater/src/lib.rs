@@ -1,0 +1,1 @@
+//! LA-CATER formats, a CATER-style generator, OPNet-style scoring and snitch localisation models.
