@@ -15,7 +15,7 @@ use rand_distr::StandardNormal;
 
 use crate::error::ParamsError;
 use crate::geom::{self, Point};
-use crate::network::{LaneId, Place, RoadNetwork};
+use crate::network::{LaneId, LaneKind, Place, RoadNetwork};
 
 /// A car's identity; shown as `car1`, `car2`, ... and never reused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -112,9 +112,39 @@ pub struct Traffic {
     pending_entries: u32,
     /// Scratch: car indices sorted by (lane, offset), and the first of each lane in that order.
     order: Vec<u32>,
+    /// Scratch: each car's key lane and offset along it (see `sort`).
+    keys: Vec<(LaneId, f64)>,
     first_in_lane: Vec<u32>,
     /// Lanes whose `first_in_lane` entry is set.
     marked_lanes: Vec<u32>,
+}
+
+/// The lane a car at `offset` on `lane` is ordered along, and its offset there (see `Traffic::sort`).
+fn key_of(net: &RoadNetwork, lane: LaneId, offset: f64) -> (LaneId, f64) {
+    let l = net.lane(lane);
+    match l.kind {
+        LaneKind::Connector { to, .. } => (to, offset - l.path.length()),
+        LaneKind::Road { .. } => (lane, offset),
+    }
+}
+
+/// The speed a car placed at `offset` on `lane` starts with: its share of the speed limit,
+/// lowered near the end of the lane so that it can brake comfortably to the next lane's limit.
+fn desired_speed(
+    net: &RoadNetwork,
+    lane: LaneId,
+    offset: f64,
+    next_lane: Option<LaneId>,
+    factor: f64,
+) -> f64 {
+    let l = net.lane(lane);
+    let mut desired = l.speed_limit_mps * factor;
+    if let Some(next_lane) = next_lane {
+        let to_lane_end = (l.path.length() - offset).max(0.0);
+        let v_next = net.lane(next_lane).speed_limit_mps * factor;
+        desired = desired.min((v_next * v_next + 2.0 * COMFORT_DECEL * to_lane_end).sqrt());
+    }
+    desired.max(0.5)
 }
 
 fn normal(rng: &mut ChaCha8Rng) -> f64 {
@@ -141,6 +171,7 @@ impl Traffic {
             speed_sd,
             pending_entries: 0,
             order: Vec::new(),
+            keys: Vec::new(),
             first_in_lane: vec![u32::MAX; net.lanes().len()],
             marked_lanes: Vec::new(),
         };
@@ -169,7 +200,7 @@ impl Traffic {
         let speed_factor = (1.0 + self.speed_sd * normal(&mut self.rng)).clamp(0.5, 1.5);
         let length = self.rng.random_range(4.0..5.0);
         let next_lane = self.choose_branch(net, lane);
-        let speed = net.lane(lane).speed_limit_mps * speed_factor;
+        let speed = desired_speed(net, lane, offset, next_lane, speed_factor);
         self.cars.push(Car {
             id: CarId(self.next_id),
             lane,
@@ -201,21 +232,26 @@ impl Traffic {
         self.cars.is_empty()
     }
 
-    /// Sorts cars by lane and offset and records where each lane's cars start.
-    fn sort(&mut self) {
+    /// Sorts cars along their "key lane" and records where each key lane's cars start. A car on
+    /// a road lane is keyed by that lane and its offset; a car on a connector by the road lane the
+    /// connector leads into, at a negative offset (the distance still to go to that lane). So cars
+    /// merging from different connectors into one lane follow each other.
+    fn sort(&mut self, net: &RoadNetwork) {
         for &lane in &self.marked_lanes {
             self.first_in_lane[lane as usize] = u32::MAX;
         }
         self.marked_lanes.clear();
+        self.keys.clear();
+        self.keys.extend(self.cars.iter().map(|car| key_of(net, car.lane, car.offset)));
         self.order.clear();
         self.order.extend(0..self.cars.len() as u32);
-        let cars = &self.cars;
+        let (cars, keys) = (&self.cars, &self.keys);
         self.order.sort_unstable_by(|&a, &b| {
-            let (a, b) = (&cars[a as usize], &cars[b as usize]);
-            a.lane.cmp(&b.lane).then(a.offset.total_cmp(&b.offset)).then(a.id.cmp(&b.id))
+            let (ka, kb) = (keys[a as usize], keys[b as usize]);
+            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1)).then(cars[a as usize].id.cmp(&cars[b as usize].id))
         });
         for (rank, &i) in self.order.iter().enumerate() {
-            let lane = self.cars[i as usize].lane.0;
+            let lane = self.keys[i as usize].0.0;
             if self.first_in_lane[lane as usize] == u32::MAX {
                 self.first_in_lane[lane as usize] = rank as u32;
                 self.marked_lanes.push(lane);
@@ -224,12 +260,11 @@ impl Traffic {
     }
 
     /// Lets replacement cars enter at free entry lanes.
-    fn enter_pending(&mut self, net: &RoadNetwork) -> bool {
+    fn enter_pending(&mut self, net: &RoadNetwork) {
         let entries = net.entry_lanes();
         if self.pending_entries == 0 || entries.is_empty() {
-            return false;
+            return;
         }
-        let mut entered = false;
         let mut used: Vec<LaneId> = Vec::new();
         // A few tries per pending car; the rest wait for the next step.
         for _ in 0..self.pending_entries.saturating_mul(3).min(1000) {
@@ -242,74 +277,65 @@ impl Traffic {
             }
             let first = self.first_in_lane[lane.0 as usize];
             let clear = first == u32::MAX || {
-                let car = &self.cars[self.order[first as usize] as usize];
-                car.offset - car.length > ENTRY_CLEARANCE_M
+                let i = self.order[first as usize] as usize;
+                self.keys[i].1 - self.cars[i].length > ENTRY_CLEARANCE_M
             };
             if clear {
                 used.push(lane);
                 self.add_car(net, lane, 0.0);
                 self.pending_entries -= 1;
-                entered = true;
             }
         }
-        entered
     }
 
-    /// The first car on `lane` or, when that lane is empty and leads on to exactly one lane, on
-    /// that one (so a car sees through an empty connector): its gap from a car `distance` before
-    /// the lane's start, and its speed.
-    fn first_car_ahead(
-        &self,
-        net: &RoadNetwork,
-        mut lane: Option<LaneId>,
-        mut distance: f64,
-    ) -> Option<(f64, f64)> {
-        for _ in 0..2 {
-            let current = lane?;
-            let first = self.first_in_lane[current.0 as usize];
-            if first != u32::MAX {
-                let next = &self.cars[self.order[first as usize] as usize];
-                return Some((distance + next.offset - next.length, next.speed));
+    /// The car ahead of car `i` (at `rank` in the order): the next one along its key lane, or
+    /// else the first one along the key lane it turns into. Returns the gap and its speed.
+    fn leader(&self, net: &RoadNetwork, rank: usize) -> Option<(f64, f64)> {
+        let i = self.order[rank] as usize;
+        let (key_lane, key_offset) = self.keys[i];
+        if let Some(&j) = self.order.get(rank + 1) {
+            let j = j as usize;
+            if self.keys[j].0 == key_lane {
+                return Some((self.keys[j].1 - self.cars[j].length - key_offset, self.cars[j].speed));
             }
-            let current = net.lane(current);
-            distance += current.path.length();
-            lane = match current.successors.as_slice() {
-                [only] => Some(*only),
-                _ => None,
-            };
         }
-        None
+        let car = &self.cars[i];
+        if key_lane != car.lane {
+            return None; // on a connector with nobody ahead in the lane it leads into
+        }
+        let next = car.next_lane?;
+        // Where the next key lane starts, measured from the car.
+        let (next_key_lane, start_offset) = key_of(net, next, 0.0);
+        let to_lane_end = (net.lane(car.lane).path.length() - car.offset).max(0.0);
+        let first = self.first_in_lane[next_key_lane.0 as usize];
+        (first != u32::MAX).then(|| {
+            let j = self.order[first as usize] as usize;
+            (to_lane_end - start_offset + self.keys[j].1 - self.cars[j].length, self.cars[j].speed)
+        })
     }
 
     /// Advances every car by `dt_s` seconds. Returns the cars that left the map.
     pub fn step(&mut self, net: &RoadNetwork, dt_s: f64) -> Vec<CarId> {
-        self.sort();
-        if self.enter_pending(net) {
-            self.sort();
-        }
+        self.sort(net);
         let n = self.cars.len();
         let mut accelerations = vec![0.0; n];
         for rank in 0..n {
             let car = &self.cars[self.order[rank] as usize];
-            let lane = net.lane(car.lane);
-            let to_lane_end = (lane.path.length() - car.offset).max(0.0);
-            // The car ahead: the next on this lane, else the first on the lane it turns into.
-            let leader = match self.order.get(rank + 1).map(|&j| &self.cars[j as usize]) {
-                Some(next) if next.lane == car.lane => {
-                    Some((next.offset - next.length - car.offset, next.speed))
-                }
-                _ => self.first_car_ahead(net, car.next_lane, to_lane_end),
-            };
+            let leader = self.leader(net, rank);
             let factor = car.speed_factor + car.speed_drift;
-            let mut desired = lane.speed_limit_mps * factor;
-            if let Some(next_lane) = car.next_lane {
-                // Slow down in time for a turn.
-                let v_next = net.lane(next_lane).speed_limit_mps * factor;
-                desired = desired.min((v_next * v_next + 2.0 * COMFORT_DECEL * to_lane_end).sqrt());
-            }
-            let desired = desired.max(0.5);
+            let lane = net.lane(car.lane);
+            let desired = (lane.speed_limit_mps * factor).max(0.5);
             let v = car.speed;
             let mut accel = MAX_ACCEL * (1.0 - (v / desired).powi(4));
+            if let Some(next_lane) = car.next_lane {
+                // Brake for a slower next lane (a turn) so as to reach its speed at the lane end.
+                let v_next = net.lane(next_lane).speed_limit_mps * factor;
+                let to_lane_end = (lane.path.length() - car.offset).max(0.5);
+                let needed = (v * v - v_next * v_next) / (2.0 * to_lane_end);
+                if needed > 0.5 * COMFORT_DECEL {
+                    accel = accel.min(-needed);
+                }
+            }
             if let Some((gap, v_leader)) = leader {
                 let gap = gap.max(0.1);
                 let wanted_gap = MIN_GAP_M
@@ -366,6 +392,10 @@ impl Traffic {
             } else {
                 i += 1;
             }
+        }
+        if self.pending_entries > 0 {
+            self.sort(net);
+            self.enter_pending(net);
         }
         left_map
     }

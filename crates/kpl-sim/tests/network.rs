@@ -1,0 +1,412 @@
+//! Road-network geometry: on_road, snapping, branching prediction, occluders, the file format.
+#![allow(clippy::unwrap_used, reason = "tests")]
+
+use kpl_sim::format::{LaneDirection, LaneSpec, OccluderKind, OccluderSpec};
+use kpl_sim::network::{LaneKind, NodeKind};
+use kpl_sim::scenarios::{self, GridTownSize};
+use kpl_sim::{NetworkError, NetworkFile, NetworkProblem, Place, RoadNetwork};
+use proptest::prelude::*;
+use std::sync::LazyLock;
+
+static CROSSING: LazyLock<RoadNetwork> =
+    LazyLock::new(|| RoadNetwork::build(&scenarios::crossing()).unwrap());
+static TOWN: LazyLock<RoadNetwork> = LazyLock::new(|| town(3));
+
+fn crossing() -> RoadNetwork {
+    CROSSING.clone()
+}
+
+fn town(blocks: u32) -> RoadNetwork {
+    RoadNetwork::build(&scenarios::grid_town(GridTownSize {
+        blocks_x: blocks,
+        blocks_y: blocks,
+        block_m: 100.0,
+    }))
+    .unwrap()
+}
+
+const EAST: f64 = 0.0;
+const NORTH: f64 = std::f64::consts::FRAC_PI_2;
+const WEST: f64 = std::f64::consts::PI;
+
+#[test]
+fn on_road_follows_the_paved_width() {
+    let net = crossing();
+    // (point, expected): the arms are 7 m wide (two 3.5 m lanes) along the axes.
+    let cases = [
+        ([0.0, 0.0], true),
+        ([-50.0, 3.4], true),
+        ([-50.0, -3.4], true),
+        ([-50.0, 3.6], false),
+        ([-50.0, -3.6], false),
+        ([3.6, 60.0], false),
+        ([3.4, 60.0], true),
+        // The crossing area joins the arms' edges where they start, 5 m from the centre, so
+        // its corners are cut diagonally like kerbs: from (5, 3.5) to (3.5, 5).
+        ([4.0, 4.0], true),
+        ([4.5, 4.5], false),
+        ([8.0, 8.0], false),
+        ([-149.0, 0.0], true),
+        ([-151.0, 0.0], true),  // still within the half width of the dead end
+        ([-154.0, 0.0], false), // beyond the end of the road
+        ([1e12, 0.0], false),
+        ([f64::NAN, 0.0], false),
+    ];
+    for (p, expected) in cases {
+        assert_eq!(net.on_road(p), expected, "on_road({p:?})");
+    }
+}
+
+#[test]
+fn crossing_structure() {
+    let net = crossing();
+    let centre = net.node_by_name("c").unwrap();
+    assert_eq!(centre.kind, NodeKind::Crossing);
+    assert_eq!(centre.radius_m, 5.0, "half of 7 m plus the 1.5 m margin");
+    assert_eq!(net.node_by_name("w").unwrap().kind, NodeKind::Boundary);
+    // 4 roads x 2 lanes, and at the crossing 4 incoming lanes x 3 other roads.
+    let connectors = net.lanes().iter().filter(|l| matches!(l.kind, LaneKind::Connector { .. })).count();
+    assert_eq!(net.lanes().len(), 8 + connectors);
+    assert_eq!(connectors, 12);
+    assert_eq!(net.entry_lanes().len(), 4);
+}
+
+#[test]
+fn snapping_picks_the_lane_of_the_direction_of_travel() {
+    let net = crossing();
+    let west_road = net.road_by_name("west").unwrap().id;
+    // On the west arm, lanes run at y = -1.75 (eastbound) and y = +1.75 (westbound).
+    let east = net.snap_to_lane([-50.0, 0.5], Some(EAST)).unwrap();
+    assert_eq!(east.place, Place::Road { road: west_road, lane: 1 });
+    assert_eq!(east.point, [-50.0, -1.75]);
+    assert!((east.lateral_m - 2.25).abs() < 1e-9, "query point is left of the eastbound lane");
+    assert!((east.heading - EAST).abs() < 1e-9);
+    // The eastbound lane starts at the boundary node (x = -150), so 100 m along.
+    assert!((east.offset_m - 100.0).abs() < 1e-9);
+
+    let west = net.snap_to_lane([-50.0, 0.5], Some(WEST)).unwrap();
+    assert_eq!(west.place, Place::Road { road: west_road, lane: 0 });
+    assert_eq!(west.point, [-50.0, 1.75]);
+    // The westbound lane starts where the crossing ends (x = -5): 45 m along.
+    assert!((west.offset_m - 45.0).abs() < 1e-9);
+
+    let nearest = net.snap_to_lane([-50.0, 0.5], None).unwrap();
+    assert_eq!(nearest.place, Place::Road { road: west_road, lane: 0 }, "nearest without a heading");
+
+    assert!(net.snap_to_lane([-50.0, 40.0], None).is_none(), "beyond the 10 m snap radius");
+    assert!(net.snap_to_lane([f64::NAN, 0.0], None).is_none());
+}
+
+#[test]
+fn snapping_inside_a_crossing_uses_the_heading_to_pick_the_connector() {
+    let net = crossing();
+    let centre = net.node_by_name("c").unwrap().id;
+    let snapped = net.snap_to_lane([0.5, 0.5], Some(NORTH)).unwrap();
+    assert_eq!(snapped.place, Place::Crossing { node: centre });
+    assert!(kpl_sim::geom::heading_difference(snapped.heading, NORTH) < 0.6, "{snapped:?}");
+}
+
+#[test]
+fn advancing_branches_once_per_outgoing_road_at_a_crossing() {
+    let net = crossing();
+    let start = net.snap_to_lane([-20.0, -1.75], Some(EAST)).unwrap();
+    // 15 m to the crossing: a short advance stays on the lane.
+    let short = net.advance(&start, 10.0, 16);
+    assert_eq!(short.len(), 1);
+    assert_eq!(short[0].route, vec![start.lane]);
+    assert_eq!(short[0].position.point, [-10.0, -1.75]);
+
+    let long = net.advance(&start, 60.0, 16);
+    assert_eq!(long.len(), 3);
+    let mut roads: Vec<&str> = long
+        .iter()
+        .map(|h| {
+            assert_eq!(h.route.len(), 3, "start lane, connector, outgoing lane");
+            assert_eq!(h.route[0], start.lane);
+            assert!(matches!(net.lane(h.route[1]).kind, LaneKind::Connector { .. }));
+            assert!(!h.reached_end);
+            assert_eq!(h.travelled_m, 60.0);
+            net.road(h.position.road().unwrap()).name.as_str()
+        })
+        .collect();
+    roads.sort_unstable();
+    assert_eq!(roads, vec!["east", "north", "south"], "left, straight and right; no U-turn");
+    for h in &long {
+        // Each hypothesis is in its road's lane leading away from the crossing, and the distance
+        // along the route adds up to 60 m.
+        let along: f64 = h.route[..h.route.len() - 1].iter().map(|&l| net.lane(l).path.length()).sum::<f64>()
+            - start.offset_m
+            + h.position.offset_m;
+        assert!((along - 60.0).abs() < 1e-9);
+        assert!(kpl_sim::geom::dist([0.0, 0.0], h.position.point) > 30.0);
+    }
+
+    // Far enough to leave the map: every branch ends at its boundary.
+    let out = net.advance(&start, 1000.0, 16);
+    assert_eq!(out.len(), 3);
+    assert!(out.iter().all(|h| h.reached_end && h.travelled_m < 1000.0));
+}
+
+#[test]
+fn advancing_through_two_crossings_multiplies_branches_up_to_the_cap() {
+    let net = town(4);
+    // Eastbound on h1_1, between crossings x1y1 and x2y1 (100 m apart), 10 m after x1y1.
+    let start = net.snap_to_lane([110.0, 98.25], Some(EAST)).unwrap();
+    assert_eq!(net.road(start.road().unwrap()).name, "h1_1");
+    assert_eq!(net.advance(&start, 150.0, 100).len(), 3);
+    assert_eq!(net.advance(&start, 250.0, 100).len(), 9);
+    let capped = net.advance(&start, 250.0, 4);
+    assert_eq!(capped.len(), 4);
+    assert_eq!(capped, net.advance(&start, 250.0, 100)[..4].to_vec(), "the cap keeps the first found");
+    // Negative and NaN distances stay put.
+    assert_eq!(net.advance(&start, -5.0, 10)[0].position.point, start.point);
+    assert_eq!(net.advance(&start, f64::NAN, 10)[0].position.point, start.point);
+}
+
+#[test]
+fn bridge_occludes_only_the_road_below() {
+    let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
+    let main = net.road_by_name("main").unwrap().id;
+    let overpass = net.road_by_name("overpass").unwrap().id;
+    let bridge = net.occluders()[0].id;
+    let half = scenarios::BRIDGE_LENGTH_M / 2.0;
+    for (p, expected) in [
+        ([0.0, -1.75], true),
+        ([half - 0.1, 1.75], true),
+        ([-half + 0.1, -1.75], true),
+        ([half + 0.1, -1.75], false),
+        ([-half - 0.1, 1.75], false),
+        ([0.0, 20.0], false),
+    ] {
+        assert_eq!(net.occluder_at(p) == Some(bridge), expected, "occluder_at({p:?})");
+        assert_eq!(net.occluder_over(main, p) == Some(bridge), expected, "occluder_over(main, {p:?})");
+    }
+    assert_eq!(net.occluder_over(overpass, [0.0, 0.0]), None, "a car on the bridge is seen");
+    // Both roads cover the point where they cross, without a crossing node.
+    assert!(net.on_road([0.0, 0.0]));
+    assert!(net.nodes().iter().all(|n| n.kind == NodeKind::Boundary));
+    // A car driving east under the bridge snaps to main, not to the overpass.
+    let snapped = net.snap_to_lane([0.0, -1.0], Some(EAST)).unwrap();
+    assert_eq!(snapped.road(), Some(main));
+}
+
+#[test]
+fn built_in_scenarios_round_trip_through_json() {
+    for name in scenarios::NAMES {
+        let file =
+            scenarios::by_name(name, GridTownSize { blocks_x: 3, blocks_y: 2, block_m: 80.0 }).unwrap();
+        let net = RoadNetwork::build(&file).unwrap();
+        let again = RoadNetwork::from_json_str(&net.to_json_string()).unwrap();
+        assert_eq!(again.file(), &file, "{name}");
+        assert_eq!(again.lanes().len(), net.lanes().len());
+    }
+    let dir = std::env::temp_dir().join(format!("kpl-sim-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bridge.json");
+    let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
+    net.save(&path).unwrap();
+    assert_eq!(RoadNetwork::load(&path).unwrap().file(), net.file());
+    let missing = RoadNetwork::load(&dir.join("missing.json")).unwrap_err();
+    assert!(matches!(missing, NetworkError::Read { .. }), "{missing}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_minimal_file_uses_the_documented_defaults() {
+    let text = r#"{
+        "format": "kpl-road-network", "version": 1,
+        "nodes": [ { "id": "a", "pos": [0, 0] }, { "id": "b", "pos": [100, 0] } ],
+        "roads": [ { "id": "ab", "from": "a", "to": "b" } ]
+    }"#;
+    let net = RoadNetwork::from_json_str(text).unwrap();
+    let road = net.road_by_name("ab").unwrap();
+    assert_eq!(road.width_m, 7.0);
+    assert_eq!(road.speed_limit_mps, 13.9);
+    assert_eq!(road.lanes[1].direction, LaneDirection::Forward);
+    assert_eq!(net.snap_radius_m(), 10.0);
+}
+
+#[test]
+fn every_problem_of_a_bad_file_is_reported_at_once() {
+    let mut file = NetworkFile::new();
+    file.add_node("a", [0.0, 0.0]);
+    file.add_node("a", [50.0, 0.0]);
+    file.add_node("c", [5.0, 0.0]);
+    file.add_node("d", [100.0, f64::NAN]);
+    file.add_road("ab", "a", "nowhere", Vec::new());
+    file.add_road("bad_lanes", "a", "c", Vec::new());
+    file.roads[1].lanes = vec![LaneSpec { width_m: -1.0, direction: LaneDirection::Forward }];
+    file.add_road("empty", "a", "c", Vec::new());
+    file.roads[2].lanes.clear();
+    let err = RoadNetwork::build(&file).unwrap_err();
+    let NetworkError::Invalid(problems) = &err else { panic!("{err}") };
+    assert!(problems.contains(&NetworkProblem::DuplicateId { what: "node", id: "a".into() }));
+    assert!(problems.contains(&NetworkProblem::UnknownNode { road: "ab".into(), node: "nowhere".into() }));
+    assert!(problems.contains(&NetworkProblem::NoLanes { road: "empty".into() }));
+    assert!(problems.iter().any(|p| matches!(p, NetworkProblem::BadNumber { field: "lane width_m", .. })));
+    assert!(problems.iter().any(|p| matches!(p, NetworkProblem::BadNumber { field: "pos", .. })));
+    assert_eq!(problems.len(), 5, "{err}");
+
+    // Geometry problems: a road too short for its crossings, an occluder outside its road.
+    let mut file = scenarios::crossing();
+    file.nodes[1].pos = [-5.5, 0.0];
+    file.occluders.push(OccluderSpec {
+        id: "tunnel".into(),
+        kind: OccluderKind::Tunnel,
+        road: "east".into(),
+        from_m: 100.0,
+        to_m: 200.0,
+    });
+    let err = RoadNetwork::build(&file).unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("road \"west\" is 5.5 m long, too short"), "{message}");
+
+    let mut file = scenarios::crossing();
+    file.occluders.push(OccluderSpec {
+        id: "tunnel".into(),
+        kind: OccluderKind::Tunnel,
+        road: "east".into(),
+        from_m: 100.0,
+        to_m: 200.0,
+    });
+    file.occluders.push(OccluderSpec {
+        id: "t2".into(),
+        kind: OccluderKind::Tunnel,
+        road: "ring".into(),
+        from_m: 0.0,
+        to_m: 1.0,
+    });
+    let NetworkError::Invalid(problems) = RoadNetwork::build(&file).unwrap_err() else { panic!() };
+    assert_eq!(problems.len(), 2);
+    assert!(matches!(problems[0], NetworkProblem::OccluderOutsideRoad { .. }));
+    assert!(matches!(problems[1], NetworkProblem::UnknownRoad { .. }));
+
+    let err = RoadNetwork::from_json_str(
+        r#"{"format": "kpl-road-network", "version": 1, "nodes": [], "roads": [], "extra": 1}"#,
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("unknown field `extra`"), "{err}");
+    let err =
+        RoadNetwork::from_json_str(r#"{"format": "x", "version": 2, "nodes": [], "roads": []}"#).unwrap_err();
+    assert_eq!(err.to_string().lines().count(), 4, "{err}"); // header + format + version + empty
+}
+
+#[test]
+fn curved_roads_and_multi_lane_roads_connect() {
+    // A bent two-lane-each-way road into a crossing with a one-lane-each-way road.
+    let mut file = NetworkFile::new();
+    file.add_node("a", [-100.0, -50.0]);
+    file.add_node("c", [0.0, 0.0]);
+    file.add_node("b", [100.0, 0.0]);
+    file.add_node("d", [0.0, 100.0]);
+    file.add_road("bent", "a", "c", vec![[-60.0, 0.0]]);
+    file.roads[0].lanes = vec![
+        LaneSpec { width_m: 3.0, direction: LaneDirection::Backward },
+        LaneSpec { width_m: 3.0, direction: LaneDirection::Backward },
+        LaneSpec { width_m: 3.0, direction: LaneDirection::Forward },
+        LaneSpec { width_m: 3.0, direction: LaneDirection::Forward },
+    ];
+    file.add_road("cb", "c", "b", Vec::new());
+    file.add_road("cd", "c", "d", Vec::new());
+    let net = RoadNetwork::build(&file).unwrap();
+    let bent = net.road_by_name("bent").unwrap();
+    assert_eq!(bent.width_m, 12.0);
+    assert_eq!(net.node_by_name("c").unwrap().radius_m, 7.5);
+    // Each of the two incoming lanes of `bent` reaches both other roads.
+    for lane in &bent.lanes[2..] {
+        assert_eq!(net.lane(lane.lane).successors.len(), 2);
+    }
+    // The one incoming lane of `cb` joins only the rightmost of the two lanes of `bent` it meets.
+    let cb_in = net.road_by_name("cb").unwrap().lanes[0].lane;
+    let to_bent: Vec<_> = net
+        .lane(cb_in)
+        .successors
+        .iter()
+        .map(|&c| match net.lane(c).kind {
+            LaneKind::Connector { to, .. } => to,
+            LaneKind::Road { .. } => c,
+        })
+        .filter(|&to| net.place_of(to) == Place::Road { road: bent.id, lane: 0 })
+        .collect();
+    assert_eq!(to_bent.len(), 1, "enters the rightmost westbound lane of `bent`");
+    // Lanes follow the bend: the outer left lane's centre is 4.5 m left of the centre line
+    // everywhere (on the inside of the bend, where the distance is exact).
+    let lane = net.lane(bent.lanes[0].lane);
+    for k in 0..20 {
+        let p = lane.path.point_at(lane.path.length() * f64::from(k) / 19.0);
+        let projection = bent.centerline.project(p);
+        assert!((projection.lateral - 4.5).abs() < 1e-6, "{p:?} {projection:?}");
+    }
+}
+
+fn arb_point_near(net: &RoadNetwork) -> impl Strategy<Value = [f64; 2]> {
+    let (lo, hi) = net.bounds();
+    (lo[0]..hi[0], lo[1]..hi[1]).prop_map(|(x, y)| [x, y])
+}
+
+fn check_snapping(net: &RoadNetwork, p: [f64; 2], heading: Option<f64>) -> Result<(), TestCaseError> {
+    let Some(snapped) = net.snap_to_lane(p, heading) else {
+        return Ok(());
+    };
+    prop_assert!(net.on_road(snapped.point), "snapped point {:?} is off the road", snapped.point);
+    prop_assert!(kpl_sim::geom::dist(p, snapped.point) <= net.snap_radius_m() + 1e-9);
+    prop_assert!((kpl_sim::geom::dist(p, snapped.point) - snapped.lateral_m.abs()).abs() < 1e-6);
+    let lane = net.lane(snapped.lane);
+    prop_assert!(kpl_sim::geom::dist(lane.path.point_at(snapped.offset_m), snapped.point) < 1e-6);
+    // Idempotent: snapping the snapped point (with or without the lane's heading) stays there.
+    let again = net.snap_to_lane(snapped.point, Some(snapped.heading)).unwrap();
+    prop_assert!(kpl_sim::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
+    prop_assert!(kpl_sim::geom::heading_difference(again.heading, snapped.heading) < 1e-6);
+    prop_assert!(again.lateral_m.abs() < 1e-6);
+    let again = net.snap_to_lane(snapped.point, None).unwrap();
+    prop_assert!(kpl_sim::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    #[test]
+    fn snapping_in_the_crossing_is_on_road_and_idempotent(
+        p in arb_point_near(&CROSSING),
+        heading in proptest::option::of(-4.0..4.0f64),
+    ) {
+        check_snapping(&CROSSING, p, heading)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    #[test]
+    fn snapping_in_a_town_is_on_road_and_idempotent(
+        p in arb_point_near(&TOWN),
+        heading in proptest::option::of(-4.0..4.0f64),
+    ) {
+        check_snapping(&TOWN, p, heading)?;
+    }
+
+    #[test]
+    fn on_road_agrees_with_a_brute_force_scan(p in arb_point_near(&TOWN)) {
+        let net = &*TOWN;
+        let brute = net.roads().iter().any(|r| {
+            let proj = r.centerline.project(p);
+            proj.lateral.abs() <= r.width_m / 2.0
+        }) || net.nodes().iter().any(|n| kpl_sim::geom::point_in_polygon(p, &n.area));
+        prop_assert_eq!(net.on_road(p), brute);
+    }
+
+    #[test]
+    fn snapping_agrees_with_a_brute_force_scan(p in arb_point_near(&TOWN)) {
+        let net = &*TOWN;
+        let brute = net
+            .lanes()
+            .iter()
+            .map(|l| l.path.project(p).lateral.abs())
+            .fold(f64::INFINITY, f64::min);
+        match net.snap_to_lane(p, None) {
+            Some(s) => prop_assert!((s.lateral_m.abs() - brute).abs() < 1e-9),
+            None => prop_assert!(brute > net.snap_radius_m()),
+        }
+    }
+}
