@@ -270,13 +270,19 @@ pub enum PolicyKind {
     // delay
     MaxDelay(DurationLit),
     // duration: valid times from `from` to `to` (`None` = unbounded end)
-    Duration { from: DurationLit, to: Option<DurationLit> },
+    Duration {
+        from: DurationLit,
+        to: Option<DurationLit>,
+    },
     // order
     AnyOrder,
     MonotoneOrder,
     StrictOrder,
     /// `queue 64 drop oldest` / `queue 1024 block`
-    Queue { capacity: u64, overflow: Overflow },
+    Queue {
+        capacity: u64,
+        overflow: Overflow,
+    },
     /// `feedback`: the consumer reads the producer's previous sample, so the edge may close a cycle.
     Feedback,
 }
@@ -421,19 +427,42 @@ pub enum ExprKind {
     /// A name or attribute access: `p`, `from.pos`, `c.speed`.
     Path(Path),
     /// A function or predicate call: `xydist(from.pos, to.pos)`, `on_road(from.pos)`.
-    Call { func: Ident, args: Vec<Expr> },
-    Unary { op: UnaryOp, expr: Box<Expr> },
-    Binary { op: BinaryOp, lhs: Box<Expr>, rhs: Box<Expr> },
+    Call {
+        func: Ident,
+        args: Vec<Expr>,
+    },
+    Unary {
+        op: UnaryOp,
+        expr: Box<Expr>,
+    },
+    Binary {
+        op: BinaryOp,
+        lhs: Box<Expr>,
+        rhs: Box<Expr>,
+    },
     /// `a and b and c`, at least two operands.
     And(Vec<Expr>),
     /// `a or b or c`, at least two operands.
     Or(Vec<Expr>),
     /// `eventually[a, b] φ`, `always φ` (no interval: `[0, inf]`).
-    Temporal { op: TemporalOp, interval: Option<Interval>, body: Box<Expr> },
+    Temporal {
+        op: TemporalOp,
+        interval: Option<Interval>,
+        body: Box<Expr>,
+    },
     /// `φ until[a, b] ψ`
-    Until { interval: Option<Interval>, lhs: Box<Expr>, rhs: Box<Expr> },
+    Until {
+        interval: Option<Interval>,
+        lhs: Box<Expr>,
+        rhs: Box<Expr>,
+    },
     /// `forall c: Car . φ`, `exists o: WorldObject . φ`
-    Quantified { quantifier: Quantifier, var: Ident, ty: Ident, body: Box<Expr> },
+    Quantified {
+        quantifier: Quantifier,
+        var: Ident,
+        ty: Ident,
+        body: Box<Expr>,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -477,7 +506,10 @@ impl BinaryOp {
         }
     }
     pub fn is_comparison(self) -> bool {
-        matches!(self, BinaryOp::Lt | BinaryOp::Le | BinaryOp::Gt | BinaryOp::Ge | BinaryOp::Eq | BinaryOp::Ne)
+        matches!(
+            self,
+            BinaryOp::Lt | BinaryOp::Le | BinaryOp::Gt | BinaryOp::Ge | BinaryOp::Eq | BinaryOp::Ne
+        )
     }
 }
 

@@ -1,5 +1,22 @@
-//! KPL's front end: the pest grammar, the syntax tree ([`ast`]), spans and diagnostics.
+//! KPL's front end: the pest grammar, the syntax tree ([`ast`]), spans, diagnostics, and the
+//! canonical formatter ([`format`]).
 //!
-//! This crate knows nothing of name resolution, graphs, tokio or zenoh.
+//! This crate knows nothing of name resolution, graphs, tokio or zenoh. Parsing never fails and
+//! never panics: it returns what parsed plus diagnostics.
+//!
+//! ```
+//! let parse = kpl_syntax::parse("stream percepts = tracker with sample every 100ms, strict order\n");
+//! assert!(parse.diagnostics.is_empty());
+//! let formula = kpl_syntax::parse_formula("eventually[0, 1s] xydist(from.pos, to.pos) < 10.0").unwrap();
+//! assert!(matches!(formula.kind, kpl_syntax::ast::ExprKind::Temporal { .. }));
+//! ```
 
 pub mod ast;
+pub mod diagnostic;
+pub mod diagnostics;
+pub mod format;
+pub mod lex;
+mod parser;
+
+pub use diagnostic::{Diagnostic, JsonDiagnostic, LineIndex, Severity};
+pub use parser::{MAX_EXPR_DEPTH, MAX_SOURCE_BYTES, Parse, parse, parse_formula};
