@@ -52,7 +52,7 @@ const MAX_COORDINATE_M: f64 = 1.0e7;
 /// Lateral acceleration cars accept in turns; gives connector speed limits.
 const TURN_LATERAL_ACCEL: f64 = 2.5;
 /// Side of a spatial-grid cell.
-const GRID_CELL_M: f64 = 25.0;
+const GRID_CELL_M: f64 = 15.0;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NodeKind {
@@ -184,13 +184,24 @@ pub struct RoadNetwork {
     road_grid: Grid,
     crossing_grid: Grid,
     /// `(lane, segment)` per item of `lane_grid`.
-    lane_segments: Vec<(LaneId, u32)>,
+    lane_segments: Vec<LaneSegment>,
     lane_grid: Grid,
     occluder_grid: Grid,
     /// Road lanes that start at a map boundary.
     entry_lanes: Vec<LaneId>,
     /// Road lanes and the running total of their lengths, for sampling positions uniformly.
     road_lane_cumulative: Vec<(f64, LaneId)>,
+}
+
+/// A segment of a lane's path, as the lane grid indexes it.
+#[derive(Debug, Clone, Copy)]
+struct LaneSegment {
+    lane: LaneId,
+    segment: u32,
+    a: Point,
+    b: Point,
+    /// Unit vector from `a` to `b`.
+    direction: Point,
 }
 
 /// Which end of a road meets a node.
@@ -600,7 +611,8 @@ impl RoadNetwork {
             for s in 0..lane.path.n_segments() {
                 let (a, b, _) = lane.path.segment(s);
                 lane_grid.insert_segment(lane_segments.len() as u32, a, b, 0.0);
-                lane_segments.push((lane.id, s as u32));
+                let direction = geom::unit(geom::heading_of(geom::sub(b, a)));
+                lane_segments.push(LaneSegment { lane: lane.id, segment: s as u32, a, b, direction });
             }
         }
         let mut occluder_grid = GridBuilder::new(bounds.0, bounds.1, GRID_CELL_M);
@@ -753,21 +765,20 @@ impl RoadNetwork {
     /// to the lane of its own direction and, inside a crossing, to the connector it follows.
     pub fn snap_to_lane(&self, pos: Point, heading: Option<f64>) -> Option<LanePosition> {
         let mut best: Option<(f64, LaneId, u32)> = None;
+        let wanted = heading.filter(|h| h.is_finite()).map(geom::unit);
         self.lane_grid.for_each_near(pos, self.snap_radius_m, |item| {
-            let (lane_id, s) = self.lane_segments[item as usize];
-            let (a, b, _) = self.lanes[lane_id.0 as usize].path.segment(s as usize);
-            let d = dist_to_segment(pos, a, b);
-            if d > self.snap_radius_m {
+            let segment = &self.lane_segments[item as usize];
+            let d = dist_to_segment(pos, segment.a, segment.b);
+            // The penalty is never negative, so a segment already further than the best is out.
+            if d > self.snap_radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
                 return;
             }
-            let penalty = match heading {
-                Some(h) if h.is_finite() => {
-                    HEADING_PENALTY_M * (1.0 - heading_difference(h, geom::heading_of(geom::sub(b, a))).cos())
-                        / 2.0
-                }
-                _ => 0.0,
+            let penalty = match wanted {
+                // (1 - cos(heading difference)) / 2: 0 when aligned, 1 when opposite.
+                Some(u) => HEADING_PENALTY_M * (1.0 - geom::dot(u, segment.direction)) / 2.0,
+                None => 0.0,
             };
-            let candidate = (d + penalty, lane_id, s);
+            let candidate = (d + penalty, segment.lane, segment.segment);
             let better = match best {
                 None => true,
                 Some(current) => {

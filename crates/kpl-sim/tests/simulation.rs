@@ -385,3 +385,18 @@ fn parameters_have_defaults_docs_and_clear_errors() {
     let missing = Params { network_file: Some("/nonexistent/net.json".into()), ..Params::default() };
     assert!(missing.load_network().unwrap_err().to_string().contains("/nonexistent/net.json"));
 }
+
+#[test]
+fn the_parameter_table_in_the_docs_matches_the_code() {
+    let docs =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/simulator.md")).unwrap();
+    let rows: Vec<&str> = docs.lines().filter(|l| l.starts_with("| `")).collect();
+    let described = Params::describe();
+    for info in &described {
+        let row = format!("| `{}` | {} | `{}` | {} |", info.name, info.ty, info.default, info.doc);
+        assert!(rows.contains(&row.as_str()), "docs/simulator.md should have the row\n{row}");
+    }
+    let param_rows =
+        rows.iter().filter(|r| described.iter().any(|p| r.starts_with(&format!("| `{}` |", p.name))));
+    assert_eq!(param_rows.count(), described.len());
+}
