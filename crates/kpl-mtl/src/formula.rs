@@ -111,12 +111,25 @@ pub(crate) const INF: Time = Time::MAX;
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum TNode {
     Const(bool),
-    Atom { term: u32, negated: bool },
+    Atom {
+        term: u32,
+        negated: bool,
+    },
     And(Vec<TplId>),
     Or(Vec<TplId>),
     /// For `Eventually`/`Always` only `rhs` is used.
-    Temporal { op: TemporalOp, lo: Time, hi: Time, lhs: TplId, rhs: TplId },
-    Quant { forall: bool, domain: DomainId, body: TplId },
+    Temporal {
+        op: TemporalOp,
+        lo: Time,
+        hi: Time,
+        lhs: TplId,
+        rhs: TplId,
+    },
+    Quant {
+        forall: bool,
+        domain: DomainId,
+        body: TplId,
+    },
 }
 
 /// A compiled formula: immutable, shared by any number of progressors (`Arc<Formula>`).
@@ -321,8 +334,10 @@ impl Compiler<'_> {
                 self.check_term(r, depth)
             }
             Term::Call(func, args) => {
-                let function =
-                    self.functions.get(*func as usize).ok_or(FormulaError::UnknownFunction { func: *func })?;
+                let function = self
+                    .functions
+                    .get(*func as usize)
+                    .ok_or(FormulaError::UnknownFunction { func: *func })?;
                 if !function.accepts(args.len()) {
                     return Err(FormulaError::Arity {
                         name: function.name.to_string(),
@@ -372,7 +387,11 @@ impl Compiler<'_> {
                 // a -> b = not a or b;  not (a -> b) = a and not b
                 let lhs = self.compile(a, !negate, depth)?;
                 let rhs = self.compile(b, negate, depth)?;
-                if negate { self.push(TNode::And(vec![lhs, rhs])) } else { self.push(TNode::Or(vec![lhs, rhs])) }
+                if negate {
+                    self.push(TNode::And(vec![lhs, rhs]))
+                } else {
+                    self.push(TNode::Or(vec![lhs, rhs]))
+                }
             }
             Mtl::Eventually(w, f) | Mtl::Always(w, f) => {
                 let (lo, hi) = self.window(w)?;

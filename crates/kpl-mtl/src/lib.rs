@@ -39,6 +39,7 @@ mod lower;
 mod progress;
 mod state;
 mod term;
+pub mod timescales;
 
 pub use context::Context;
 pub use error::{CompileError, EvalError, FormulaError};

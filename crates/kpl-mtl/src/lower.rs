@@ -35,7 +35,9 @@ pub fn bound_in_unit(bound: &Bound, unit: TimeUnit, tick_unit: TimeUnit) -> Resu
             let n = i64::try_from(*n).map_err(|_| format!("bound {n} is too large"))?;
             tick_unit.to_micros(n).ok_or_else(|| format!("bound {n}{} is too large", tick_unit.suffix()))?
         }
-        Bound::Duration(d) => d.micros().ok_or_else(|| "the duration is negative or too large".to_string())?,
+        Bound::Duration(d) => {
+            d.micros().ok_or_else(|| "the duration is negative or too large".to_string())?
+        }
     };
     if micros % unit.micros() != 0 {
         return Err(format!(
@@ -102,8 +104,10 @@ impl Lowering<'_> {
                     Some(d) => d,
                     None if self.context.is_open() => self.context.declare_object_type(&ty.name),
                     None => {
-                        let known: Vec<String> = self.context.domain_names().iter().map(|n| n.to_string()).collect();
-                        let mut err = CompileError::new(ty.span, format!("unknown object type `{}`", ty.name));
+                        let known: Vec<String> =
+                            self.context.domain_names().iter().map(|n| n.to_string()).collect();
+                        let mut err =
+                            CompileError::new(ty.span, format!("unknown object type `{}`", ty.name));
                         if let Some(best) = closest(&ty.name, known.iter().map(String::as_str)) {
                             err = err.with_help(format!("did you mean `{best}`?"));
                         }
@@ -185,7 +189,8 @@ impl Lowering<'_> {
                         Term::Call(id, args)
                     }
                     None => {
-                        let mut err = CompileError::new(func.span, format!("unknown function `{}`", func.name));
+                        let mut err =
+                            CompileError::new(func.span, format!("unknown function `{}`", func.name));
                         if let Some(best) = closest(&func.name, self.context.function_names()) {
                             err = err.with_help(format!("did you mean `{best}`?"));
                         }
@@ -253,7 +258,8 @@ impl Lowering<'_> {
         } else if self.context.is_open() {
             Term::Slot(self.context.declare_value(&first.name))
         } else {
-            let mut candidates: Vec<String> = self.context.slot_names().iter().map(|n| n.to_string()).collect();
+            let mut candidates: Vec<String> =
+                self.context.slot_names().iter().map(|n| n.to_string()).collect();
             candidates.extend(self.scope.iter().cloned());
             let mut err = CompileError::new(first.span, format!("unknown name `{}`", first.name));
             if let Some(best) = closest(&first.name, candidates.iter().map(String::as_str)) {
@@ -294,6 +300,7 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing test should fail loudly
 mod tests {
     use super::*;
     use kpl_syntax::ast::DurationLit;

@@ -63,7 +63,15 @@ impl Node {
         Node { kind: Kind::Temporal(op), lo, hi, tpl, env, kids: 0, n_kids: 0 }
     }
     fn constant(value: bool) -> Node {
-        Node { kind: if value { Kind::True } else { Kind::False }, lo: 0, hi: 0, tpl: 0, env: 0, kids: 0, n_kids: 0 }
+        Node {
+            kind: if value { Kind::True } else { Kind::False },
+            lo: 0,
+            hi: 0,
+            tpl: 0,
+            env: 0,
+            kids: 0,
+            n_kids: 0,
+        }
     }
 }
 
@@ -149,7 +157,10 @@ impl Arena {
             Kind::Or => 4,
             Kind::Temporal(op) => 5 + op as u64,
         };
-        let mut h = mix(mix(mix(mix(kind, node.lo as u64), node.hi as u64), u64::from(node.tpl)), u64::from(node.env));
+        let mut h = mix(
+            mix(mix(mix(kind, node.lo as u64), node.hi as u64), u64::from(node.tpl)),
+            u64::from(node.env),
+        );
         for k in kids {
             h = mix(h, u64::from(*k));
         }
@@ -602,7 +613,8 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             return;
         }
         windows.sort_unstable_by_key(|w| (w.op, w.tpl, w.env, w.lo, w.hi));
-        let shares_body = windows.windows(2).any(|p| (p[0].op, p[0].tpl, p[0].env) == (p[1].op, p[1].tpl, p[1].env));
+        let shares_body =
+            windows.windows(2).any(|p| (p[0].op, p[0].tpl, p[0].env) == (p[1].op, p[1].tpl, p[1].env));
         if !shares_body {
             self.scratch.windows = windows;
             return;
@@ -612,7 +624,8 @@ impl<S: State + ?Sized> Stepper<'_, S> {
         while group_start < windows.len() {
             let key = (windows[group_start].op, windows[group_start].tpl, windows[group_start].env);
             let mut group_end = group_start + 1;
-            while group_end < windows.len() && (windows[group_end].op, windows[group_end].tpl, windows[group_end].env) == key
+            while group_end < windows.len()
+                && (windows[group_end].op, windows[group_end].tpl, windows[group_end].env) == key
             {
                 group_end += 1;
             }
@@ -715,7 +728,9 @@ fn implies(arena: &Arena, a: u32, b: u32, depth: u32) -> bool {
         return true;
     }
     match (na.kind, nb.kind) {
-        (Kind::Temporal(op_a), Kind::Temporal(op_b)) if op_a == op_b && na.tpl == nb.tpl && na.env == nb.env => {
+        (Kind::Temporal(op_a), Kind::Temporal(op_b))
+            if op_a == op_b && na.tpl == nb.tpl && na.env == nb.env =>
+        {
             let a_inside_b = nb.lo <= na.lo && na.hi <= nb.hi;
             let b_inside_a = na.lo <= nb.lo && nb.hi <= na.hi;
             // Existential: a smaller window is stronger. Universal: a larger window is stronger.

@@ -259,19 +259,24 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
     pub fn eval(&self, term: &Term) -> Result<Value, EvalError> {
         match term {
             Term::Const(v) => Ok(v.clone()),
-            Term::Slot(slot) => {
-                self.state.value(*slot).cloned().ok_or_else(|| EvalError::Missing { name: self.slot_name(*slot) })
-            }
+            Term::Slot(slot) => self
+                .state
+                .value(*slot)
+                .cloned()
+                .ok_or_else(|| EvalError::Missing { name: self.slot_name(*slot) }),
             Term::Var(var) => {
-                let binding = self.bindings.get(*var as usize).ok_or_else(|| EvalError::Missing {
-                    name: format!("quantified variable #{var}"),
-                })?;
-                self.state.object(binding.domain, &binding.id).cloned().ok_or_else(|| EvalError::MissingObject {
-                    domain: self
-                        .domain_names
-                        .get(binding.domain as usize)
-                        .map_or_else(|| format!("#{}", binding.domain), |n| n.to_string()),
-                    id: binding.id.to_string(),
+                let binding = self
+                    .bindings
+                    .get(*var as usize)
+                    .ok_or_else(|| EvalError::Missing { name: format!("quantified variable #{var}") })?;
+                self.state.object(binding.domain, &binding.id).cloned().ok_or_else(|| {
+                    EvalError::MissingObject {
+                        domain: self
+                            .domain_names
+                            .get(binding.domain as usize)
+                            .map_or_else(|| format!("#{}", binding.domain), |n| n.to_string()),
+                        id: binding.id.to_string(),
+                    }
                 })
             }
             Term::Field(base, field) => {
@@ -282,9 +287,10 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
                 })
             }
             Term::Neg(inner) => match self.eval(inner)? {
-                Value::Int(i) => {
-                    i.checked_neg().map(Value::Int).ok_or_else(|| EvalError::Arithmetic("integer overflow".into()))
-                }
+                Value::Int(i) => i
+                    .checked_neg()
+                    .map(Value::Int)
+                    .ok_or_else(|| EvalError::Arithmetic("integer overflow".into())),
                 Value::Float(x) => Ok(Value::Float(-x)),
                 Value::Vec2([x, y]) => Ok(Value::Vec2([-x, -y])),
                 other => Err(type_error("`-`", "a number or vec2", &other)),
@@ -334,7 +340,11 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
 }
 
 fn type_error(context: &str, expected: &str, found: &Value) -> EvalError {
-    EvalError::Type { context: context.to_string(), expected: expected.to_string(), found: found.kind().into() }
+    EvalError::Type {
+        context: context.to_string(),
+        expected: expected.to_string(),
+        found: found.kind().into(),
+    }
 }
 
 /// A short text for a term, used in messages (`from.pos`).
@@ -384,7 +394,9 @@ pub(crate) fn binary(op: BinOp, l: &Value, r: &Value) -> Result<Value, EvalError
                 (Value::Str(a), Value::Str(b)) => a.cmp(b),
                 (Value::Duration(a), Value::Duration(b)) => a.cmp(b),
                 (a, b) => match (a.as_f64(), b.as_f64()) {
-                    (Some(x), Some(y)) => x.partial_cmp(&y).ok_or_else(|| arithmetic("comparison with NaN"))?,
+                    (Some(x), Some(y)) => {
+                        x.partial_cmp(&y).ok_or_else(|| arithmetic("comparison with NaN"))?
+                    }
                     _ => {
                         let bad = if a.as_f64().is_none() { a } else { b };
                         return Err(type_error(&format!("`{}`", op.symbol()), "numbers", bad));
@@ -451,6 +463,7 @@ pub(crate) fn binary(op: BinOp, l: &Value, r: &Value) -> Result<Value, EvalError
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // a failing test should fail loudly
 mod tests {
     use super::*;
 
@@ -460,7 +473,10 @@ mod tests {
         assert_eq!(binary(BinOp::Div, &Value::Int(3), &Value::Int(2)), Ok(Value::Float(1.5)));
         assert_eq!(binary(BinOp::Mul, &Value::Int(2), &Value::Float(0.5)), Ok(Value::Float(1.0)));
         assert!(matches!(binary(BinOp::Div, &Value::Int(1), &Value::Int(0)), Err(EvalError::Arithmetic(_))));
-        assert!(matches!(binary(BinOp::Add, &Value::Int(i64::MAX), &Value::Int(1)), Err(EvalError::Arithmetic(_))));
+        assert!(matches!(
+            binary(BinOp::Add, &Value::Int(i64::MAX), &Value::Int(1)),
+            Err(EvalError::Arithmetic(_))
+        ));
         assert_eq!(binary(BinOp::Lt, &Value::Int(2), &Value::Float(2.5)), Ok(Value::Bool(true)));
         assert_eq!(binary(BinOp::Eq, &Value::Int(2), &Value::Float(2.0)), Ok(Value::Bool(true)));
         assert!(matches!(binary(BinOp::Lt, &Value::Bool(true), &Value::Int(1)), Err(EvalError::Type { .. })));

@@ -121,9 +121,9 @@ fn eval(f: &F, trace: &[TraceState], k: usize, end: bool, env: &Env) -> Vec<Opti
                     if witness {
                         return Some(true);
                     }
-                    let every_candidate_fails = (i..=k).filter(|&j| in_window(trace, i, j, *lo, *hi)).all(|j| {
-                        vb[j] == Some(false) || (i + 1..j).any(|m| va[m] == Some(false))
-                    });
+                    let every_candidate_fails = (i..=k)
+                        .filter(|&j| in_window(trace, i, j, *lo, *hi))
+                        .all(|j| vb[j] == Some(false) || (i + 1..j).any(|m| va[m] == Some(false)));
                     let future_blocked = is_closed(i, *hi) || (i + 1..=k).any(|m| va[m] == Some(false));
                     if every_candidate_fails && future_blocked { Some(false) } else { None }
                 })
@@ -164,7 +164,11 @@ fn naive(f: &F, trace: &[TraceState]) -> Vec<(bool, Option<Time>)> {
             if decided[i].is_none()
                 && let Some(v) = values[i]
             {
-                assert_eq!(v, finals[i], "the prefix semantics decided {v} at {k} but the trace gives {}", finals[i]);
+                assert_eq!(
+                    v, finals[i],
+                    "the prefix semantics decided {v} at {k} but the trace gives {}",
+                    finals[i]
+                );
                 decided[i] = Some(trace[k].time);
             }
         }
@@ -203,14 +207,22 @@ fn times(trace: &[TraceState]) -> Vec<Time> {
 }
 
 fn check(seed: u64, cases: usize, quantifiers: bool) {
-    let mut generator = Gen { rng: ChaCha8Rng::seed_from_u64(seed), max_bound: 12, quantifiers, unbounded: true };
+    let mut generator = Gen {
+        rng: ChaCha8Rng::seed_from_u64(seed),
+        max_bound: 12,
+        quantifiers,
+        unbounded: true,
+        constants: true,
+    };
     let (mut at_first, mut later, mut at_end) = (0, 0, 0);
     let mut largest_residual = 0;
     for case in 0..cases {
         // A temporal operator on top makes the decision time interesting more often.
         let f = loop {
             let f = generator.formula(4, 0);
-            if matches!(f, F::Ev(..) | F::Al(..) | F::Until(..)) || rand::Rng::random_bool(&mut generator.rng, 0.2) {
+            if matches!(f, F::Ev(..) | F::Al(..) | F::Until(..))
+                || rand::Rng::random_bool(&mut generator.rng, 0.2)
+            {
                 break f;
             }
         };
@@ -234,7 +246,14 @@ fn check(seed: u64, cases: usize, quantifiers: bool) {
         }
         let every = engine_every(&f, &trace);
         for (i, (got, want)) in every.iter().zip(expected.iter()).enumerate() {
-            assert_eq!(got, want, "case {case}, start {i}: formula {}\ntimes {:?}\ntrace {:?}", show(&f), times(&trace), trace);
+            assert_eq!(
+                got,
+                want,
+                "case {case}, start {i}: formula {}\ntimes {:?}\ntrace {:?}",
+                show(&f),
+                times(&trace),
+                trace
+            );
         }
     }
     eprintln!(

@@ -22,9 +22,17 @@ pub enum F {
     False,
     Prop(usize),
     /// `nums[var] > c` (or `<` when `greater` is false).
-    Cmp { var: usize, greater: bool, c: f64 },
+    Cmp {
+        var: usize,
+        greater: bool,
+        c: f64,
+    },
     /// `$depth.v > c` for the object bound by the quantifier at nesting `depth`.
-    ObjCmp { depth: u32, greater: bool, c: f64 },
+    ObjCmp {
+        depth: u32,
+        greater: bool,
+        c: f64,
+    },
     Not(Box<F>),
     And(Vec<F>),
     Or(Vec<F>),
@@ -50,6 +58,8 @@ pub struct Gen {
     pub max_bound: Time,
     pub quantifiers: bool,
     pub unbounded: bool,
+    /// Whether `true` and `false` may appear as atoms.
+    pub constants: bool,
 }
 
 impl Gen {
@@ -64,7 +74,7 @@ impl Gen {
     }
 
     fn atom(&mut self, qdepth: u32) -> F {
-        let choice = self.rng.random_range(0..20);
+        let choice = self.rng.random_range(if self.constants { 0 } else { 2 }..20);
         match choice {
             0 => F::True,
             1 => F::False,
@@ -92,7 +102,10 @@ impl Gen {
             0 => F::Not(Box::new(self.formula(depth - 1, qdepth))),
             1 => F::And((0..self.rng.random_range(2..=3)).map(|_| self.formula(depth - 1, qdepth)).collect()),
             2 => F::Or((0..self.rng.random_range(2..=3)).map(|_| self.formula(depth - 1, qdepth)).collect()),
-            3 => F::Implies(Box::new(self.formula(depth - 1, qdepth)), Box::new(self.formula(depth - 1, qdepth))),
+            3 => F::Implies(
+                Box::new(self.formula(depth - 1, qdepth)),
+                Box::new(self.formula(depth - 1, qdepth)),
+            ),
             4 => {
                 let (lo, hi) = self.window();
                 F::Ev(lo, hi, Box::new(self.formula(depth - 1, qdepth)))
@@ -181,7 +194,10 @@ pub fn slot_state(s: &TraceState) -> SlotState {
         .iter()
         .zip(s.objects.iter())
         .map(|(id, v)| {
-            Value::Record(Arc::new(Record { id: Some(Arc::from(*id)), fields: vec![(Arc::from("v"), Value::Float(*v))] }))
+            Value::Record(Arc::new(Record {
+                id: Some(Arc::from(*id)),
+                fields: vec![(Arc::from("v"), Value::Float(*v))],
+            }))
         })
         .collect();
     SlotState { values, objects: vec![objects] }
