@@ -186,6 +186,7 @@ pub struct RoadNetwork {
     /// `(lane, segment)` per item of `lane_grid`.
     lane_segments: Vec<LaneSegment>,
     lane_grid: Grid,
+    max_half_lane_width_m: f64,
     occluder_grid: Grid,
     /// Road lanes that start at a map boundary.
     entry_lanes: Vec<LaneId>,
@@ -497,7 +498,7 @@ impl RoadNetwork {
                 area_points.push(geom::add(centre, geom::scale(normal, road.width_m / 2.0)));
                 area_points.push(geom::sub(centre, geom::scale(normal, road.width_m / 2.0)));
             }
-            node.area = convex_hull(&area_points);
+            let first_connector = lanes.len();
             for &(in_road, in_end) in incident {
                 let incoming = ranked_lanes(&roads[in_road.0 as usize], in_end, true);
                 for &(out_road, out_end) in incident {
@@ -514,6 +515,12 @@ impl RoadNetwork {
                     }
                 }
             }
+            // The area covers the road ends and every connector, so that turning cars (and points
+            // snapped to connectors) are on the road even where roads meet at sharp angles.
+            for lane in &lanes[first_connector..] {
+                area_points.extend_from_slice(lane.path.points());
+            }
+            node.area = convex_hull(&area_points);
         }
 
         // Occluders.
@@ -587,6 +594,13 @@ impl RoadNetwork {
         for node in &nodes {
             all_points.extend_from_slice(&node.area);
         }
+        for lane in &lanes {
+            // Mitred lanes can reach beyond the road band at sharp bends.
+            let (lo, hi) = lane.path.bounds();
+            let margin = lane.width_m;
+            all_points.push([lo[0] - margin, lo[1] - margin]);
+            all_points.push([hi[0] + margin, hi[1] + margin]);
+        }
         let bounds = bounds_of(&all_points);
 
         let mut road_segments = Vec::new();
@@ -634,6 +648,7 @@ impl RoadNetwork {
                 (total, l.id)
             })
             .collect();
+        let max_half_lane_width_m = lanes.iter().map(|l| l.width_m / 2.0).fold(0.0, f64::max);
         RoadNetwork {
             snap_radius_m: file.snap_radius_m,
             file,
@@ -647,6 +662,7 @@ impl RoadNetwork {
             crossing_grid: crossing_grid.build(),
             lane_segments,
             lane_grid: lane_grid.build(),
+            max_half_lane_width_m,
             occluder_grid: occluder_grid.build(),
             entry_lanes,
             road_lane_cumulative,
@@ -668,6 +684,9 @@ impl RoadNetwork {
     pub fn occluders(&self) -> &[Occluder] {
         &self.occluders
     }
+
+    // The accessors below take ids handed out by this network and panic on others; use the
+    // slices (`nodes()`, `roads()`, `lanes()`, `occluders()`) with `get` for ids of unknown origin.
 
     pub fn node(&self, id: NodeId) -> &Node {
         &self.nodes[id.0 as usize]
@@ -712,9 +731,23 @@ impl RoadNetwork {
         self.road_lane_cumulative.last().map_or(0.0, |&(total, _)| total)
     }
 
-    /// Whether `pos` is within a road's width of its centre line or inside a crossing.
+    /// Whether `pos` is on the paved surface: within half a road's width of its centre line,
+    /// inside a crossing, or within half a lane's width of the lane's centre (which only adds
+    /// the outside of sharp bends, where mitred lanes reach beyond the round-cornered road band).
     pub fn on_road(&self, pos: Point) -> bool {
-        self.road_at(pos).is_some() || self.crossing_at(pos).is_some()
+        self.road_at(pos).is_some() || self.crossing_at(pos).is_some() || self.on_lane(pos)
+    }
+
+    fn on_lane(&self, pos: Point) -> bool {
+        let mut found = false;
+        self.lane_grid.for_each_near(pos, self.max_half_lane_width_m, |item| {
+            let segment = &self.lane_segments[item as usize];
+            if !found {
+                let half = self.lanes[segment.lane.0 as usize].width_m / 2.0;
+                found = dist_to_segment(pos, segment.a, segment.b) <= half + 1e-9;
+            }
+        });
+        found
     }
 
     /// A road whose paved width contains `pos` (the lowest-numbered one when several overlap).

@@ -141,8 +141,9 @@ impl Params {
         if self.network_file.is_none() && !scenarios::NAMES.contains(&self.scenario.as_str()) {
             return Err(ParamsError::UnknownScenario { name: self.scenario.clone() });
         }
-        range("grid_blocks_x", f64::from(self.grid_blocks_x), 1.0, 1000.0, "between 1 and 1000")?;
-        range("grid_blocks_y", f64::from(self.grid_blocks_y), 1.0, 1000.0, "between 1 and 1000")?;
+        // 200 x 200 blocks is a 20 km town at the default block size and some 400 MB of lanes.
+        range("grid_blocks_x", f64::from(self.grid_blocks_x), 1.0, 200.0, "between 1 and 200")?;
+        range("grid_blocks_y", f64::from(self.grid_blocks_y), 1.0, 200.0, "between 1 and 200")?;
         range("block_m", self.block_m, 30.0, 10_000.0, "between 30 and 10000")?;
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 1000.0) {
             return Err(ParamsError::OutOfRange {

@@ -30,8 +30,12 @@ impl RoadNetwork {
     /// Advances `from` along its lane by `distance_m` (negative or NaN counts as 0), branching
     /// into every successor lane at the end of a lane. Returns at most `max_hypotheses`
     /// hypotheses; when there are more, the ones found first in a depth-first walk that takes
-    /// successors in lane order are kept. The order of the result is deterministic.
+    /// successors in lane order are kept. The order of the result is deterministic. A position
+    /// whose lane is not in this network gives no hypotheses.
     pub fn advance(&self, from: &LanePosition, distance_m: f64, max_hypotheses: usize) -> Vec<Hypothesis> {
+        if from.lane.0 as usize >= self.lanes().len() {
+            return Vec::new();
+        }
         let distance_m = if distance_m.is_nan() { 0.0 } else { distance_m.max(0.0) };
         let mut result = Vec::new();
         // (lane, offset on it, distance still to go, route so far)

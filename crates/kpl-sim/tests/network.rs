@@ -392,7 +392,8 @@ proptest! {
         let brute = net.roads().iter().any(|r| {
             let proj = r.centerline.project(p);
             proj.lateral.abs() <= r.width_m / 2.0
-        }) || net.nodes().iter().any(|n| kpl_sim::geom::point_in_polygon(p, &n.area));
+        }) || net.nodes().iter().any(|n| kpl_sim::geom::point_in_polygon(p, &n.area))
+            || net.lanes().iter().any(|l| l.path.project(p).lateral.abs() <= l.width_m / 2.0);
         prop_assert_eq!(net.on_road(p), brute);
     }
 
@@ -407,6 +408,81 @@ proptest! {
         match net.snap_to_lane(p, None) {
             Some(s) => prop_assert!((s.lateral_m.abs() - brute).abs() < 1e-9),
             None => prop_assert!(brute > net.snap_radius_m()),
+        }
+    }
+}
+
+/// Random small networks: nodes anywhere, roads between any two (loops too), any lane layout.
+fn arb_network_file() -> impl Strategy<Value = NetworkFile> {
+    let node = (-200.0..200.0f64, -200.0..200.0f64, proptest::option::of(0.0..30.0f64));
+    let lane = (0.5..6.0f64, any::<bool>());
+    let road = (
+        0..6usize,
+        0..6usize,
+        proptest::collection::vec((-250.0..250.0f64, -250.0..250.0f64), 0..3),
+        proptest::collection::vec(lane, 1..4),
+    );
+    (proptest::collection::vec(node, 2..6), proptest::collection::vec(road, 1..8)).prop_map(
+        |(nodes, roads)| {
+            let mut file = NetworkFile::new();
+            for (i, &(x, y, radius)) in nodes.iter().enumerate() {
+                file.add_node(&format!("n{i}"), [x, y]);
+                file.nodes[i].radius_m = radius;
+            }
+            for (i, (from, to, via, lanes)) in roads.into_iter().enumerate() {
+                let (from, to) = (from % nodes.len(), to % nodes.len());
+                file.add_road(
+                    &format!("r{i}"),
+                    &format!("n{from}"),
+                    &format!("n{to}"),
+                    via.into_iter().map(|(x, y)| [x, y]).collect(),
+                );
+                file.roads[i].lanes = lanes
+                    .into_iter()
+                    .map(|(width_m, forward)| LaneSpec {
+                        width_m,
+                        direction: if forward { LaneDirection::Forward } else { LaneDirection::Backward },
+                    })
+                    .collect();
+            }
+            file
+        },
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(500))]
+
+    /// Any file either builds or is rejected with problems; a built network answers every query
+    /// and runs traffic without panicking.
+    #[test]
+    fn random_networks_build_or_are_rejected_and_never_panic(
+        file in arb_network_file(),
+        points in proptest::collection::vec((-300.0..300.0f64, -300.0..300.0f64, -4.0..4.0f64), 10),
+    ) {
+        let net = match RoadNetwork::build(&file) {
+            Ok(net) => net,
+            Err(NetworkError::Invalid(problems)) => {
+                prop_assert!(!problems.is_empty());
+                return Ok(());
+            }
+            Err(other) => return Err(TestCaseError::fail(format!("unexpected error {other}"))),
+        };
+        for (x, y, heading) in points {
+            let _ = net.on_road([x, y]);
+            let _ = net.occluder_at([x, y]);
+            check_snapping(&net, [x, y], Some(heading))?;
+            if let Some(snapped) = net.snap_to_lane([x, y], Some(heading)) {
+                for h in net.advance(&snapped, 150.0, 32) {
+                    prop_assert!(h.travelled_m <= 150.0 + 1e-9);
+                    prop_assert_eq!(h.route[0], snapped.lane);
+                }
+            }
+        }
+        let params = kpl_sim::Params { n_cars: 3, false_positive_rate: 5.0, ..kpl_sim::Params::default() };
+        if let Ok(mut sim) = kpl_sim::UavTrackerSim::new(&params, std::sync::Arc::new(net), 0) {
+            let frames = sim.frames_until(3_000_000);
+            prop_assert_eq!(frames.len(), 31);
         }
     }
 }
