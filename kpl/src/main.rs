@@ -21,6 +21,12 @@ enum Command {
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(subcommand)]
     Cater(cmd::cater::Command),
+    /// Metric temporal logic: evaluate formulas over traces.
+    #[command(subcommand)]
+    Mtl(cmd::mtl::Command),
+    /// Benchmarks whose figures go to docs/performance.md.
+    #[command(subcommand)]
+    Bench(cmd::bench::Command),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +41,8 @@ fn main() -> ExitCode {
     };
     match cli.command {
         Command::Cater(command) => cmd::cater::run(command),
+        Command::Mtl(command) => cmd::mtl::run(command),
+        Command::Bench(command) => cmd::bench::run(command),
     }
 }
 

@@ -1,4 +1,6 @@
 //! One module per subcommand; each has its clap `Args` (or `Command`) and a `run` returning the
 //! process exit code: 0 success, 1 the input has errors, 2 usage or I/O errors.
 
+pub mod bench;
 pub mod cater;
+pub mod mtl;

@@ -1,0 +1,20 @@
+//! `kpl bench ...`: benchmarks whose figures go to `docs/performance.md`. Each reports ratios
+//! against a baseline measured in the same run; nothing here is asserted by a test.
+
+use std::process::ExitCode;
+
+use clap::Subcommand;
+
+use crate::cmd::mtl;
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// The MTL engine on the ten timed properties of the Timescales benchmark, against R2U2.
+    Mtl(mtl::BenchArgs),
+}
+
+pub fn run(command: Command) -> ExitCode {
+    match command {
+        Command::Mtl(args) => mtl::bench(args),
+    }
+}
