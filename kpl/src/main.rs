@@ -7,6 +7,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod cmd;
+mod registry;
+mod report;
 
 /// KPL: stream-based knowledge processing with hierarchical anchoring.
 #[derive(Debug, Parser)]
@@ -18,6 +20,14 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Parse and check specs: names, types, units, policies, links, cycles, deployment.
+    Check(cmd::check::Args),
+    /// Draw the process graph of a spec (dot, mermaid or json), with streams and policies.
+    Graph(cmd::graph::Args),
+    /// Rewrite specs in the canonical layout, keeping comments.
+    Fmt(cmd::fmt::Args),
+    /// List the sources, units, sinks, prediction models and functions the runtime provides.
+    List(cmd::list::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(subcommand)]
     Cater(cmd::cater::Command),
@@ -40,6 +50,10 @@ fn main() -> ExitCode {
         }
     };
     match cli.command {
+        Command::Check(args) => cmd::check::run(args),
+        Command::Graph(args) => cmd::graph::run(args),
+        Command::Fmt(args) => cmd::fmt::run(args),
+        Command::List(args) => cmd::list::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

@@ -29,7 +29,7 @@ use crate::geometry::{
     alignment_cost, bottom_centre, centre, from_bottom_centre, intersects, is_valid, outside, scale, size,
     translate,
 };
-use crate::params::{ActionRule, ChildPlacement, Effect, Params};
+use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
     Action, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,
 };
@@ -107,7 +107,7 @@ impl Aapa {
         if p.extensions.predict_motion
             && let Some(previous_time) = previous.time
         {
-            predict_motion(&mut work, previous_time, time);
+            predict_motion(&mut work, previous_time, time, p.extensions.motion_profile);
         }
 
         // 1b. Consecutive frame alignment.
@@ -139,6 +139,7 @@ impl Aapa {
                 _ => [0.0, 0.0],
             };
             w.anchor.bbox = percept.bbox;
+            vote_type(&mut w.anchor, &percept.object_type);
             w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
             w.anchor.status = AnchorStatus::Visible;
             w.anchor.last_seen = time;
@@ -166,8 +167,10 @@ impl Aapa {
                     velocity: [0.0, 0.0],
                     moving: false,
                     moving_until: None,
+                    moving_since: None,
                     attachment: None,
                     for_inference: false,
+                    type_votes: vec![(percept.object_type.clone(), 1)],
                 },
                 aligned: true,
                 previous_centre: None,
@@ -183,7 +186,7 @@ impl Aapa {
         // Effects of actions: attachments (III-B.2b) and motion.
         for action in actions {
             for rule in self.rules_for(action) {
-                apply_rule(rule, action, &mut work, p.theta_anch, &mut notes);
+                apply_rule(rule, action, time, &mut work, p.theta_anch, &mut notes);
             }
         }
 
@@ -389,6 +392,7 @@ impl Aapa {
             old.anchor.confidence = (old.anchor.confidence + p.conf_plus).min(1.0);
             old.anchor.moving = false;
             old.anchor.moving_until = None;
+            old.anchor.moving_since = None;
             if new.colour.is_some() {
                 old.anchor.colour = new.colour;
             }
@@ -478,16 +482,42 @@ fn inside(b: &BBox, width: f64, height: f64) -> bool {
     !outside(b, width, height) && b.x1 >= 0.0 && b.y1 >= 0.0 && b.x2 <= width && b.y2 <= height
 }
 
-fn predict_motion(work: &mut [Work], previous_time: Time, time: Time) {
+/// Moves unseen anchors that an action is moving (extension). With the ease-in-out profile and a
+/// known start and end, the velocity last measured (at time fraction `u0`) fixes the displacement of
+/// the whole move, `D = v T / s'(u0)`, and the anchor advances by `D (s(u) - s(u_prev))`; near
+/// either end of the move (`s'(u0)` small) that estimate is unstable and the constant velocity
+/// model is used instead.
+fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: MotionProfile) {
+    let ease = |u: f64| {
+        let u = u.clamp(0.0, 1.0);
+        u * u * (3.0 - 2.0 * u)
+    };
     for w in work.iter_mut().filter(|w| w.anchor.moving) {
         let end = w.anchor.moving_until.map_or(time, |until| until.min(time));
         let dt = (end - previous_time).max(0) as f64 / 1e6;
-        if !w.aligned && w.anchor.velocity != [0.0, 0.0] && dt > 0.0 {
-            w.anchor.bbox = translate(&w.anchor.bbox, [w.anchor.velocity[0] * dt, w.anchor.velocity[1] * dt]);
+        let v = w.anchor.velocity;
+        if !w.aligned && v != [0.0, 0.0] && dt > 0.0 {
+            let mut shift = [v[0] * dt, v[1] * dt];
+            if let (MotionProfile::EaseInOut, Some(since), Some(until)) =
+                (profile, w.anchor.moving_since, w.anchor.moving_until)
+                && until > since
+            {
+                let duration = (until - since) as f64;
+                let fraction = |t: Time| (t - since) as f64 / duration;
+                let u0 = fraction(w.anchor.last_seen).clamp(0.0, 1.0);
+                let slope = 6.0 * u0 * (1.0 - u0);
+                if slope >= 0.3 {
+                    let seconds = duration / 1e6;
+                    let progress = ease(fraction(end)) - ease(fraction(previous_time));
+                    shift = [v[0] * seconds / slope * progress, v[1] * seconds / slope * progress];
+                }
+            }
+            w.anchor.bbox = translate(&w.anchor.bbox, shift);
         }
         if w.anchor.moving_until.is_some_and(|until| time >= until) {
             w.anchor.moving = false;
             w.anchor.moving_until = None;
+            w.anchor.moving_since = None;
         }
     }
 }
@@ -552,6 +582,7 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
 fn apply_rule(
     rule: &ActionRule,
     action: &Action,
+    time: Time,
     work: &mut [Work],
     theta_anch: f64,
     notes: &mut Vec<String>,
@@ -626,15 +657,35 @@ fn apply_rule(
                 if let Some(o) = lookup(*object, work, notes) {
                     work[o].anchor.moving = true;
                     work[o].anchor.moving_until = action.expected_end;
+                    work[o].anchor.moving_since = Some(time);
                 }
             }
             Effect::StopMoving { object } => {
                 if let Some(o) = lookup(*object, work, notes) {
                     work[o].anchor.moving = false;
                     work[o].anchor.moving_until = None;
+                    work[o].anchor.moving_since = None;
                 }
             }
         }
+    }
+}
+
+/// Counts one detection of `object_type` for the anchor and makes its type the most frequent one
+/// (the current type wins ties).
+fn vote_type(anchor: &mut Anchor, object_type: &Symbol) {
+    if anchor.type_votes.is_empty() {
+        anchor.type_votes.push((anchor.object_type.clone(), 1));
+    }
+    match anchor.type_votes.iter_mut().find(|(t, _)| t == object_type) {
+        Some((_, n)) => *n = n.saturating_add(1),
+        None => anchor.type_votes.push((object_type.clone(), 1)),
+    }
+    let current = anchor.type_votes.iter().find(|(t, _)| *t == anchor.object_type).map_or(0, |(_, n)| *n);
+    if let Some((best, n)) = anchor.type_votes.iter().max_by_key(|(_, n)| *n)
+        && *n > current
+    {
+        anchor.object_type = best.clone();
     }
 }
 

@@ -23,7 +23,8 @@ pub use aapa::Aapa;
 pub use error::AapaError;
 pub use geometry::{alignment_cost, intersects};
 pub use params::{
-    ActionRule, CameraModel, ChildPlacement, Effect, Extensions, ImageSize, Params, RelationRule,
+    ActionRule, CameraModel, ChildPlacement, Effect, Extensions, ImageSize, MotionProfile, Params,
+    RelationRule,
 };
 pub use types::{
     Action, ActionPhase, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,

@@ -66,11 +66,31 @@ pub struct Extensions {
     /// A child following its parent scales its offset and size with the parent's box, so a carried
     /// object grows and shrinks with its carrier (the paper keeps the last size).
     pub scale_attached: bool,
+    /// How a move that is not seen is assumed to proceed between its start and its expected end.
+    pub motion_profile: MotionProfile,
+}
+
+/// The speed profile of an action's move, for motion prediction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MotionProfile {
+    /// Keep the last measured velocity until the expected end.
+    ConstantVelocity,
+    /// Start and stop smoothly (`3u² - 2u³` of the action's time fraction `u`, the shape of
+    /// Blender's default keyframe easing and of typical arm trajectories): the velocity measured at
+    /// fraction `u0` fixes the whole move, which decelerates to rest at the expected end.
+    #[default]
+    EaseInOut,
 }
 
 impl Default for Extensions {
     fn default() -> Extensions {
-        Extensions { predict_motion: true, reacquire: true, scale_attached: true }
+        Extensions {
+            predict_motion: true,
+            reacquire: true,
+            scale_attached: true,
+            motion_profile: MotionProfile::EaseInOut,
+        }
     }
 }
 
@@ -203,7 +223,12 @@ impl Params {
             .collect();
         Params {
             action_rules,
-            extensions: Extensions { predict_motion: false, reacquire: false, scale_attached: false },
+            extensions: Extensions {
+                predict_motion: false,
+                reacquire: false,
+                scale_attached: false,
+                motion_profile: MotionProfile::ConstantVelocity,
+            },
             ..Params::cater()
         }
     }

@@ -158,10 +158,17 @@ pub struct Anchor {
     pub moving: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_until: Option<Time>,
+    /// When the action moving this object started.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moving_since: Option<Time>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attachment: Option<Attachment>,
     /// `confidence >= theta_inf`: passed on for world state inference (III-B.3).
     pub for_inference: bool,
+    /// How often each type was detected for this anchor; `object_type` is the most frequent, so a
+    /// detector's occasional misclassification does not rename the object.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub type_votes: Vec<(Symbol, u32)>,
 }
 
 impl Anchor {
@@ -196,13 +203,15 @@ impl WorldState {
         self.relations.iter().any(|r| &*r.name == name && &*r.args[0] == a && &*r.args[1] == b)
     }
 
-    /// The anchors of a type, best first: anchored before tentative, then most recently seen, then
-    /// most confident. This is how a consumer asking "where is the snitch" should read the state.
+    /// The best anchor of a type: anchored before tentative, then the most confident, then the
+    /// most recently seen, then the oldest. This is how a consumer asking "where is the snitch"
+    /// should read the state (a ghost anchored for a frame or two loses to the real object).
     pub fn best_of_type(&self, object_type: &str, theta_anch: f64) -> Option<&Anchor> {
         self.anchors.iter().filter(|a| &*a.object_type == object_type).max_by(|a, b| {
-            (a.is_anchored(theta_anch), a.last_seen)
-                .cmp(&(b.is_anchored(theta_anch), b.last_seen))
+            a.is_anchored(theta_anch)
+                .cmp(&b.is_anchored(theta_anch))
                 .then(a.confidence.total_cmp(&b.confidence))
+                .then(a.last_seen.cmp(&b.last_seen))
                 // Older anchors win the remaining ties (max_by keeps the last maximum).
                 .then(b.first_seen.cmp(&a.first_seen))
         })

@@ -2,8 +2,8 @@
 #![allow(clippy::unwrap_used, reason = "tests")]
 
 use kpl_aapa::{
-    Aapa, AapaError, Action, AnchorStatus, CameraModel, CameraPose, Extensions, ImageSize, Params, Percept,
-    WorldState,
+    Aapa, AapaError, Action, AnchorStatus, CameraModel, CameraPose, Extensions, ImageSize, MotionProfile,
+    Params, Percept, WorldState,
 };
 use kpl_core::BBox;
 
@@ -364,9 +364,18 @@ fn motion_is_predicted_only_while_an_action_moves_the_object() {
         frames.push((vec![cube(k), wall.clone()], actions));
     }
     frames.extend(still(vec![wall], 10));
-    let with = run(&cater(), &frames).pop().unwrap();
-    let x_with = with.anchor("c").unwrap().bbox.x1;
-    assert!((x_with - 30.0).abs() < 1e-6, "moved to the end of the action: {x_with}");
+    let with_profile = |motion_profile| {
+        let params =
+            Params { extensions: Extensions { motion_profile, ..Extensions::default() }, ..Params::cater() };
+        run(&Aapa::new(params).unwrap(), &frames).pop().unwrap().anchor("c").unwrap().bbox.x1
+    };
+    // Constant velocity: 3 px per frame for the 5 frames left of the action.
+    let x_constant = with_profile(MotionProfile::ConstantVelocity);
+    assert!((x_constant - 30.0).abs() < 1e-6, "moved to the end of the action: {x_constant}");
+    // Ease in and out: seen half way (u = 0.5, speed 1.5 times the mean), so the whole move is
+    // 3 px * 10 frames / 1.5 = 20 px, half of it still to come.
+    let x_eased = with_profile(MotionProfile::EaseInOut);
+    assert!((x_eased - 25.0).abs() < 1e-6, "decelerated to a stop: {x_eased}");
     let frozen = Params {
         extensions: Extensions { predict_motion: false, ..Extensions::default() },
         ..Params::cater()

@@ -54,3 +54,11 @@ pub fn bad_duration(span: Span, exact: bool) -> Diagnostic {
         .with_label("this duration")
         .with_hint("durations are non-negative, count whole microseconds, and stay below about 146,000 years")
 }
+
+pub const NOT_UTF8: &str = "E0008";
+
+pub fn not_utf8(offset: usize) -> Diagnostic {
+    Diagnostic::error(NOT_UTF8, Span::new(offset as u32, offset as u32 + 1), "file is not valid UTF-8")
+        .with_label("invalid byte sequence")
+        .with_hint("save the spec as UTF-8 text")
+}

@@ -19,4 +19,9 @@ pub mod lex;
 mod parser;
 
 pub use diagnostic::{Diagnostic, JsonDiagnostic, LineIndex, Severity};
+
+/// Reads a file's bytes as UTF-8 text; on failure the diagnostic points at the first bad byte.
+pub fn decode_source(bytes: &[u8]) -> Result<&str, Diagnostic> {
+    std::str::from_utf8(bytes).map_err(|e| diagnostics::not_utf8(e.valid_up_to()))
+}
 pub use parser::{MAX_EXPR_DEPTH, MAX_SOURCE_BYTES, Parse, parse, parse_formula};

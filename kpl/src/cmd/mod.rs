@@ -3,4 +3,8 @@
 
 pub mod bench;
 pub mod cater;
+pub mod check;
+pub mod fmt;
+pub mod graph;
+pub mod list;
 pub mod mtl;

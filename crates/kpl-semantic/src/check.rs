@@ -1,0 +1,1183 @@
+//! The checker: from a syntax tree and a registry to a checked [`hir::Spec`], reporting every
+//! problem it finds in one pass over the file (it never stops at the first).
+//!
+//! Order of work: object types; the names of processes and streams (one namespace); each
+//! process's output type; declared streams and their policies; each process's inputs,
+//! parameters and formulas; prediction and forgetting; deployment; the graph and its cycles.
+
+use std::collections::BTreeMap;
+
+use kpl_core::{Value, ValueType};
+use kpl_syntax::Diagnostic;
+use kpl_syntax::ast::{self, Span};
+
+use crate::diagnostics as diag;
+use crate::formula::{Context, FormulaChecker, StreamScope, assignable};
+use crate::hir::{self, ProcessId, TypeTable};
+use crate::registry::{Entry, EntryKind, Function, Inputs, ParamType, Registry, TypeReq};
+use crate::types;
+
+/// The result of checking: the checked spec when there were no errors, and all diagnostics
+/// (errors and warnings) in source order.
+#[derive(Debug)]
+pub struct Checked {
+    pub spec: Option<hir::Spec>,
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl Checked {
+    pub fn has_errors(&self) -> bool {
+        self.diagnostics.iter().any(Diagnostic::is_error)
+    }
+}
+
+/// Checks a parsed spec against a registry.
+pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
+    let mut checker =
+        Checker { registry, diagnostics: Vec::new(), types: TypeTable::default(), names: BTreeMap::new() };
+    let result = checker.run(spec);
+    let mut diagnostics = checker.diagnostics;
+    diagnostics.sort_by_key(|d| (d.span.start, d.span.end));
+    let has_errors = diagnostics.iter().any(Diagnostic::is_error);
+    Checked { spec: if has_errors { None } else { Some(result) }, diagnostics }
+}
+
+/// What a name in the process/stream namespace refers to.
+#[derive(Debug, Clone, Copy)]
+enum Named {
+    Process(ProcessId),
+    Stream(usize),
+}
+
+struct Checker<'a> {
+    registry: &'a Registry,
+    diagnostics: Vec<Diagnostic>,
+    types: TypeTable,
+    names: BTreeMap<String, (Named, Span)>,
+}
+
+/// A process during checking: its declaration and what is known so far.
+struct Draft<'s> {
+    decl: Decl<'s>,
+    name: &'s ast::Ident,
+    output: Option<ValueType>,
+    ports: Vec<(String, ValueType)>,
+}
+
+#[derive(Clone, Copy)]
+enum Decl<'s> {
+    Process(&'s ast::ProcessDecl),
+    Link(&'s ast::LinkDecl),
+    Monitor(&'s ast::MonitorDecl),
+}
+
+impl<'a> Checker<'a> {
+    fn run(&mut self, spec: &ast::Spec) -> hir::Spec {
+        let type_decls: Vec<&ast::TypeDecl> = spec
+            .items
+            .iter()
+            .filter_map(|i| match i {
+                ast::Item::Type(t) => Some(t),
+                _ => None,
+            })
+            .collect();
+        self.types = types::collect(&type_decls, &mut self.diagnostics);
+
+        // Names and output types of processes; names of streams.
+        let mut drafts: Vec<Draft<'_>> = Vec::new();
+        let mut stream_decls: Vec<&ast::StreamDecl> = Vec::new();
+        for item in &spec.items {
+            let (decl, name) = match item {
+                ast::Item::Process(p) => (Decl::Process(p), &p.name),
+                ast::Item::Link(l) => (Decl::Link(l), &l.name),
+                ast::Item::Monitor(m) => (Decl::Monitor(m), &m.name),
+                ast::Item::Stream(s) => {
+                    if self.declare(&s.name, Named::Stream(stream_decls.len())) {
+                        stream_decls.push(s);
+                    }
+                    continue;
+                }
+                _ => continue,
+            };
+            if self.declare(name, Named::Process(drafts.len())) {
+                let (output, ports) = self.output_of(decl);
+                drafts.push(Draft { decl, name, output, ports });
+            }
+        }
+
+        // Declared streams.
+        let mut streams: Vec<Option<hir::StreamRef>> = Vec::new();
+        for decl in &stream_decls {
+            let resolved = self.stream_decl(decl, &drafts);
+            streams.push(resolved);
+        }
+
+        // Inputs, parameters and formulas.
+        let mut used_streams = vec![false; stream_decls.len()];
+        let mut processes = Vec::with_capacity(drafts.len());
+        for (id, draft) in drafts.iter().enumerate() {
+            let mut resolver =
+                Resolver { checker: self, drafts: &drafts, streams: &streams, used: &mut used_streams };
+            let (kind, inputs) = resolver.process(draft);
+            processes.push(hir::Process {
+                id,
+                name: draft.name.name.clone(),
+                span: draft.name.span,
+                kind,
+                output: draft.output.clone(),
+                ports: draft.ports.clone(),
+                inputs,
+            });
+        }
+        for (decl, used) in stream_decls.iter().zip(&used_streams) {
+            if !used {
+                self.diagnostics.push(diag::unused_stream(decl.name.span, &decl.name.name));
+            }
+        }
+
+        let (predictions, forget) = self.anchoring(spec);
+        let deploy = self.deploy(spec, &drafts, &stream_decls);
+        let graph = self.graph(&processes);
+
+        let mut stream_map = BTreeMap::new();
+        for (decl, stream) in stream_decls.iter().zip(streams) {
+            if let Some(stream) = stream {
+                stream_map.insert(decl.name.name.clone(), stream);
+            }
+        }
+        hir::Spec {
+            types: std::mem::take(&mut self.types),
+            processes,
+            streams: stream_map,
+            predictions,
+            forget,
+            deploy,
+            graph,
+        }
+    }
+
+    /// Enters a name into the process/stream namespace; reports duplicates.
+    fn declare(&mut self, name: &ast::Ident, named: Named) -> bool {
+        if let Some((_, first)) = self.names.get(&name.name) {
+            self.diagnostics.push(diag::duplicate(name.span, "name", &name.name, *first));
+            return false;
+        }
+        self.names.insert(name.name.clone(), (named, name.span));
+        true
+    }
+
+    fn resolve_type(&mut self, ty: &ast::TypeExpr) -> ValueType {
+        let types = &self.types;
+        match types::resolve_type_expr(ty, &mut |n| types.get(n).cloned()) {
+            Ok(t) => t,
+            Err(types::TypeError::Unknown(id)) => {
+                let names: Vec<&str> = self.types.names().collect();
+                self.diagnostics.push(diag::unknown_type(id.span, &id.name, &names));
+                ValueType::Any
+            }
+        }
+    }
+
+    fn record_type(&mut self, id: &ast::Ident) -> Option<ValueType> {
+        match self.types.get(&id.name) {
+            Some(t) => Some(ValueType::Record(t.clone())),
+            None => {
+                let names: Vec<&str> = self.types.names().collect();
+                self.diagnostics.push(diag::unknown_type(id.span, &id.name, &names));
+                None
+            }
+        }
+    }
+
+    /// The registry entry a call names, or a diagnostic.
+    fn entry(&mut self, kind: EntryKind, call: &ast::Call) -> Option<&'a Entry> {
+        let name = call.callee.dotted();
+        if let Some(entry) = self.registry.entry(kind, &name) {
+            return Some(entry);
+        }
+        let other_kinds: Vec<&str> = self.registry.entries_named(&name).map(|e| e.kind.noun()).collect();
+        let candidates: Vec<&str> = self.registry.entries_of(kind).map(|e| e.name.as_str()).collect();
+        self.diagnostics.push(diag::unknown_entry(
+            call.callee.span,
+            kind.noun(),
+            &name,
+            &other_kinds,
+            &candidates,
+        ));
+        None
+    }
+
+    /// Output type and extra ports of a process, from its declaration and its registry entry.
+    fn output_of(&mut self, decl: Decl<'_>) -> (Option<ValueType>, Vec<(String, ValueType)>) {
+        match decl {
+            Decl::Process(p) => {
+                let kind = entry_kind(p.kind);
+                let entry = self.entry(kind, &p.call);
+                let ports = entry.map_or_else(Vec::new, |e| {
+                    e.ports.iter().map(|port| (port.name.clone(), req_type(&port.ty))).collect()
+                });
+                if p.kind == ast::ProcessKind::Sink {
+                    if let Some(output) = &p.output {
+                        self.diagnostics.push(
+                            Diagnostic::error(
+                                diag::TYPE_MISMATCH,
+                                output.span(),
+                                "a sink has no output type",
+                            )
+                            .with_label("remove this")
+                            .with_hint("sinks consume streams; write `sink NAME = entry(inputs...)`"),
+                        );
+                    }
+                    return (None, ports);
+                }
+                let declared = p.output.as_ref().map(|t| (self.resolve_type(t), t.span()));
+                let output = match (declared, entry) {
+                    (Some((ty, span)), Some(entry)) => {
+                        if !satisfies(&ty, &entry.output, &self.types) {
+                            self.diagnostics.push(
+                                diag::type_mismatch(
+                                    span,
+                                    &format!("a type matching {}", entry.output),
+                                    &describe(&ty),
+                                )
+                                .with_hint(format!("`{}` produces {}", entry.name, entry.output)),
+                            );
+                        }
+                        ty
+                    }
+                    (Some((ty, _)), None) => ty,
+                    (None, Some(entry)) => req_type(&entry.output),
+                    (None, None) => ValueType::Any,
+                };
+                (Some(output), ports)
+            }
+            Decl::Link(l) => {
+                let to =
+                    self.types.get(&l.to_type.name).map_or(ValueType::Any, |t| ValueType::Record(t.clone()));
+                (Some(to), vec![("changes".to_string(), ValueType::Any)])
+            }
+            Decl::Monitor(_) => (Some(ValueType::Bool), Vec::new()),
+        }
+    }
+
+    fn stream_decl(&mut self, decl: &ast::StreamDecl, drafts: &[Draft<'_>]) -> Option<hir::StreamRef> {
+        let policy = self.policy(&decl.policies);
+        let source = &decl.source;
+        let first = source.segments.first()?;
+        let (producer, port, ty) = match self.names.get(&first.name).map(|(n, _)| *n) {
+            Some(Named::Process(id)) => self.process_output(&drafts[id], id, source)?,
+            Some(Named::Stream(_)) => {
+                self.diagnostics.push(
+                    diag::not_a_stream(source.span, &first.name, "a stream")
+                        .with_hint("a stream's source is a process; declare this stream over that process with all the policies it needs"),
+                );
+                return None;
+            }
+            None => {
+                self.unknown_stream(first);
+                return None;
+            }
+        };
+        Some(hir::StreamRef { name: decl.name.name.clone(), producer, port, policy, ty })
+    }
+
+    /// The producer, port and type of `process[.port]`.
+    fn process_output(
+        &mut self,
+        draft: &Draft<'_>,
+        id: ProcessId,
+        path: &ast::Path,
+    ) -> Option<(ProcessId, Option<String>, ValueType)> {
+        let name = &draft.name.name;
+        if matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink) {
+            self.diagnostics.push(diag::not_a_stream(path.span, name, "a sink"));
+            return None;
+        }
+        match path.segments.as_slice() {
+            [_] => Some((id, None, draft.output.clone().unwrap_or(ValueType::Any))),
+            [_, port] => match draft.ports.iter().find(|(n, _)| *n == port.name) {
+                Some((port_name, ty)) => Some((id, Some(port_name.clone()), ty.clone())),
+                None => {
+                    let names: Vec<&str> = draft.ports.iter().map(|(n, _)| n.as_str()).collect();
+                    self.diagnostics.push(diag::unknown_port(port.span, name, &port.name, &names));
+                    None
+                }
+            },
+            [_, _, extra, ..] => {
+                self.diagnostics.push(diag::unknown_port(extra.span, name, &extra.name, &[]));
+                None
+            }
+            [] => None,
+        }
+    }
+
+    fn unknown_stream(&mut self, name: &ast::Ident) {
+        if self.types.get(&name.name).is_some() {
+            self.diagnostics.push(diag::not_a_stream(name.span, &name.name, "a type"));
+            return;
+        }
+        let candidates: Vec<&str> = self.names.keys().map(String::as_str).collect();
+        self.diagnostics.push(diag::unknown_name(name.span, "stream or process", &name.name, &candidates));
+    }
+
+    /// Resolves a stream's policies, with defaults, reporting duplicates and conflicts.
+    fn policy(&mut self, policies: &[ast::Policy]) -> hir::Policy {
+        let mut policy = hir::Policy::default();
+        let mut seen: BTreeMap<ast::PolicyClass, &ast::Policy> = BTreeMap::new();
+        for p in policies {
+            let class = p.kind.class();
+            if let Some(first) = seen.get(&class) {
+                self.diagnostics.push(diag::policy_duplicate(p.span, class_name(class), first.span));
+                continue;
+            }
+            seen.insert(class, p);
+            let micros = |d: &ast::DurationLit| d.micros().unwrap_or(0);
+            match &p.kind {
+                ast::PolicyKind::NoApproximation => policy.approximation = hir::Approximation::None,
+                ast::PolicyKind::UseMostRecent => policy.approximation = hir::Approximation::UseMostRecent,
+                ast::PolicyKind::AnyUpdate => policy.change = hir::Change::AnyUpdate,
+                ast::PolicyKind::AnyChange => policy.change = hir::Change::AnyChange,
+                ast::PolicyKind::SampleEvery(d) => {
+                    if micros(d) == 0 {
+                        self.diagnostics.push(diag::policy_value(
+                            p.span,
+                            "`sample every` needs a period above zero",
+                            "write e.g. `sample every 100ms`",
+                        ));
+                    }
+                    policy.change = hir::Change::SampleEvery(micros(d));
+                }
+                ast::PolicyKind::MaxDelay(d) => policy.max_delay = Some(micros(d)),
+                ast::PolicyKind::Duration { from, to } => {
+                    let (from_us, to_us) = (micros(from), to.as_ref().map(micros));
+                    if to_us.is_some_and(|t| t < from_us) {
+                        self.diagnostics.push(diag::policy_value(
+                            p.span,
+                            "the duration window ends before it starts",
+                            "write `from A to B` with A <= B",
+                        ));
+                    }
+                    policy.window = Some((from_us, to_us));
+                }
+                ast::PolicyKind::AnyOrder => policy.order = hir::Order::Any,
+                ast::PolicyKind::MonotoneOrder => policy.order = hir::Order::Monotone,
+                ast::PolicyKind::StrictOrder => policy.order = hir::Order::Strict,
+                ast::PolicyKind::Queue { capacity, overflow } => {
+                    if *capacity == 0 {
+                        self.diagnostics.push(diag::policy_value(
+                            p.span,
+                            "a queue needs room for at least one sample",
+                            "write e.g. `queue 64 drop oldest`",
+                        ));
+                    }
+                    policy.queue = hir::Queue { capacity: *capacity, overflow: *overflow };
+                }
+                ast::PolicyKind::Feedback => policy.feedback = true,
+            }
+        }
+        if let Some(sample) =
+            seen.get(&ast::PolicyClass::Change).filter(|p| matches!(p.kind, ast::PolicyKind::SampleEvery(_)))
+        {
+            match seen.get(&ast::PolicyClass::Order) {
+                Some(order) if order.kind == ast::PolicyKind::AnyOrder => self.diagnostics.push(diag::policy_conflict(
+                    sample.span,
+                    "`sample every` needs samples in time order, but the stream accepts `any order`",
+                    order.span,
+                    "use `monotone order` or `strict order` (the default with `sample every` is monotone)",
+                )),
+                Some(_) => {}
+                None => policy.order = hir::Order::Monotone,
+            }
+            match seen.get(&ast::PolicyClass::Approximation) {
+                Some(approx) if approx.kind == ast::PolicyKind::NoApproximation => self.diagnostics.push(diag::policy_conflict(
+                    sample.span,
+                    "`sample every` must fill instants that have no sample, but the stream has `no approximation`",
+                    approx.span,
+                    "use `use most recent` (the default with `sample every`)",
+                )),
+                Some(_) => {}
+                None => policy.approximation = hir::Approximation::UseMostRecent,
+            }
+        }
+        policy
+    }
+
+    /// Converts the named parameters of a call, filling defaults; returns the resolved call.
+    fn params(&mut self, entry: &Entry, call: &ast::Call) -> hir::Call {
+        let mut params = BTreeMap::new();
+        let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
+        for (name, literal) in call.params() {
+            if let Some(first) = seen.get(name.name.as_str()) {
+                self.diagnostics.push(diag::duplicate(name.span, "parameter", &name.name, *first));
+                continue;
+            }
+            seen.insert(&name.name, name.span);
+            let Some(param) = entry.param_named(&name.name) else {
+                let names: Vec<&str> = entry.params.iter().map(|p| p.name.as_str()).collect();
+                self.diagnostics.push(diag::unknown_param(name.span, &entry.name, &name.name, &names));
+                continue;
+            };
+            match literal_value(literal, &param.ty) {
+                Ok(value) => {
+                    params.insert(param.name.clone(), value);
+                }
+                Err(found) => {
+                    let mut d = diag::param_type(
+                        literal.span,
+                        &entry.name,
+                        &name.name,
+                        &param.ty.to_string(),
+                        &found,
+                    );
+                    if let ParamType::Choice(options) = &param.ty {
+                        d = d.with_hint(format!("one of: {}", options.join(", ")));
+                    }
+                    self.diagnostics.push(d);
+                }
+            }
+        }
+        for param in &entry.params {
+            if params.contains_key(&param.name) || seen.contains_key(param.name.as_str()) {
+                continue;
+            }
+            match &param.default {
+                Some(default) => {
+                    params.insert(param.name.clone(), default.clone());
+                }
+                None => self.diagnostics.push(diag::missing_param(
+                    call.span,
+                    &entry.name,
+                    &param.name,
+                    &param.ty.to_string(),
+                    &param.doc,
+                )),
+            }
+        }
+        hir::Call { entry: entry.name.clone(), params }
+    }
+
+    fn anchoring(&mut self, spec: &ast::Spec) -> (Vec<hir::Prediction>, hir::Forget) {
+        let mut predictions = Vec::new();
+        let mut predicted: BTreeMap<String, Span> = BTreeMap::new();
+        let mut forget = hir::Forget::default();
+        let mut forget_spans: BTreeMap<Option<String>, Span> = BTreeMap::new();
+        for item in &spec.items {
+            match item {
+                ast::Item::Predict(p) => {
+                    let ty = self.record_type(&p.ty);
+                    if let Some(first) = predicted.get(&p.ty.name) {
+                        self.diagnostics.push(diag::duplicate(
+                            p.ty.span,
+                            "prediction model for",
+                            &p.ty.name,
+                            *first,
+                        ));
+                        continue;
+                    }
+                    predicted.insert(p.ty.name.clone(), p.ty.span);
+                    let Some(entry) = self.entry(EntryKind::Predict, &p.model) else { continue };
+                    if let Some(ty) = &ty
+                        && !satisfies(ty, &entry.output, &self.types)
+                    {
+                        self.diagnostics.push(
+                            diag::type_mismatch(
+                                p.ty.span,
+                                &format!("a type with {}", entry.output),
+                                &describe(ty),
+                            )
+                            .with_hint(format!("`{}` needs objects with {}", entry.name, entry.output)),
+                        );
+                    }
+                    self.no_inputs(entry, &p.model);
+                    let model = self.params(entry, &p.model);
+                    predictions.push(hir::Prediction { ty: p.ty.name.clone(), model });
+                }
+                ast::Item::Forget(f) => {
+                    let key = f.ty.as_ref().map(|t| t.name.clone());
+                    let span = f.ty.as_ref().map_or(f.span, |t| t.span);
+                    if let Some(ty) = &f.ty {
+                        self.record_type(ty);
+                    }
+                    if let Some(first) = forget_spans.get(&key) {
+                        let what = key.clone().unwrap_or_else(|| "all types".into());
+                        self.diagnostics.push(diag::duplicate(span, "forget time for", &what, *first));
+                        continue;
+                    }
+                    forget_spans.insert(key.clone(), span);
+                    let after = f.after.micros().unwrap_or(0);
+                    match key {
+                        Some(ty) => {
+                            forget.per_type.insert(ty, after);
+                        }
+                        None => forget.default = Some(after),
+                    }
+                }
+                _ => {}
+            }
+        }
+        (predictions, forget)
+    }
+
+    fn no_inputs(&mut self, entry: &Entry, call: &ast::Call) {
+        let given = call.inputs().count();
+        let expected = match &entry.inputs {
+            Inputs::Fixed(ports) => ports.len(),
+            Inputs::Variadic { .. } => return,
+        };
+        if given != expected {
+            self.diagnostics.push(diag::input_count(call.span, &entry.name, &count_words(expected), given));
+        }
+    }
+
+    fn deploy(
+        &mut self,
+        spec: &ast::Spec,
+        drafts: &[Draft<'_>],
+        streams: &[&ast::StreamDecl],
+    ) -> Option<hir::Deploy> {
+        let mut sections = spec.items.iter().filter_map(|i| match i {
+            ast::Item::Deploy(d) => Some(d),
+            _ => None,
+        });
+        let section = sections.next()?;
+        for extra in sections {
+            self.diagnostics.push(diag::deploy_twice(extra.span, section.span));
+        }
+        let mut hosts: Vec<hir::Host> = Vec::new();
+        let mut host_spans: BTreeMap<&str, Span> = BTreeMap::new();
+        let mut placed: BTreeMap<ProcessId, (Span, &str)> = BTreeMap::new();
+        for host in &section.hosts {
+            if let Some(first) = host_spans.get(host.name.name.as_str()) {
+                self.diagnostics.push(diag::duplicate_host(host.name.span, &host.name.name, *first));
+                continue;
+            }
+            host_spans.insert(&host.name.name, host.name.span);
+            let endpoints = |lits: &[ast::Literal], diagnostics: &mut Vec<Diagnostic>| -> Vec<String> {
+                let mut out = Vec::new();
+                for lit in lits {
+                    if let ast::LitKind::Str(s) = &lit.kind {
+                        if !valid_endpoint(s) {
+                            diagnostics.push(diag::bad_endpoint(lit.span, s));
+                        }
+                        out.push(s.clone());
+                    }
+                }
+                out
+            };
+            let listen = endpoints(&host.listen, &mut self.diagnostics);
+            let connect = endpoints(&host.connect, &mut self.diagnostics);
+            let mut processes = Vec::new();
+            for name in &host.processes {
+                match self.names.get(&name.name).map(|(n, _)| *n) {
+                    Some(Named::Process(id)) => {
+                        if let Some((first, first_host)) = placed.get(&id) {
+                            self.diagnostics.push(diag::placed_twice(
+                                name.span,
+                                &name.name,
+                                &host.name.name,
+                                *first,
+                                first_host,
+                            ));
+                        } else {
+                            placed.insert(id, (name.span, &host.name.name));
+                            processes.push(id);
+                        }
+                    }
+                    Some(Named::Stream(_)) => {
+                        self.diagnostics.push(diag::stream_placed(name.span, &name.name))
+                    }
+                    None => {
+                        let candidates: Vec<&str> = drafts.iter().map(|d| d.name.name.as_str()).collect();
+                        self.diagnostics.push(diag::unknown_placed(name.span, &name.name, &candidates));
+                    }
+                }
+            }
+            hosts.push(hir::Host { name: host.name.name.clone(), listen, connect, processes });
+        }
+        let _ = streams;
+        for (id, draft) in drafts.iter().enumerate() {
+            if !placed.contains_key(&id) {
+                self.diagnostics.push(diag::not_placed(
+                    draft.name.span,
+                    &draft.name.name,
+                    decl_kind(draft.decl),
+                ));
+            }
+        }
+        Some(hir::Deploy { hosts })
+    }
+
+    fn graph(&mut self, processes: &[hir::Process]) -> hir::ProcessGraph {
+        let mut graph = hir::ProcessGraph::default();
+        for p in processes {
+            graph.nodes.push(graph.graph.add_node(p.id));
+        }
+        let mut acyclic = petgraph::graph::DiGraph::<ProcessId, ()>::new();
+        let acyclic_nodes: Vec<_> = processes.iter().map(|p| acyclic.add_node(p.id)).collect();
+        let mut consumed = vec![false; processes.len()];
+        for p in processes {
+            for input in &p.inputs {
+                let from = input.stream.producer;
+                consumed[from] = true;
+                graph.graph.add_edge(
+                    graph.nodes[from],
+                    graph.nodes[p.id],
+                    hir::Edge {
+                        stream: input.stream.name.clone(),
+                        port: input.stream.port.clone(),
+                        input: input.port.clone(),
+                        policy: input.stream.policy.clone(),
+                    },
+                );
+                if !input.stream.policy.feedback {
+                    acyclic.add_edge(acyclic_nodes[from], acyclic_nodes[p.id], ());
+                }
+            }
+        }
+        for component in petgraph::algo::tarjan_scc(&acyclic) {
+            let self_loop = component.len() == 1 && acyclic.contains_edge(component[0], component[0]);
+            if component.len() < 2 && !self_loop {
+                continue;
+            }
+            let mut members: Vec<ProcessId> = component.iter().map(|n| acyclic[*n]).collect();
+            members.sort_unstable();
+            let cycle = cycle_path(&acyclic, &acyclic_nodes, &members);
+            let names: Vec<String> = cycle.iter().map(|id| processes[*id].name.clone()).collect();
+            self.diagnostics.push(diag::cycle(processes[members[0]].span, &names));
+        }
+        for p in processes {
+            let kind = match p.kind {
+                hir::ProcessKind::Source(_) => "source",
+                hir::ProcessKind::Compute(_) => "computational unit",
+                _ => continue,
+            };
+            if !consumed[p.id] {
+                self.diagnostics.push(diag::unused_output(p.span, &p.name, kind));
+            }
+        }
+        graph
+    }
+}
+
+/// A cycle through the first member of a strongly connected component, in edge order.
+fn cycle_path(
+    graph: &petgraph::graph::DiGraph<ProcessId, ()>,
+    nodes: &[petgraph::graph::NodeIndex],
+    members: &[ProcessId],
+) -> Vec<ProcessId> {
+    let start = nodes[members[0]];
+    // Breadth-first search inside the component back to the start.
+    let mut previous: BTreeMap<petgraph::graph::NodeIndex, petgraph::graph::NodeIndex> = BTreeMap::new();
+    let mut queue = std::collections::VecDeque::from([start]);
+    while let Some(node) = queue.pop_front() {
+        for next in graph.neighbors(node) {
+            if !members.contains(&graph[next]) {
+                continue;
+            }
+            if next == start {
+                let mut path = vec![graph[node]];
+                let mut current = node;
+                while current != start {
+                    current = previous[&current];
+                    path.push(graph[current]);
+                }
+                path.reverse();
+                return path;
+            }
+            if let std::collections::btree_map::Entry::Vacant(e) = previous.entry(next) {
+                e.insert(node);
+                queue.push_back(next);
+            }
+        }
+    }
+    members.to_vec()
+}
+
+/// Resolves the inputs of one process (needs the drafts of all processes).
+struct Resolver<'c, 'a, 's> {
+    checker: &'c mut Checker<'a>,
+    drafts: &'c [Draft<'s>],
+    streams: &'c [Option<hir::StreamRef>],
+    used: &'c mut [bool],
+}
+
+impl Resolver<'_, '_, '_> {
+    fn process(&mut self, draft: &Draft<'_>) -> (hir::ProcessKind, Vec<hir::Input>) {
+        match draft.decl {
+            Decl::Process(p) => {
+                let kind = entry_kind(p.kind);
+                let Some(entry) = self.checker.registry.entry(kind, &p.call.callee.dotted()) else {
+                    // Reported when the output type was computed; still resolve the inputs.
+                    for path in p.call.inputs() {
+                        self.stream_ref(path);
+                    }
+                    let call = hir::Call { entry: p.call.callee.dotted(), params: BTreeMap::new() };
+                    return (wrap(p.kind, call), Vec::new());
+                };
+                let inputs = self.call_inputs(entry, &p.call);
+                let call = self.checker.params(entry, &p.call);
+                (wrap(p.kind, call), inputs)
+            }
+            Decl::Link(l) => self.link(l),
+            Decl::Monitor(m) => self.monitor(m),
+        }
+    }
+
+    /// A stream reference in an input position.
+    fn stream_ref(&mut self, path: &ast::Path) -> Option<hir::StreamRef> {
+        let first = path.segments.first()?;
+        match self.checker.names.get(&first.name).map(|(n, _)| *n) {
+            Some(Named::Stream(index)) => {
+                self.used[index] = true;
+                if let Some(extra) = path.segments.get(1) {
+                    self.checker.diagnostics.push(
+                        diag::unknown_port(extra.span, &first.name, &extra.name, &[])
+                            .with_hint("a declared stream has no named outputs; name the process output in the stream declaration"),
+                    );
+                    return None;
+                }
+                self.streams[index].clone()
+            }
+            Some(Named::Process(id)) => {
+                let (producer, port, ty) = self.checker.process_output(&self.drafts[id], id, path)?;
+                let name = path.dotted();
+                Some(hir::StreamRef { name, producer, port, policy: hir::Policy::default(), ty })
+            }
+            None => {
+                self.checker.unknown_stream(first);
+                None
+            }
+        }
+    }
+
+    fn call_inputs(&mut self, entry: &Entry, call: &ast::Call) -> Vec<hir::Input> {
+        let paths: Vec<&ast::Path> = call.inputs().collect();
+        let ports: Vec<(String, TypeReq)> = match &entry.inputs {
+            Inputs::Fixed(ports) => {
+                if ports.len() != paths.len() {
+                    self.checker.diagnostics.push(diag::input_count(
+                        call.span,
+                        &entry.name,
+                        &count_words(ports.len()),
+                        paths.len(),
+                    ));
+                }
+                ports.iter().map(|p| (p.name.clone(), p.ty.clone())).collect()
+            }
+            Inputs::Variadic { min, port } => {
+                if paths.len() < *min {
+                    self.checker.diagnostics.push(diag::input_count(
+                        call.span,
+                        &entry.name,
+                        &format!("at least {}", count_words(*min)),
+                        paths.len(),
+                    ));
+                }
+                (0..paths.len()).map(|i| (format!("{}{i}", port.name), port.ty.clone())).collect()
+            }
+        };
+        let mut inputs = Vec::new();
+        for (path, (port, req)) in paths.iter().zip(ports) {
+            let Some(stream) = self.stream_ref(path) else { continue };
+            if !satisfies(&stream.ty, &req, &self.checker.types) {
+                self.checker.diagnostics.push(
+                    diag::type_mismatch(
+                        path.span,
+                        &format!("a stream of {req}"),
+                        &format!("a stream of {}", describe(&stream.ty)),
+                    )
+                    .with_hint(format!("input `{port}` of `{}` takes {req}", entry.name)),
+                );
+            }
+            inputs.push(hir::Input { port, stream });
+        }
+        inputs
+    }
+
+    /// The streams that carry objects of exactly type `ty`: for each producer, its one declared
+    /// stream if it has exactly one, else the producer's output directly. Subtypes do not count:
+    /// in an object linkage structure an on-road object `oo3` is a different object from the
+    /// world object `wo5` it was linked from, though its type inherits `WorldObject`'s attributes.
+    fn producers_of(&mut self, ty: &str) -> Vec<hir::StreamRef> {
+        let mut refs = Vec::new();
+        for (id, draft) in self.drafts.iter().enumerate() {
+            let produces = match &draft.output {
+                Some(ValueType::Record(r)) => &*r.name == ty,
+                _ => false,
+            };
+            if !produces || matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink) {
+                continue;
+            }
+            let declared: Vec<usize> = self
+                .streams
+                .iter()
+                .enumerate()
+                .filter(|(_, s)| s.as_ref().is_some_and(|s| s.producer == id && s.port.is_none()))
+                .map(|(i, _)| i)
+                .collect();
+            match declared.as_slice() {
+                [one] => {
+                    self.used[*one] = true;
+                    if let Some(s) = self.streams[*one].clone() {
+                        refs.push(s);
+                    }
+                }
+                _ => refs.push(hir::StreamRef {
+                    name: draft.name.name.clone(),
+                    producer: id,
+                    port: None,
+                    policy: hir::Policy::default(),
+                    ty: draft.output.clone().unwrap_or(ValueType::Any),
+                }),
+            }
+        }
+        refs
+    }
+
+    fn link(&mut self, l: &ast::LinkDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
+        let from = self.checker.record_type(&l.from_type);
+        let to = self.checker.record_type(&l.to_type);
+        let mut inputs = Vec::new();
+
+        // The stream(s) of `from` objects.
+        let explicit: Vec<&ast::Path> = l
+            .clauses
+            .iter()
+            .filter_map(|c| match c {
+                ast::LinkClause::Input(p, _) => Some(p),
+                ast::LinkClause::Condition(_) => None,
+            })
+            .collect();
+        if explicit.is_empty() {
+            if from.is_some() {
+                let producers = self.producers_of(&l.from_type.name);
+                if producers.is_empty() {
+                    self.checker.diagnostics.push(diag::no_producer(
+                        l.from_type.span,
+                        &l.from_type.name,
+                        &format!("link `{}`", l.name.name),
+                    ));
+                }
+                inputs.extend(producers.into_iter().map(|stream| hir::Input { port: "from".into(), stream }));
+            }
+        } else {
+            for path in explicit {
+                let Some(stream) = self.stream_ref(path) else { continue };
+                if let Some(from_ty) = &from
+                    && !assignable(&stream.ty, from_ty, &self.checker.types)
+                {
+                    self.checker.diagnostics.push(diag::link_input_type(
+                        path.span,
+                        &path.dotted(),
+                        &describe(&stream.ty),
+                        &l.from_type.name,
+                    ));
+                }
+                inputs.push(hir::Input { port: "from".into(), stream });
+            }
+        }
+
+        // The link unit: its own inputs and parameters; it must be able to fill `to` objects.
+        let via_entry = self.checker.entry(EntryKind::Link, &l.via);
+        let provided: &[Function] = via_entry.map_or(&[], |e| e.provides.as_slice());
+        let via = match via_entry {
+            Some(entry) => {
+                if let Some(to_ty) = &to
+                    && !satisfies(to_ty, &entry.output, &self.checker.types)
+                {
+                    self.checker.diagnostics.push(
+                        diag::type_mismatch(
+                            l.to_type.span,
+                            &format!("a type with {}", entry.output),
+                            &describe(to_ty),
+                        )
+                        .with_hint(format!("`{}` fills objects with {}", entry.name, entry.output)),
+                    );
+                }
+                inputs.extend(self.call_inputs(entry, &l.via));
+                self.checker.params(entry, &l.via)
+            }
+            None => hir::Call { entry: l.via.callee.dotted(), params: BTreeMap::new() },
+        };
+
+        // The three conditions, each exactly once.
+        let mut conditions: BTreeMap<&str, &ast::Condition> = BTreeMap::new();
+        for clause in &l.clauses {
+            let ast::LinkClause::Condition(c) = clause else { continue };
+            let keyword = c.kind.keyword();
+            if let Some(first) = conditions.get(keyword) {
+                self.checker.diagnostics.push(diag::condition_twice(c.span, keyword, first.span));
+                continue;
+            }
+            conditions.insert(keyword, c);
+            let mut vars = vec![("from".to_string(), from.clone().unwrap_or(ValueType::Any))];
+            let to_bound = c.kind != ast::ConditionKind::Establish;
+            if to_bound {
+                vars.push(("to".to_string(), to.clone().unwrap_or(ValueType::Any)));
+            }
+            self.formula(&c.formula, Context::Link { to_bound }, vars, provided);
+        }
+        let mut formula = |kind: ast::ConditionKind| -> ast::Expr {
+            match conditions.get(kind.keyword()) {
+                Some(c) => c.formula.clone(),
+                None => {
+                    self.checker.diagnostics.push(diag::condition_missing(
+                        l.name.span,
+                        &l.name.name,
+                        kind.keyword(),
+                    ));
+                    ast::Expr { kind: ast::ExprKind::Bool(false), span: l.span }
+                }
+            }
+        };
+        let establish = formula(ast::ConditionKind::Establish);
+        let reestablish = formula(ast::ConditionKind::Reestablish);
+        let maintain = formula(ast::ConditionKind::Maintain);
+        let link = hir::Link {
+            from_type: l.from_type.name.clone(),
+            to_type: l.to_type.name.clone(),
+            via,
+            establish,
+            reestablish,
+            maintain,
+        };
+        (hir::ProcessKind::Link(Box::new(link)), inputs)
+    }
+
+    fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
+        let mut scope = MonitorScope { refs: BTreeMap::new(), resolver: self };
+        let (used_streams, quantified) = {
+            let mut diagnostics = Vec::new();
+            let registry = scope.resolver.checker.registry;
+            let types = scope.resolver.checker.types.clone();
+            let mut checker = FormulaChecker {
+                registry,
+                local_functions: &[],
+                types: &types,
+                context: Context::Monitor,
+                vars: Vec::new(),
+                streams: Some(&mut scope),
+                diagnostics: &mut diagnostics,
+                used_streams: Vec::new(),
+                quantified_types: Vec::new(),
+            };
+            checker.check_formula(&m.formula);
+            let used = std::mem::take(&mut checker.used_streams);
+            let quantified = std::mem::take(&mut checker.quantified_types);
+            scope.resolver.checker.diagnostics.extend(diagnostics);
+            (used, quantified)
+        };
+        let refs = std::mem::take(&mut scope.refs);
+        let mut inputs: Vec<hir::Input> = used_streams
+            .iter()
+            .filter_map(|name| refs.get(name).cloned())
+            .map(|stream| hir::Input { port: "state".into(), stream })
+            .collect();
+        for ty in &quantified {
+            let producers = self.producers_of(ty);
+            if producers.is_empty() {
+                self.checker.diagnostics.push(diag::no_producer(
+                    m.name.span,
+                    ty,
+                    &format!("monitor `{}`", m.name.name),
+                ));
+            }
+            inputs.extend(producers.into_iter().map(|stream| hir::Input { port: "objects".into(), stream }));
+        }
+        let monitor =
+            hir::Monitor { formula: m.formula.clone(), streams: used_streams, object_types: quantified };
+        (hir::ProcessKind::Monitor(monitor), inputs)
+    }
+
+    fn formula(
+        &mut self,
+        expr: &ast::Expr,
+        context: Context,
+        vars: Vec<(String, ValueType)>,
+        local_functions: &[Function],
+    ) {
+        let mut diagnostics = Vec::new();
+        let mut checker = FormulaChecker {
+            registry: self.checker.registry,
+            local_functions,
+            types: &self.checker.types,
+            context,
+            vars,
+            streams: None,
+            diagnostics: &mut diagnostics,
+            used_streams: Vec::new(),
+            quantified_types: Vec::new(),
+        };
+        checker.check_formula(expr);
+        self.checker.diagnostics.extend(diagnostics);
+    }
+}
+
+/// Resolves the stream names a monitor's formula uses.
+struct MonitorScope<'r, 'c, 'a, 's> {
+    refs: BTreeMap<String, hir::StreamRef>,
+    resolver: &'r mut Resolver<'c, 'a, 's>,
+}
+
+impl StreamScope for MonitorScope<'_, '_, '_, '_> {
+    fn stream_type(&mut self, name: &ast::Ident) -> Option<Result<ValueType, Diagnostic>> {
+        if let Some(stream) = self.refs.get(&name.name) {
+            return Some(Ok(stream.ty.clone()));
+        }
+        let path = ast::Path { segments: vec![name.clone()], span: name.span };
+        match self.resolver.checker.names.get(&name.name).map(|(n, _)| *n) {
+            Some(Named::Stream(index)) => {
+                self.resolver.used[index] = true;
+                let stream = self.resolver.streams[index].clone()?;
+                let ty = stream.ty.clone();
+                self.refs.insert(name.name.clone(), stream);
+                Some(Ok(ty))
+            }
+            Some(Named::Process(id)) => {
+                let draft = &self.resolver.drafts[id];
+                if matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink) {
+                    return Some(Err(diag::not_a_stream(name.span, &name.name, "a sink")));
+                }
+                let ty = draft.output.clone().unwrap_or(ValueType::Any);
+                let stream = hir::StreamRef {
+                    name: path.dotted(),
+                    producer: id,
+                    port: None,
+                    policy: hir::Policy::default(),
+                    ty: ty.clone(),
+                };
+                self.refs.insert(name.name.clone(), stream);
+                Some(Ok(ty))
+            }
+            None => None,
+        }
+    }
+
+    fn stream_names(&self) -> Vec<String> {
+        self.resolver.checker.names.keys().cloned().collect()
+    }
+}
+
+fn wrap(kind: ast::ProcessKind, call: hir::Call) -> hir::ProcessKind {
+    match kind {
+        ast::ProcessKind::Source => hir::ProcessKind::Source(call),
+        ast::ProcessKind::Compute => hir::ProcessKind::Compute(call),
+        ast::ProcessKind::Sink => hir::ProcessKind::Sink(call),
+    }
+}
+
+fn entry_kind(kind: ast::ProcessKind) -> EntryKind {
+    match kind {
+        ast::ProcessKind::Source => EntryKind::Source,
+        ast::ProcessKind::Compute => EntryKind::Compute,
+        ast::ProcessKind::Sink => EntryKind::Sink,
+    }
+}
+
+fn decl_kind(decl: Decl<'_>) -> &'static str {
+    match decl {
+        Decl::Process(p) => p.kind.keyword(),
+        Decl::Link(_) => "link",
+        Decl::Monitor(_) => "monitor",
+    }
+}
+
+fn class_name(class: ast::PolicyClass) -> &'static str {
+    match class {
+        ast::PolicyClass::Approximation => "approximation",
+        ast::PolicyClass::Change => "change",
+        ast::PolicyClass::Delay => "delay",
+        ast::PolicyClass::Duration => "duration",
+        ast::PolicyClass::Order => "order",
+        ast::PolicyClass::Queue => "queue",
+        ast::PolicyClass::Feedback => "feedback",
+    }
+}
+
+fn count_words(n: usize) -> String {
+    match n {
+        0 => "no input streams".into(),
+        1 => "one input stream".into(),
+        n => format!("{n} input streams"),
+    }
+}
+
+fn describe(t: &ValueType) -> String {
+    match t {
+        ValueType::Record(r) => format!("`{}`", r.name),
+        other => format!("`{other}`"),
+    }
+}
+
+/// The type a requirement stands for when nothing more is declared.
+fn req_type(req: &TypeReq) -> ValueType {
+    match req {
+        TypeReq::Exact(t) => t.clone(),
+        TypeReq::Any | TypeReq::Fields(_) => ValueType::Any,
+    }
+}
+
+/// Whether values of `ty` meet `req`.
+pub(crate) fn satisfies(ty: &ValueType, req: &TypeReq, types: &TypeTable) -> bool {
+    match req {
+        TypeReq::Any => true,
+        TypeReq::Exact(t) => assignable(ty, t, types),
+        TypeReq::Fields(fields) => match ty {
+            ValueType::Any => true,
+            ValueType::Record(r) => {
+                fields.iter().all(|(name, t)| r.field(name).is_some_and(|f| assignable(&f.ty, t, types)))
+            }
+            _ => false,
+        },
+    }
+}
+
+/// A zenoh endpoint: `protocol/address` (`tcp/127.0.0.1:7447`).
+fn valid_endpoint(s: &str) -> bool {
+    let Some((protocol, address)) = s.split_once('/') else { return false };
+    let protocol_ok = !protocol.is_empty() && protocol.chars().all(|c| c.is_ascii_lowercase() || c == '-');
+    let address = address.split('#').next().unwrap_or("");
+    let needs_port = matches!(protocol, "tcp" | "udp" | "tls" | "quic" | "ws");
+    let port_ok = !needs_port
+        || address
+            .rsplit_once(':')
+            .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok());
+    protocol_ok && !address.is_empty() && port_ok
+}
+
+/// Converts a parameter literal to the value the parameter type asks for, or says what it found.
+fn literal_value(literal: &ast::Literal, ty: &ParamType) -> Result<Value, String> {
+    use ast::LitKind as L;
+    let found = || -> String {
+        match &literal.kind {
+            L::Bool(_) => "a boolean".into(),
+            L::Number(ast::Number::Int(_)) => "an integer".into(),
+            L::Number(ast::Number::Float(_)) => "a float".into(),
+            L::Str(_) => "a string".into(),
+            L::Duration(_) => "a duration".into(),
+            L::List(_) => "a list".into(),
+        }
+    };
+    match (ty, &literal.kind) {
+        (ParamType::Bool | ParamType::Any, L::Bool(b)) => Ok(Value::Bool(*b)),
+        (ParamType::Int | ParamType::Any, L::Number(ast::Number::Int(i))) => Ok(Value::Int(*i)),
+        (ParamType::Float, L::Number(n)) => Ok(Value::Float(n.as_f64())),
+        (ParamType::Any, L::Number(ast::Number::Float(x))) => Ok(Value::Float(*x)),
+        (ParamType::Str | ParamType::Any, L::Str(s)) => Ok(Value::str(s)),
+        (ParamType::Choice(options), L::Str(s)) if options.iter().any(|o| o == s) => Ok(Value::str(s)),
+        (ParamType::Duration | ParamType::Any, L::Duration(d)) => {
+            Ok(Value::Duration(d.micros().unwrap_or(0)))
+        }
+        (ParamType::List(item), L::List(items)) => {
+            let values: Result<Vec<Value>, String> = items.iter().map(|i| literal_value(i, item)).collect();
+            Ok(Value::List(values?.into()))
+        }
+        (ParamType::Any, L::List(items)) => {
+            let values: Result<Vec<Value>, String> =
+                items.iter().map(|i| literal_value(i, &ParamType::Any)).collect();
+            Ok(Value::List(values?.into()))
+        }
+        (ParamType::Choice(_), L::Str(s)) => Err(format!("\"{s}\"")),
+        _ => Err(found()),
+    }
+}

@@ -1,0 +1,342 @@
+//! Every diagnostic semantic analysis emits, one constructor each (codes `E01xx`, warnings
+//! `W02xx`). `docs/diagnostics.md` documents each code with an example.
+
+use kpl_syntax::Diagnostic;
+use kpl_syntax::ast::Span;
+
+use crate::suggest::did_you_mean;
+
+pub const UNKNOWN_NAME: &str = "E0101";
+pub const DUPLICATE: &str = "E0102";
+pub const UNKNOWN_ATTRIBUTE: &str = "E0103";
+pub const TYPE_MISMATCH: &str = "E0104";
+pub const UNKNOWN_TYPE: &str = "E0105";
+pub const TYPE_CYCLE: &str = "E0106";
+pub const UNKNOWN_FUNCTION: &str = "E0107";
+pub const ARITY: &str = "E0108";
+pub const DUPLICATE_SYMBOL: &str = "E0109";
+pub const UNKNOWN_ENTRY: &str = "E0110";
+pub const UNKNOWN_PARAM: &str = "E0111";
+pub const MISSING_PARAM: &str = "E0112";
+pub const PARAM_TYPE: &str = "E0113";
+pub const INPUT_COUNT: &str = "E0114";
+pub const NOT_A_STREAM: &str = "E0115";
+pub const UNKNOWN_PORT: &str = "E0116";
+pub const BUILTIN_TYPE: &str = "E0117";
+pub const POLICY_CONFLICT: &str = "E0120";
+pub const POLICY_DUPLICATE: &str = "E0121";
+pub const POLICY_VALUE: &str = "E0122";
+pub const CYCLE: &str = "E0130";
+pub const NOT_PLACED: &str = "E0140";
+pub const PLACED_TWICE: &str = "E0141";
+pub const UNKNOWN_PLACED: &str = "E0142";
+pub const STREAM_PLACED: &str = "E0143";
+pub const DUPLICATE_HOST: &str = "E0144";
+pub const DEPLOY_TWICE: &str = "E0145";
+pub const BAD_ENDPOINT: &str = "E0146";
+pub const CONDITION_MISSING: &str = "E0150";
+pub const CONDITION_TWICE: &str = "E0151";
+pub const NO_PRODUCER: &str = "E0152";
+pub const TO_IN_ESTABLISH: &str = "E0153";
+pub const LINK_INPUT_TYPE: &str = "E0154";
+pub const BAD_INTERVAL: &str = "E0160";
+pub const BAD_BOUND: &str = "E0161";
+pub const UNUSED_STREAM: &str = "W0201";
+pub const UNUSED_OUTPUT: &str = "W0202";
+
+pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
+    Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
+        .with_label(format!("no {what} of this name"))
+        .with_hint_opt(did_you_mean(name, candidates))
+}
+
+pub fn duplicate(span: Span, what: &str, name: &str, first: Span) -> Diagnostic {
+    Diagnostic::error(DUPLICATE, span, format!("{what} `{name}` is defined more than once"))
+        .with_label("defined again here")
+        .with_secondary(first, "first defined here")
+        .with_hint("rename one of them")
+}
+
+pub fn unknown_attribute(span: Span, ty: &str, field: &str, candidates: &[&str]) -> Diagnostic {
+    let hint = did_you_mean(field, candidates)
+        .or_else(|| (!candidates.is_empty()).then(|| format!("`{ty}` has: {}", candidates.join(", "))));
+    Diagnostic::error(UNKNOWN_ATTRIBUTE, span, format!("`{ty}` has no attribute `{field}`"))
+        .with_label("unknown attribute")
+        .with_hint_opt(hint)
+}
+
+pub fn type_mismatch(span: Span, expected: &str, found: &str) -> Diagnostic {
+    Diagnostic::error(TYPE_MISMATCH, span, format!("expected {expected}, found {found}"))
+        .with_label(format!("this is {found}"))
+}
+
+pub fn type_mismatch_hint(span: Span, expected: &str, found: &str, hint: &str) -> Diagnostic {
+    type_mismatch(span, expected, found).with_hint(hint)
+}
+
+pub fn unknown_type(span: Span, name: &str, candidates: &[&str]) -> Diagnostic {
+    let hint = did_you_mean(name, candidates).unwrap_or_else(|| {
+        "built-in types are bool, int, float, string, vec2, box, duration and list<T>; declare object types with `type`".to_string()
+    });
+    Diagnostic::error(UNKNOWN_TYPE, span, format!("unknown type `{name}`"))
+        .with_label("not a type")
+        .with_hint(hint)
+}
+
+pub fn type_cycle(span: Span, cycle: &[String]) -> Diagnostic {
+    Diagnostic::error(TYPE_CYCLE, span, format!("type hierarchy has a cycle: {}", cycle.join(" : ")))
+        .with_label("inherits from itself")
+        .with_hint("each type has at most one parent, and following parents must end at a type without one")
+}
+
+pub fn unknown_function(span: Span, name: &str, candidates: &[&str]) -> Diagnostic {
+    Diagnostic::error(UNKNOWN_FUNCTION, span, format!("unknown function `{name}`"))
+        .with_label("not a function")
+        .with_hint_opt(
+            did_you_mean(name, candidates)
+                .or_else(|| Some("`kpl list` shows the functions formulas may call".into())),
+        )
+}
+
+pub fn arity(span: Span, signature: &str, given: usize) -> Diagnostic {
+    Diagnostic::error(
+        ARITY,
+        span,
+        format!("wrong number of arguments: `{signature}` takes a different number than {given}"),
+    )
+    .with_label(format!("{given} given"))
+    .with_hint(format!("the signature is `{signature}`"))
+}
+
+pub fn duplicate_symbol(span: Span, symbol: &str, ty: &str, other: &str, first: Span) -> Diagnostic {
+    Diagnostic::error(
+        DUPLICATE_SYMBOL,
+        span,
+        format!("types `{ty}` and `{other}` both use the symbol prefix `{symbol}`"),
+    )
+    .with_label("same prefix")
+    .with_secondary(first, "also used here")
+    .with_hint("give each type its own prefix with `symbol`, so that symbols like `wo3` name one type")
+}
+
+pub fn builtin_type(span: Span, name: &str) -> Diagnostic {
+    Diagnostic::error(BUILTIN_TYPE, span, format!("`{name}` is a built-in type and cannot be redefined"))
+        .with_label("built-in")
+        .with_hint("choose another name")
+}
+
+pub fn unknown_entry(
+    span: Span,
+    kind: &str,
+    name: &str,
+    other_kinds: &[&str],
+    candidates: &[&str],
+) -> Diagnostic {
+    let hint = if let Some(other) = other_kinds.first() {
+        Some(format!("`{name}` is a {other}, not a {kind}"))
+    } else {
+        did_you_mean(name, candidates).or_else(|| Some("`kpl list` shows what the runtime provides".into()))
+    };
+    Diagnostic::error(UNKNOWN_ENTRY, span, format!("no {kind} named `{name}` is registered"))
+        .with_label(format!("unknown {kind}"))
+        .with_hint_opt(hint)
+}
+
+pub fn unknown_param(span: Span, entry: &str, name: &str, candidates: &[&str]) -> Diagnostic {
+    let hint = did_you_mean(name, candidates).or_else(|| {
+        Some(if candidates.is_empty() {
+            format!("`{entry}` takes no parameters")
+        } else {
+            format!("`{entry}` takes: {}", candidates.join(", "))
+        })
+    });
+    Diagnostic::error(UNKNOWN_PARAM, span, format!("`{entry}` has no parameter `{name}`"))
+        .with_label("unknown parameter")
+        .with_hint_opt(hint)
+}
+
+pub fn missing_param(span: Span, entry: &str, name: &str, ty: &str, doc: &str) -> Diagnostic {
+    Diagnostic::error(MISSING_PARAM, span, format!("`{entry}` needs the parameter `{name}`"))
+        .with_label(format!("`{name}` missing"))
+        .with_hint(format!("add `{name}: <{ty}>` ({doc})"))
+}
+
+pub fn param_type(span: Span, entry: &str, name: &str, expected: &str, found: &str) -> Diagnostic {
+    Diagnostic::error(
+        PARAM_TYPE,
+        span,
+        format!("parameter `{name}` of `{entry}` must be {expected}, found {found}"),
+    )
+    .with_label(format!("expected {expected}"))
+}
+
+pub fn input_count(span: Span, entry: &str, expected: &str, given: usize) -> Diagnostic {
+    Diagnostic::error(INPUT_COUNT, span, format!("`{entry}` takes {expected}, {given} given"))
+        .with_label("wrong number of input streams")
+        .with_hint("inputs are the positional arguments; parameters are written `name: value`")
+}
+
+pub fn not_a_stream(span: Span, name: &str, what: &str) -> Diagnostic {
+    Diagnostic::error(NOT_A_STREAM, span, format!("`{name}` is {what}, not a stream"))
+        .with_label("not a stream")
+        .with_hint("inputs name a `stream`, or a source, compute, link or monitor (its output stream)")
+}
+
+pub fn unknown_port(span: Span, process: &str, port: &str, candidates: &[&str]) -> Diagnostic {
+    let hint = did_you_mean(port, candidates).or_else(|| {
+        Some(if candidates.is_empty() {
+            format!("`{process}` has only its default output: write `{process}`")
+        } else {
+            format!("`{process}` has the outputs: {}", candidates.join(", "))
+        })
+    });
+    Diagnostic::error(UNKNOWN_PORT, span, format!("`{process}` has no output `{port}`"))
+        .with_label("unknown output")
+        .with_hint_opt(hint)
+}
+
+pub fn policy_conflict(span: Span, message: &str, other: Span, hint: &str) -> Diagnostic {
+    Diagnostic::error(POLICY_CONFLICT, span, format!("conflicting policies: {message}"))
+        .with_label("conflicts")
+        .with_secondary(other, "with this")
+        .with_hint(hint)
+}
+
+pub fn policy_conflict_default(span: Span, message: &str, hint: &str) -> Diagnostic {
+    Diagnostic::error(POLICY_CONFLICT, span, format!("conflicting policies: {message}"))
+        .with_label("conflicts")
+        .with_hint(hint)
+}
+
+pub fn policy_duplicate(span: Span, class: &str, first: Span) -> Diagnostic {
+    Diagnostic::error(POLICY_DUPLICATE, span, format!("two {class} policies on one stream"))
+        .with_label("second one")
+        .with_secondary(first, "first one")
+        .with_hint(format!("a stream has at most one {class} policy; keep one"))
+}
+
+pub fn policy_value(span: Span, message: &str, hint: &str) -> Diagnostic {
+    Diagnostic::error(POLICY_VALUE, span, message.to_string()).with_label("here").with_hint(hint)
+}
+
+pub fn cycle(span: Span, names: &[String]) -> Diagnostic {
+    let mut path = names.to_vec();
+    if let Some(first) = names.first() {
+        path.push(first.clone());
+    }
+    Diagnostic::error(CYCLE, span, format!("the processes {} form a cycle", path.join(" -> ")))
+        .with_label("part of the cycle")
+        .with_hint(
+            "a cycle is allowed only through a delayed edge: declare one stream of the cycle `with feedback`",
+        )
+}
+
+pub fn not_placed(span: Span, name: &str, kind: &str) -> Diagnostic {
+    Diagnostic::error(NOT_PLACED, span, format!("{kind} `{name}` is not placed on any host"))
+        .with_label("not in the deploy section")
+        .with_hint("with a deploy section, every process must be listed under exactly one host")
+}
+
+pub fn placed_twice(span: Span, name: &str, host: &str, first: Span, first_host: &str) -> Diagnostic {
+    Diagnostic::error(PLACED_TWICE, span, format!("`{name}` is placed on both `{first_host}` and `{host}`"))
+        .with_label(format!("on `{host}`"))
+        .with_secondary(first, format!("on `{first_host}`"))
+        .with_hint("a process runs on exactly one host; a stream reaches other hosts by itself")
+}
+
+pub fn unknown_placed(span: Span, name: &str, candidates: &[&str]) -> Diagnostic {
+    Diagnostic::error(UNKNOWN_PLACED, span, format!("no process named `{name}` to place"))
+        .with_label("unknown process")
+        .with_hint_opt(did_you_mean(name, candidates))
+}
+
+pub fn stream_placed(span: Span, name: &str) -> Diagnostic {
+    Diagnostic::error(STREAM_PLACED, span, format!("`{name}` is a stream; only processes are placed"))
+        .with_label("a stream")
+        .with_hint("a stream's policy runs where each consumer runs; remove it from the host")
+}
+
+pub fn duplicate_host(span: Span, name: &str, first: Span) -> Diagnostic {
+    Diagnostic::error(DUPLICATE_HOST, span, format!("host `{name}` is declared twice"))
+        .with_label("again")
+        .with_secondary(first, "first here")
+        .with_hint("list all of a host's processes in one `host` block")
+}
+
+pub fn deploy_twice(span: Span, first: Span) -> Diagnostic {
+    Diagnostic::error(DEPLOY_TWICE, span, "a spec has at most one deploy section")
+        .with_label("second deploy section")
+        .with_secondary(first, "first one")
+        .with_hint("merge the hosts into one `deploy { ... }`")
+}
+
+pub fn bad_endpoint(span: Span, endpoint: &str) -> Diagnostic {
+    Diagnostic::error(BAD_ENDPOINT, span, format!("`{endpoint}` is not a zenoh endpoint"))
+        .with_label("expected PROTOCOL/ADDRESS")
+        .with_hint("endpoints look like \"tcp/127.0.0.1:7447\", \"udp/192.168.1.2:7447\", \"quic/host:7447\" or \"tls/host:7447\"")
+}
+
+pub fn condition_missing(span: Span, link: &str, kind: &str) -> Diagnostic {
+    Diagnostic::error(CONDITION_MISSING, span, format!("link `{link}` has no {kind} condition"))
+        .with_label("incomplete link specification")
+        .with_hint(format!("add `{kind} <formula>` (use `{kind} false` to never {kind}, `true` to always)"))
+}
+
+pub fn condition_twice(span: Span, kind: &str, first: Span) -> Diagnostic {
+    Diagnostic::error(CONDITION_TWICE, span, format!("the {kind} condition is given twice"))
+        .with_label("second one")
+        .with_secondary(first, "first one")
+        .with_hint("combine them with `and` or `or`")
+}
+
+pub fn no_producer(span: Span, ty: &str, user: &str) -> Diagnostic {
+    Diagnostic::error(NO_PRODUCER, span, format!("no process produces objects of type `{ty}` for {user}"))
+        .with_label(format!("nothing produces `{ty}`"))
+        .with_hint(format!(
+            "declare a source of `{ty}`, or a link `... -> {ty}`, or name the stream with `input`"
+        ))
+}
+
+pub fn to_in_establish(span: Span) -> Diagnostic {
+    Diagnostic::error(TO_IN_ESTABLISH, span, "`to` is not bound in an establish condition")
+        .with_label("no `to` object yet")
+        .with_hint("establish decides whether to create a new object, so only `from` exists; compare with existing objects in `reestablish`")
+}
+
+pub fn link_input_type(span: Span, stream: &str, found: &str, expected: &str) -> Diagnostic {
+    Diagnostic::error(
+        LINK_INPUT_TYPE,
+        span,
+        format!("stream `{stream}` carries {found}, but the link is from `{expected}`"),
+    )
+    .with_label(format!("not `{expected}` objects"))
+    .with_hint(format!("give the link a stream of `{expected}` (or of a subtype)"))
+}
+
+pub fn bad_interval(span: Span, lo: &str, hi: &str) -> Diagnostic {
+    Diagnostic::error(
+        BAD_INTERVAL,
+        span,
+        format!("interval [{lo}, {hi}] is empty: its lower bound is above its upper bound"),
+    )
+    .with_label("empty interval")
+    .with_hint("write the bounds in increasing order")
+}
+
+pub fn bad_bound(span: Span, message: &str) -> Diagnostic {
+    Diagnostic::error(BAD_BOUND, span, message.to_string()).with_label("this bound").with_hint(
+        "in a spec a bare integer bound counts milliseconds; durations take a unit (`500ms`, `2s`)",
+    )
+}
+
+pub fn unused_stream(span: Span, name: &str) -> Diagnostic {
+    Diagnostic::warning(UNUSED_STREAM, span, format!("stream `{name}` is never used"))
+        .with_label("declared here")
+        .with_hint("use it as an input, or remove it")
+}
+
+pub fn unused_output(span: Span, name: &str, kind: &str) -> Diagnostic {
+    Diagnostic::warning(UNUSED_OUTPUT, span, format!("the output of {kind} `{name}` is never used"))
+        .with_label("nothing consumes this")
+        .with_hint("connect it to a sink or another process, or remove it")
+}

@@ -1,0 +1,372 @@
+//! Types of expressions and formulas: names, attribute access, operators, function calls,
+//! quantifiers and interval bounds. A formula must be of type `bool`.
+//!
+//! `ValueType::Any` stands for "unknown": it is the type of a name that failed to resolve, so one
+//! mistake is reported once and does not cascade.
+
+use kpl_core::ValueType;
+use kpl_syntax::Diagnostic;
+use kpl_syntax::ast::{self, BinaryOp, ExprKind, UnaryOp};
+
+use crate::diagnostics as diag;
+use crate::hir::{SPEC_TICK, TypeTable};
+use crate::registry::{Function, Registry};
+
+/// Where a formula appears, which decides the names it may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Context {
+    /// A link condition: `from` (and `to`, unless establish) are objects.
+    Link { to_bound: bool },
+    /// A monitor: names are streams; quantifiers range over objects of a type.
+    Monitor,
+}
+
+/// Resolves a stream or process name to the type of its samples (monitors only). A monitor names
+/// a stream by its first path segment; the rest are attributes (`car_states.speed`). To use a
+/// named output (`link.changes`) declare a stream for it.
+pub(crate) trait StreamScope {
+    fn stream_type(&mut self, name: &ast::Ident) -> Option<Result<ValueType, Diagnostic>>;
+    fn stream_names(&self) -> Vec<String>;
+}
+
+pub(crate) struct FormulaChecker<'a> {
+    pub registry: &'a Registry,
+    /// Functions available here besides the registry's (those a link's unit provides).
+    pub local_functions: &'a [Function],
+    pub types: &'a TypeTable,
+    pub context: Context,
+    pub vars: Vec<(String, ValueType)>,
+    pub streams: Option<&'a mut dyn StreamScope>,
+    pub diagnostics: &'a mut Vec<Diagnostic>,
+    /// Stream names the formula reads (monitors).
+    pub used_streams: Vec<String>,
+    /// Object types the formula quantifies over.
+    pub quantified_types: Vec<String>,
+}
+
+fn is_numeric(t: &ValueType) -> bool {
+    matches!(t, ValueType::Int | ValueType::Float | ValueType::Any)
+}
+
+fn describe(t: &ValueType) -> String {
+    match t {
+        ValueType::Record(r) => format!("an object of type `{}`", r.name),
+        ValueType::Any => "an unknown type".to_string(),
+        other => format!("`{other}`"),
+    }
+}
+
+/// Whether a value of type `found` can be used where `expected` is needed (ints widen to floats).
+pub(crate) fn assignable(found: &ValueType, expected: &ValueType, types: &TypeTable) -> bool {
+    match (found, expected) {
+        (ValueType::Any, _) | (_, ValueType::Any) => true,
+        (ValueType::Int, ValueType::Float) => true,
+        (ValueType::Record(a), ValueType::Record(b)) => types.is_subtype(&a.name, &b.name),
+        (ValueType::List(a), ValueType::List(b)) => assignable(a, b, types),
+        (a, b) => a == b,
+    }
+}
+
+impl FormulaChecker<'_> {
+    /// Checks a formula (must be boolean).
+    pub fn check_formula(&mut self, expr: &ast::Expr) {
+        let ty = self.expr(expr);
+        self.expect_bool(expr, &ty);
+    }
+
+    fn expect_bool(&mut self, expr: &ast::Expr, ty: &ValueType) {
+        if !matches!(ty, ValueType::Bool | ValueType::Any) {
+            let hint = match ty {
+                ValueType::Int | ValueType::Float => "compare it, as in `x > 0.0`",
+                _ => "a formula must be true or false: compare values or call a predicate",
+            };
+            self.diagnostics.push(diag::type_mismatch_hint(expr.span, "a boolean", &describe(ty), hint));
+        }
+    }
+
+    fn expr(&mut self, expr: &ast::Expr) -> ValueType {
+        match &expr.kind {
+            ExprKind::Bool(_) => ValueType::Bool,
+            ExprKind::Number(ast::Number::Int(_)) => ValueType::Int,
+            ExprKind::Number(ast::Number::Float(_)) => ValueType::Float,
+            ExprKind::Str(_) => ValueType::Str,
+            ExprKind::Duration(_) => ValueType::Duration,
+            ExprKind::Path(path) => self.path(path),
+            ExprKind::Call { func, args } => self.call(func, args),
+            ExprKind::Unary { op: UnaryOp::Not, expr: operand } => {
+                let t = self.expr(operand);
+                self.expect_bool(operand, &t);
+                ValueType::Bool
+            }
+            ExprKind::Unary { op: UnaryOp::Neg, expr: operand } => {
+                let t = self.expr(operand);
+                match t {
+                    ValueType::Int | ValueType::Float | ValueType::Vec2 | ValueType::Any => t,
+                    other => {
+                        self.diagnostics.push(diag::type_mismatch(
+                            operand.span,
+                            "a number or a vector",
+                            &describe(&other),
+                        ));
+                        ValueType::Any
+                    }
+                }
+            }
+            ExprKind::And(items) | ExprKind::Or(items) => {
+                for item in items {
+                    let t = self.expr(item);
+                    self.expect_bool(item, &t);
+                }
+                ValueType::Bool
+            }
+            ExprKind::Temporal { interval, body, .. } => {
+                self.interval(interval.as_ref());
+                let t = self.expr(body);
+                self.expect_bool(body, &t);
+                ValueType::Bool
+            }
+            ExprKind::Until { interval, lhs, rhs } => {
+                self.interval(interval.as_ref());
+                for side in [lhs, rhs] {
+                    let t = self.expr(side);
+                    self.expect_bool(side, &t);
+                }
+                ValueType::Bool
+            }
+            ExprKind::Quantified { var, ty, body, .. } => {
+                let record = match self.types.get(&ty.name) {
+                    Some(record) => ValueType::Record(record.clone()),
+                    None => {
+                        let names: Vec<&str> = self.types.names().collect();
+                        self.diagnostics.push(diag::unknown_type(ty.span, &ty.name, &names));
+                        ValueType::Any
+                    }
+                };
+                if matches!(record, ValueType::Record(_)) && !self.quantified_types.contains(&ty.name) {
+                    self.quantified_types.push(ty.name.clone());
+                }
+                self.vars.push((var.name.clone(), record));
+                let t = self.expr(body);
+                self.vars.pop();
+                self.expect_bool(body, &t);
+                ValueType::Bool
+            }
+            ExprKind::Binary { op, lhs, rhs } => self.binary(expr, *op, lhs, rhs),
+        }
+    }
+
+    fn binary(&mut self, expr: &ast::Expr, op: BinaryOp, lhs: &ast::Expr, rhs: &ast::Expr) -> ValueType {
+        let l = self.expr(lhs);
+        let r = self.expr(rhs);
+        use ValueType as T;
+        match op {
+            BinaryOp::Implies => {
+                self.expect_bool(lhs, &l);
+                self.expect_bool(rhs, &r);
+                T::Bool
+            }
+            BinaryOp::Add | BinaryOp::Sub | BinaryOp::Mul | BinaryOp::Div | BinaryOp::Rem => {
+                let additive = matches!(op, BinaryOp::Add | BinaryOp::Sub);
+                match (&l, &r) {
+                    (T::Any, _) | (_, T::Any) => T::Any,
+                    (T::Int, T::Int) => T::Int,
+                    (a, b) if is_numeric(a) && is_numeric(b) => T::Float,
+                    (T::Vec2, T::Vec2) if additive => T::Vec2,
+                    (T::Vec2, b) if is_numeric(b) && matches!(op, BinaryOp::Mul | BinaryOp::Div) => T::Vec2,
+                    (a, T::Vec2) if is_numeric(a) && op == BinaryOp::Mul => T::Vec2,
+                    (T::Duration, T::Duration) if additive => T::Duration,
+                    _ => {
+                        self.diagnostics.push(
+                            diag::type_mismatch(expr.span, &format!("operands that `{}` applies to", op.symbol()), &format!("{} and {}", describe(&l), describe(&r)))
+                                .with_hint("arithmetic works on numbers, on vectors (+, -, and scaling) and on durations (+, -)"),
+                        );
+                        T::Any
+                    }
+                }
+            }
+            BinaryOp::Lt | BinaryOp::Le | BinaryOp::Gt | BinaryOp::Ge => {
+                let ok = matches!(
+                    (&l, &r),
+                    (T::Any, _) | (_, T::Any) | (T::Duration, T::Duration) | (T::Str, T::Str)
+                ) || (is_numeric(&l) && is_numeric(&r));
+                if !ok {
+                    self.diagnostics.push(
+                        diag::type_mismatch(
+                            expr.span,
+                            "two numbers, two durations or two strings to order",
+                            &format!("{} and {}", describe(&l), describe(&r)),
+                        )
+                        .with_hint(
+                            "to compare positions use a distance, as in `xydist(a.pos, b.pos) < 10.0`",
+                        ),
+                    );
+                }
+                T::Bool
+            }
+            BinaryOp::Eq | BinaryOp::Ne => {
+                let ok = matches!((&l, &r), (T::Any, _) | (_, T::Any))
+                    || (is_numeric(&l) && is_numeric(&r))
+                    || assignable(&l, &r, self.types)
+                    || assignable(&r, &l, self.types);
+                if !ok {
+                    self.diagnostics.push(diag::type_mismatch(
+                        expr.span,
+                        "two values of the same type",
+                        &format!("{} and {}", describe(&l), describe(&r)),
+                    ));
+                }
+                T::Bool
+            }
+        }
+    }
+
+    fn path(&mut self, path: &ast::Path) -> ValueType {
+        let Some(first) = path.segments.first() else { return ValueType::Any };
+        let mut ty = if let Some((_, t)) = self.vars.iter().rev().find(|(n, _)| *n == first.name) {
+            t.clone()
+        } else if first.name == "to" && self.context == (Context::Link { to_bound: false }) {
+            self.diagnostics.push(diag::to_in_establish(first.span));
+            return ValueType::Any;
+        } else if let Some(scope) = self.streams.as_deref_mut() {
+            match scope.stream_type(first) {
+                Some(Ok(t)) => {
+                    if !self.used_streams.contains(&first.name) {
+                        self.used_streams.push(first.name.clone());
+                    }
+                    t
+                }
+                Some(Err(diagnostic)) => {
+                    self.diagnostics.push(diagnostic);
+                    return ValueType::Any;
+                }
+                None => {
+                    let mut names = scope.stream_names();
+                    names.extend(self.vars.iter().map(|(n, _)| n.clone()));
+                    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                    self.diagnostics.push(diag::unknown_name(first.span, "stream", &first.name, &names));
+                    return ValueType::Any;
+                }
+            }
+        } else {
+            let mut names: Vec<&str> = self.vars.iter().map(|(n, _)| n.as_str()).collect();
+            if matches!(self.context, Context::Link { .. }) {
+                names.extend(["from", "to"]);
+            }
+            self.diagnostics.push(diag::unknown_name(first.span, "name", &first.name, &names).with_hint_opt(
+                Some(match self.context {
+                    Context::Link { to_bound: true } => {
+                        "link conditions talk about `from` and `to` (e.g. `from.pos`)".to_string()
+                    }
+                    Context::Link { to_bound: false } => {
+                        "an establish condition talks about `from` (e.g. `from.pos`)".to_string()
+                    }
+                    Context::Monitor => "monitors name streams and quantified variables".to_string(),
+                }),
+            ));
+            return ValueType::Any;
+        };
+        for segment in &path.segments[1..] {
+            ty = self.attribute(ty, segment);
+        }
+        ty
+    }
+
+    fn attribute(&mut self, ty: ValueType, field: &ast::Ident) -> ValueType {
+        let fields: &[(&str, ValueType)] = match &ty {
+            ValueType::Any => return ValueType::Any,
+            ValueType::Record(record) => {
+                if field.name == "id" {
+                    return ValueType::Str;
+                }
+                if let Some(f) = record.field(&field.name) {
+                    return f.ty.clone();
+                }
+                let names: Vec<&str> = record.fields.iter().map(|f| &*f.name).collect();
+                self.diagnostics.push(diag::unknown_attribute(field.span, &record.name, &field.name, &names));
+                return ValueType::Any;
+            }
+            ValueType::Vec2 => &[("x", ValueType::Float), ("y", ValueType::Float)],
+            ValueType::BBox => &[
+                ("x1", ValueType::Float),
+                ("y1", ValueType::Float),
+                ("x2", ValueType::Float),
+                ("y2", ValueType::Float),
+                ("width", ValueType::Float),
+                ("height", ValueType::Float),
+                ("center", ValueType::Vec2),
+            ],
+            _ => &[],
+        };
+        if let Some((_, t)) = fields.iter().find(|(n, _)| *n == field.name) {
+            return t.clone();
+        }
+        let names: Vec<&str> = fields.iter().map(|(n, _)| *n).collect();
+        self.diagnostics.push(diag::unknown_attribute(field.span, &ty.to_string(), &field.name, &names));
+        ValueType::Any
+    }
+
+    fn call(&mut self, func: &ast::Ident, args: &[ast::Expr]) -> ValueType {
+        let arg_types: Vec<ValueType> = args.iter().map(|a| self.expr(a)).collect();
+        let local = self.local_functions.iter().find(|f| f.name == func.name);
+        let Some(function) = local.or_else(|| self.registry.function(&func.name)) else {
+            let mut names: Vec<&str> = self.registry.functions().map(|f| f.name.as_str()).collect();
+            names.extend(self.local_functions.iter().map(|f| f.name.as_str()));
+            self.diagnostics.push(diag::unknown_function(func.span, &func.name, &names));
+            return ValueType::Any;
+        };
+        if !function.accepts(args.len()) {
+            let span = args.first().map_or(func.span, |a| func.span.to(a.span));
+            self.diagnostics.push(diag::arity(span, &function.signature(), args.len()));
+            return function.returns.clone();
+        }
+        for (i, (arg, found)) in args.iter().zip(&arg_types).enumerate() {
+            let expected = function.param(i);
+            if !assignable(found, expected, self.types) {
+                self.diagnostics.push(
+                    diag::type_mismatch(arg.span, &describe(expected), &describe(found))
+                        .with_hint(format!("the signature is `{}`", function.signature())),
+                );
+            }
+        }
+        function.returns.clone()
+    }
+
+    fn interval(&mut self, interval: Option<&ast::Interval>) {
+        let Some(interval) = interval else { return };
+        let lo = bound_micros(&interval.lo);
+        let hi = bound_micros(&interval.hi);
+        match (lo, hi) {
+            (Err(message), _) | (_, Err(message)) => {
+                self.diagnostics.push(diag::bad_bound(interval.span, &message));
+            }
+            (Ok(Some(lo)), Ok(Some(hi))) if lo > hi => {
+                self.diagnostics.push(diag::bad_interval(
+                    interval.span,
+                    &kpl_core::format_micros(lo),
+                    &kpl_core::format_micros(hi),
+                ));
+            }
+            (Ok(None), _) => {
+                self.diagnostics
+                    .push(diag::bad_bound(interval.span, "`inf` can only be the upper bound of an interval"));
+            }
+            _ => {}
+        }
+    }
+}
+
+/// A bound in microseconds (`None` for `inf`). Bare integers count milliseconds in a spec.
+pub fn bound_micros(bound: &ast::Bound) -> Result<Option<kpl_core::Time>, String> {
+    match bound {
+        ast::Bound::Inf => Ok(None),
+        ast::Bound::Ticks(n) => i64::try_from(*n)
+            .ok()
+            .and_then(|n| SPEC_TICK.to_micros(n))
+            .filter(|us| *us < (1 << 62))
+            .map(Some)
+            .ok_or_else(|| format!("bound {n} is too large")),
+        ast::Bound::Duration(d) => {
+            d.micros().map(Some).ok_or_else(|| "duration bound is out of range".to_string())
+        }
+    }
+}

@@ -1,0 +1,341 @@
+//! The checked spec: every name resolved, every type known, every duration in microseconds, and
+//! the process graph built. The runtime builds its processes from this, never from the syntax tree.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use kpl_core::{RecordType, Time, Value, ValueType};
+use kpl_syntax::ast::{self, Span};
+use petgraph::graph::{DiGraph, NodeIndex};
+use serde::Serialize;
+
+/// Index of a process in [`Spec::processes`].
+pub type ProcessId = usize;
+
+/// The time unit of a bare integer bound in a spec's formulas (the DyKnow paper's unit).
+pub const SPEC_TICK: kpl_core::TimeUnit = kpl_core::TimeUnit::Ms;
+
+#[derive(Debug, Clone)]
+pub struct Spec {
+    pub types: TypeTable,
+    pub processes: Vec<Process>,
+    /// The `stream` declarations, by name.
+    pub streams: BTreeMap<String, StreamRef>,
+    pub predictions: Vec<Prediction>,
+    pub forget: Forget,
+    pub deploy: Option<Deploy>,
+    pub graph: ProcessGraph,
+}
+
+impl Spec {
+    pub fn process(&self, name: &str) -> Option<&Process> {
+        self.processes.iter().find(|p| p.name == name)
+    }
+
+    /// The host a process runs on (`None` when the spec has no deploy section).
+    pub fn host_of(&self, id: ProcessId) -> Option<&str> {
+        let deploy = self.deploy.as_ref()?;
+        deploy.hosts.iter().find(|h| h.processes.contains(&id)).map(|h| h.name.as_str())
+    }
+}
+
+/// Declared object types, with inherited fields flattened in.
+#[derive(Debug, Clone, Default)]
+pub struct TypeTable {
+    types: BTreeMap<String, Arc<RecordType>>,
+    /// Declaration order.
+    order: Vec<String>,
+}
+
+impl TypeTable {
+    pub(crate) fn insert(&mut self, ty: Arc<RecordType>) {
+        self.order.push(ty.name.to_string());
+        self.types.insert(ty.name.to_string(), ty);
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Arc<RecordType>> {
+        self.types.get(name)
+    }
+
+    /// Types in declaration order.
+    pub fn iter(&self) -> impl Iterator<Item = &Arc<RecordType>> {
+        self.order.iter().filter_map(|n| self.types.get(n))
+    }
+
+    /// `sub` is `sup` or inherits from it.
+    pub fn is_subtype(&self, sub: &str, sup: &str) -> bool {
+        let mut current = Some(sub.to_string());
+        let mut steps = 0;
+        while let Some(name) = current {
+            if name == sup {
+                return true;
+            }
+            steps += 1;
+            if steps > self.types.len() {
+                return false; // a cycle (already reported)
+            }
+            current = self.types.get(&name).and_then(|t| t.parent.as_deref().map(str::to_string));
+        }
+        false
+    }
+
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.order.iter().map(String::as_str)
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct Process {
+    pub id: ProcessId,
+    pub name: String,
+    pub span: Span,
+    pub kind: ProcessKind,
+    /// The type of the default output stream (`None` for sinks).
+    pub output: Option<ValueType>,
+    /// Named extra outputs (`link.changes`).
+    pub ports: Vec<(String, ValueType)>,
+    pub inputs: Vec<Input>,
+}
+
+impl Process {
+    pub fn kind_name(&self) -> &'static str {
+        match self.kind {
+            ProcessKind::Source(_) => "source",
+            ProcessKind::Compute(_) => "compute",
+            ProcessKind::Sink(_) => "sink",
+            ProcessKind::Link(_) => "link",
+            ProcessKind::Monitor(_) => "monitor",
+        }
+    }
+
+    /// The type of an output: the default one for `None`, else a named port.
+    pub fn output_type(&self, port: Option<&str>) -> Option<&ValueType> {
+        match port {
+            None => self.output.as_ref(),
+            Some(port) => self.ports.iter().find(|(n, _)| n == port).map(|(_, t)| t),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub enum ProcessKind {
+    Source(Call),
+    Compute(Call),
+    Sink(Call),
+    Link(Box<Link>),
+    Monitor(Monitor),
+}
+
+/// A registry entry with its parameters resolved (defaults filled in; durations in microseconds).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Call {
+    pub entry: String,
+    pub params: BTreeMap<String, Value>,
+}
+
+/// One input of a process: which registry port it feeds, and the stream that feeds it.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// The port's name in the registry (`from` for a link's objects, `state` for a monitor).
+    pub port: String,
+    pub stream: StreamRef,
+}
+
+/// A stream as a consumer sees it: its producer, the policy applied for this consumer and the
+/// type of its samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StreamRef {
+    /// The name the spec uses: a declared stream, or the producer (`tracker`, `link.changes`).
+    pub name: String,
+    pub producer: ProcessId,
+    /// A named output of the producer, or `None` for its default output.
+    pub port: Option<String>,
+    pub policy: Policy,
+    pub ty: ValueType,
+}
+
+/// A link process: `<from type, to type, unit, establish, reestablish, maintain>`.
+#[derive(Debug, Clone)]
+pub struct Link {
+    pub from_type: String,
+    pub to_type: String,
+    pub via: Call,
+    pub establish: ast::Expr,
+    pub reestablish: ast::Expr,
+    pub maintain: ast::Expr,
+}
+
+/// A monitor: a formula over the named streams it mentions and the objects of the types it
+/// quantifies over. Its verdicts form its output stream.
+#[derive(Debug, Clone)]
+pub struct Monitor {
+    pub formula: ast::Expr,
+    /// Stream names used in the formula, each the name of one of the process's inputs.
+    pub streams: Vec<String>,
+    /// Object types the formula quantifies over.
+    pub object_types: Vec<String>,
+}
+
+/// The policy of a stream for one consumer, with every default made explicit.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Policy {
+    pub approximation: Approximation,
+    pub change: Change,
+    /// `max delay`: samples later than this after their valid time are late.
+    pub max_delay: Option<Time>,
+    /// `from T to T`: only samples with valid times in this window (`None` = unbounded end).
+    pub window: Option<(Time, Option<Time>)>,
+    pub order: Order,
+    pub queue: Queue,
+    /// The edge may close a cycle: the consumer reads the producer's previous sample.
+    pub feedback: bool,
+}
+
+impl Default for Policy {
+    fn default() -> Policy {
+        Policy {
+            approximation: Approximation::None,
+            change: Change::AnyUpdate,
+            max_delay: None,
+            window: None,
+            order: Order::Any,
+            queue: Queue::default(),
+            feedback: false,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Approximation {
+    None,
+    UseMostRecent,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Change {
+    AnyUpdate,
+    AnyChange,
+    SampleEvery(Time),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Order {
+    Any,
+    Monotone,
+    Strict,
+}
+
+/// The bound of the queue in front of a consumer and what happens when it is full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Queue {
+    pub capacity: u64,
+    pub overflow: ast::Overflow,
+}
+
+impl Queue {
+    /// Default bound of a stream's queue.
+    pub const DEFAULT_CAPACITY: u64 = 1024;
+}
+
+impl Default for Queue {
+    fn default() -> Queue {
+        Queue { capacity: Queue::DEFAULT_CAPACITY, overflow: ast::Overflow::Block }
+    }
+}
+
+impl Policy {
+    /// The policy as KPL text, defaults included (`no approximation, any update, any order, queue 1024 block`).
+    pub fn describe(&self) -> String {
+        use kpl_core::format_micros as d;
+        let mut parts = vec![
+            match self.approximation {
+                Approximation::None => "no approximation".to_string(),
+                Approximation::UseMostRecent => "use most recent".to_string(),
+            },
+            match self.change {
+                Change::AnyUpdate => "any update".to_string(),
+                Change::AnyChange => "any change".to_string(),
+                Change::SampleEvery(t) => format!("sample every {}", d(t)),
+            },
+        ];
+        if let Some(t) = self.max_delay {
+            parts.push(format!("max delay {}", d(t)));
+        }
+        if let Some((from, to)) = self.window {
+            parts.push(format!("from {} to {}", d(from), to.map_or("inf".to_string(), d)));
+        }
+        parts.push(
+            match self.order {
+                Order::Any => "any order",
+                Order::Monotone => "monotone order",
+                Order::Strict => "strict order",
+            }
+            .to_string(),
+        );
+        parts.push(format!(
+            "queue {} {}",
+            self.queue.capacity,
+            match self.queue.overflow {
+                ast::Overflow::Block => "block",
+                ast::Overflow::DropOldest => "drop oldest",
+            }
+        ));
+        if self.feedback {
+            parts.push("feedback".to_string());
+        }
+        parts.join(", ")
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    pub ty: String,
+    pub model: Call,
+}
+
+/// When objects that are not anchored are removed.
+#[derive(Debug, Clone, Default)]
+pub struct Forget {
+    pub default: Option<Time>,
+    pub per_type: BTreeMap<String, Time>,
+}
+
+impl Forget {
+    /// The forget time of a type: its own, else the default.
+    pub fn after(&self, ty: &str) -> Option<Time> {
+        self.per_type.get(ty).copied().or(self.default)
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct Deploy {
+    pub hosts: Vec<Host>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Host {
+    pub name: String,
+    pub listen: Vec<String>,
+    pub connect: Vec<String>,
+    pub processes: Vec<ProcessId>,
+}
+
+/// The process graph: a node per process, an edge per input stream (producer to consumer).
+#[derive(Debug, Clone, Default)]
+pub struct ProcessGraph {
+    pub graph: DiGraph<ProcessId, Edge>,
+    /// The node of each process, indexed by [`ProcessId`].
+    pub nodes: Vec<NodeIndex>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Edge {
+    pub stream: String,
+    pub port: Option<String>,
+    /// The consumer's input port.
+    pub input: String,
+    pub policy: Policy,
+}

@@ -1,0 +1,69 @@
+//! `kpl check`: parse and check spec files against the runtime's registry.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args as ClapArgs;
+
+use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
+
+#[derive(Debug, ClapArgs)]
+#[command(
+    after_help = "Examples:\n  kpl check specs/traffic/bridge.kpl\n  kpl check specs/ok specs/traffic\n  kpl check --format json spec.kpl | jq '.[].message'\n\nExit status: 0 when every spec is valid (warnings allowed), 1 when a spec has errors, 2 for usage or I/O errors."
+)]
+pub struct Args {
+    /// Spec files, or directories to search for `.kpl` files (`-` reads standard input).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// How to print diagnostics.
+    #[arg(long, value_enum, default_value = "text")]
+    pub format: DiagnosticFormat,
+}
+
+/// Parses and checks one file, returning its diagnostics and, when it is valid, the checked spec.
+pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl_semantic::hir::Spec>) {
+    if let Some(d) = &file.decode_error {
+        return (vec![d.clone()], None);
+    }
+    let parse = kpl_syntax::parse(&file.text);
+    if parse.has_errors() {
+        return (parse.diagnostics, None);
+    }
+    let checked = kpl_semantic::check(&parse.spec, &crate::registry::registry());
+    let mut diagnostics = parse.diagnostics;
+    diagnostics.extend(checked.diagnostics);
+    (diagnostics, checked.spec)
+}
+
+pub fn run(args: Args) -> ExitCode {
+    let files = match report::expand(&args.files) {
+        Ok(files) => files,
+        Err(err) => {
+            report::io_error(&args.files[0], &err);
+            return ExitCode::from(2);
+        }
+    };
+    let mut reporter = Reporter::new(args.format);
+    let mut io_failed = false;
+    for path in &files {
+        let file = match SourceFile::read(path) {
+            Ok(file) => file,
+            Err(err) => {
+                report::io_error(path, &err);
+                io_failed = true;
+                continue;
+            }
+        };
+        let (diagnostics, _) = check_file(&file);
+        reporter.report(&file, &diagnostics);
+    }
+    let errors = reporter.errors;
+    reporter.finish();
+    if io_failed {
+        ExitCode::from(2)
+    } else if errors > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    }
+}

@@ -1,0 +1,141 @@
+//! Loading spec files and reporting their diagnostics, as text on stderr or as one JSON array
+//! on stdout (`--format json`).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use kpl_syntax::{Diagnostic, JsonDiagnostic, LineIndex};
+
+/// A spec file read from disk. Bytes that are not UTF-8 become a diagnostic, and the text is
+/// kept (lossily) so it can still be shown.
+pub struct SourceFile {
+    pub path: PathBuf,
+    pub text: String,
+    /// Set when the file is not UTF-8.
+    pub decode_error: Option<Diagnostic>,
+}
+
+impl SourceFile {
+    pub fn read(path: &Path) -> std::io::Result<SourceFile> {
+        let bytes = if path.as_os_str() == "-" {
+            let mut buf = Vec::new();
+            std::io::Read::read_to_end(&mut std::io::stdin(), &mut buf)?;
+            buf
+        } else {
+            std::fs::read(path)?
+        };
+        Ok(match kpl_syntax::decode_source(&bytes) {
+            Ok(text) => SourceFile { path: path.to_path_buf(), text: text.to_string(), decode_error: None },
+            Err(diagnostic) => SourceFile {
+                path: path.to_path_buf(),
+                text: String::from_utf8_lossy(&bytes).into_owned(),
+                decode_error: Some(diagnostic),
+            },
+        })
+    }
+
+    pub fn display_name(&self) -> String {
+        if self.path.as_os_str() == "-" { "<stdin>".to_string() } else { self.path.display().to_string() }
+    }
+}
+
+/// Expands directories into the `.kpl` files below them (sorted), keeps files as given.
+pub fn expand(paths: &[PathBuf]) -> std::io::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let mut found = Vec::new();
+            collect_kpl(path, &mut found)?;
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(path.clone());
+        }
+    }
+    Ok(out)
+}
+
+fn collect_kpl(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.is_dir() {
+            collect_kpl(&path, out)?;
+        } else if path.extension().is_some_and(|e| e == "kpl") {
+            out.push(path);
+        }
+    }
+    Ok(())
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DiagnosticFormat {
+    /// Human-readable, with the source line and the span marked.
+    Text,
+    /// A JSON array of {file, line, column, end_line, end_column, severity, code, message}.
+    Json,
+}
+
+/// Collects diagnostics across files and prints them in the chosen format.
+pub struct Reporter {
+    format: DiagnosticFormat,
+    json: Vec<JsonDiagnostic>,
+    pub errors: usize,
+    pub warnings: usize,
+}
+
+impl Reporter {
+    pub fn new(format: DiagnosticFormat) -> Reporter {
+        Reporter { format, json: Vec::new(), errors: 0, warnings: 0 }
+    }
+
+    pub fn report(&mut self, file: &SourceFile, diagnostics: &[Diagnostic]) {
+        let index = LineIndex::new(&file.text);
+        let name = file.display_name();
+        for d in diagnostics {
+            if d.is_error() {
+                self.errors += 1;
+            } else {
+                self.warnings += 1;
+            }
+            match self.format {
+                DiagnosticFormat::Text => {
+                    let mut stderr = std::io::stderr().lock();
+                    let _ = writeln!(stderr, "{}", d.render(&name, &file.text, &index));
+                }
+                DiagnosticFormat::Json => self.json.push(d.to_json(&name, &file.text, &index)),
+            }
+        }
+    }
+
+    /// Prints the JSON array (json format) or a one-line summary (text format, when anything was found).
+    pub fn finish(self) {
+        match self.format {
+            DiagnosticFormat::Json => {
+                let mut stdout = std::io::stdout().lock();
+                let _ = writeln!(
+                    stdout,
+                    "{}",
+                    serde_json::to_string_pretty(&self.json).unwrap_or_else(|_| "[]".into())
+                );
+            }
+            DiagnosticFormat::Text if self.errors + self.warnings > 0 => {
+                let plural =
+                    |n: usize, word: &str| if n == 1 { format!("1 {word}") } else { format!("{n} {word}s") };
+                let mut stderr = std::io::stderr().lock();
+                let _ = writeln!(
+                    stderr,
+                    "{}, {}",
+                    plural(self.errors, "error"),
+                    plural(self.warnings, "warning")
+                );
+            }
+            DiagnosticFormat::Text => {}
+        }
+    }
+}
+
+/// Prints an I/O or usage problem (exit code 2).
+pub fn io_error(path: &Path, err: &std::io::Error) {
+    let mut stderr = std::io::stderr().lock();
+    let _ = writeln!(stderr, "error: cannot read {}: {err}", path.display());
+}
