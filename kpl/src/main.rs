@@ -2,6 +2,9 @@
 //! diagnostics and wires the library crates together; each subcommand lives in its own module
 //! under `cmd/`.
 
+// The binary is the one crate that prints (the lints keep printing out of the libraries).
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
