@@ -171,3 +171,36 @@ pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> Stri
     svg.push_str("</svg>\n");
     svg
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, reason = "tests")]
+    use super::*;
+    use crate::scenarios;
+
+    #[test]
+    fn draws_roads_occluders_layers_and_an_escaped_legend() {
+        let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
+        let layers = [
+            Layer::line(
+                "<cars & trucks>",
+                "#1f77b4",
+                vec![vec![[-100.0, -1.75], [100.0, -1.75]], vec![[0.0, 0.0]]],
+            ),
+            Layer::dots("percepts", "red", vec![vec![[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]]),
+        ];
+        let svg = render(&net, &layers, &SvgOptions { width_px: 400.0, view: None });
+        assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+        assert!(svg.contains("&lt;cars &amp; trucks&gt;") && !svg.contains("<cars"));
+        assert!(svg.contains("<title>bridge</title>"));
+        // Two roads, each a band and a dashed centre line.
+        assert_eq!(svg.matches("stroke=\"#8a8a8a\"").count(), 2);
+        // One line track, a one-point track drawn as a dot, three dots.
+        assert_eq!(svg.matches("stroke=\"#1f77b4\"").count(), 1);
+        assert_eq!(svg.matches("<circle").count(), 4);
+        // The overpass (level 1) is drawn after the bridge, so it lies on top of it.
+        let bridge_at = svg.find("<title>bridge</title>").unwrap();
+        let last_road_at = svg.rfind("stroke=\"#8a8a8a\"").unwrap();
+        assert!(last_road_at > bridge_at);
+    }
+}
