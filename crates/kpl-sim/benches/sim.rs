@@ -13,14 +13,14 @@ use kpl_sim::{Params, RoadNetwork, UavTrackerSim};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// A grid town with about 11 cars per block, as dense as a busy town at the 15 m-per-car limit
-/// allows with room to spare.
+/// A grid town sized by `GridTownSize::for_cars` (about 11 cars per block).
 fn town_params(n_cars: u32) -> Params {
-    let blocks = ((f64::from(n_cars) / 11.0).sqrt().round() as u32).max(2);
+    let size = GridTownSize::for_cars(n_cars);
     Params {
         scenario: "grid_town".into(),
-        grid_blocks_x: blocks,
-        grid_blocks_y: blocks,
+        grid_blocks_x: size.blocks_x,
+        grid_blocks_y: size.blocks_y,
+        block_m: size.block_m,
         n_cars,
         dropout: 0.1,
         seed: 1,

@@ -21,6 +21,15 @@ pub struct GridTownSize {
     pub block_m: f64,
 }
 
+impl GridTownSize {
+    /// A square town of 100 m blocks with room for `n_cars` at about 11 cars per block (one car
+    /// per 36 m of lane, a busy town; at least 2 x 2 blocks). Used by the scale benchmarks.
+    pub fn for_cars(n_cars: u32) -> GridTownSize {
+        let blocks = ((f64::from(n_cars) / 11.0).sqrt().round() as u32).clamp(2, 200);
+        GridTownSize { blocks_x: blocks, blocks_y: blocks, block_m: 100.0 }
+    }
+}
+
 /// The built-in network called `name`; `grid` sizes `grid_town` and is ignored otherwise.
 pub fn by_name(name: &str, grid: GridTownSize) -> Option<NetworkFile> {
     match name {

@@ -400,3 +400,25 @@ fn the_parameter_table_in_the_docs_matches_the_code() {
         rows.iter().filter(|r| described.iter().any(|p| r.starts_with(&format!("| `{}` |", p.name))));
     assert_eq!(param_rows.count(), described.len());
 }
+
+#[test]
+fn a_town_sized_for_ten_thousand_cars_holds_them() {
+    let size = kpl_sim::scenarios::GridTownSize::for_cars(10_000);
+    assert_eq!((size.blocks_x, size.blocks_y), (30, 30));
+    let params = Params {
+        scenario: "grid_town".into(),
+        grid_blocks_x: size.blocks_x,
+        grid_blocks_y: size.blocks_y,
+        n_cars: 10_000,
+        dropout: 0.1,
+        ..Params::default()
+    };
+    let (_, frames) = run(&params, 1.0);
+    assert_eq!(frames.len(), 11);
+    let counts: Vec<usize> = frames.iter().map(|f| f.cars.len()).collect();
+    // Cars leaving the town are replaced as soon as an entry lane is free.
+    assert!(counts.iter().all(|&n| (9_990..=10_000).contains(&n)), "{counts:?}");
+    let detected =
+        frames.iter().map(|f| f.percepts.iter().filter(|p| p.source != PerceptSource::FalsePositive).count());
+    assert!(detected.clone().all(|n| (8_800..=9_200).contains(&n)), "{:?}", detected.collect::<Vec<_>>());
+}
