@@ -99,7 +99,12 @@ fn time_unit_sets_the_unit_of_time_stamps_and_bare_bounds() {
     // In seconds, [0, 2] reaches the state at 2 s; so does [0, 2000ms].
     for formula in ["eventually[0, 2] q", "eventually[0, 2000ms] q", "eventually[0, 2s] q"] {
         let run = eval(formula, &trace, &["--time-unit", "s"]);
-        assert_eq!(json_lines(&run.stdout)[0]["verdict"], serde_json::json!(true), "{formula}: {}", run.stderr);
+        assert_eq!(
+            json_lines(&run.stdout)[0]["verdict"],
+            serde_json::json!(true),
+            "{formula}: {}",
+            run.stderr
+        );
     }
     // 1500 ms is not a whole number of seconds.
     let run = eval("eventually[0, 1500ms] q", &trace, &["--time-unit", "s"]);
@@ -167,7 +172,10 @@ fn bad_traces_are_reported_with_their_line_number() {
 fn bad_formulas_are_reported_against_the_formula() {
     let trace = trace_file("formula_errors.jsonl", TRACE);
     assert_fails(&eval("eventually[0, 5 q", &trace, &[]), &["<formula>"]);
-    assert_fails(&eval("xydst(p, q) < 3", &trace, &[]), &["unknown function `xydst`", "did you mean `xydist`?"]);
+    assert_fails(
+        &eval("xydst(p, q) < 3", &trace, &[]),
+        &["unknown function `xydst`", "did you mean `xydist`?"],
+    );
     assert_fails(&eval("eventually[5, 2] p", &trace, &[]), &["interval is empty"]);
     assert_fails(&eval("always (x + 1)", &trace, &[]), &["expected a condition"]);
 }

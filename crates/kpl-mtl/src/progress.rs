@@ -33,7 +33,7 @@ const NONE: u32 = u32::MAX;
 /// quadratic); window merging and duplicate removal still apply.
 const IMPLICATION_CHECK_LIMIT: usize = 24;
 /// How deep the syntactic implication check looks.
-const IMPLICATION_DEPTH: u32 = 4;
+const IMPLICATION_DEPTH: u32 = 3;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 enum Kind {
@@ -138,11 +138,14 @@ impl Arena {
         self.chain.push(NONE);
         self.nodes.push(Node::constant(false));
         self.chain.push(NONE);
-        self.envs.clear();
-        self.env_table.clear();
-        let empty: Env = Arc::from(Vec::new());
-        self.envs.push(empty.clone());
-        self.env_table.insert(empty, 0);
+        // envs[0] is the empty environment; it is never in `env_table` (see `intern_env`).
+        if self.envs.is_empty() {
+            self.envs.push(Arc::from(Vec::new()));
+        }
+        self.envs.truncate(1);
+        if !self.env_table.is_empty() {
+            self.env_table.clear();
+        }
     }
 
     fn kids_of(&self, node: &Node) -> &[u32] {
@@ -179,7 +182,8 @@ impl Arena {
                 && other.hi == node.hi
                 && other.tpl == node.tpl
                 && other.env == node.env
-                && self.kids_of(other) == kids
+                && other.n_kids as usize == kids.len()
+                && self.kids_of(other).iter().zip(kids).all(|(a, b)| a == b)
             {
                 return candidate;
             }
@@ -427,6 +431,9 @@ impl<S: State + ?Sized> Stepper<'_, S> {
                     let left = self.instantiate(lhs, env)?;
                     if left == neutral {
                         neutral
+                    } else if left == absorbing {
+                        // φ holds here: the until goes on unchanged.
+                        rest
                     } else {
                         let inner = self.scratch.buf.len();
                         self.scratch.buf.push(left);
@@ -472,10 +479,9 @@ impl<S: State + ?Sized> Stepper<'_, S> {
                 }
             }
             TNode::Atom { term, negated } => {
-                let env_bindings = self.new.envs[env as usize].clone();
                 let term_env = TermEnv {
                     state: self.state,
-                    bindings: &env_bindings,
+                    bindings: &self.new.envs[env as usize],
                     functions: &formula.functions,
                     slot_names: &formula.slot_names,
                     domain_names: &formula.domain_names,
@@ -710,11 +716,23 @@ fn implies(arena: &Arena, a: u32, b: u32, depth: u32) -> bool {
     if a == b || a == FALSE || b == TRUE {
         return true;
     }
-    if depth == 0 || a == TRUE || b == FALSE {
+    if a == TRUE || b == FALSE {
         return false;
     }
     let na = &arena.nodes[a as usize];
     let nb = &arena.nodes[b as usize];
+    if let (Kind::Temporal(op_a), Kind::Temporal(op_b)) = (na.kind, nb.kind) {
+        if op_a != op_b || na.tpl != nb.tpl || na.env != nb.env {
+            return false;
+        }
+        let a_inside_b = nb.lo <= na.lo && na.hi <= nb.hi;
+        let b_inside_a = na.lo <= nb.lo && nb.hi <= na.hi;
+        // Existential: a smaller window is stronger. Universal: a larger window is stronger.
+        return if is_existential(op_a) { a_inside_b } else { b_inside_a };
+    }
+    if depth == 0 {
+        return false;
+    }
     if nb.kind == Kind::And {
         return arena.kids_of(nb).iter().all(|k| implies(arena, a, *k, depth - 1));
     }
@@ -724,20 +742,7 @@ fn implies(arena: &Arena, a: u32, b: u32, depth: u32) -> bool {
     if nb.kind == Kind::Or && arena.kids_of(nb).iter().any(|k| implies(arena, a, *k, depth - 1)) {
         return true;
     }
-    if na.kind == Kind::And && arena.kids_of(na).iter().any(|k| implies(arena, *k, b, depth - 1)) {
-        return true;
-    }
-    match (na.kind, nb.kind) {
-        (Kind::Temporal(op_a), Kind::Temporal(op_b))
-            if op_a == op_b && na.tpl == nb.tpl && na.env == nb.env =>
-        {
-            let a_inside_b = nb.lo <= na.lo && na.hi <= nb.hi;
-            let b_inside_a = na.lo <= nb.lo && nb.hi <= na.hi;
-            // Existential: a smaller window is stronger. Universal: a larger window is stronger.
-            if is_existential(op_a) { a_inside_b } else { b_inside_a }
-        }
-        _ => false,
-    }
+    na.kind == Kind::And && arena.kids_of(na).iter().any(|k| implies(arena, *k, b, depth - 1))
 }
 
 /// Progresses one formula through a stream of states, as a link process does for each object's
