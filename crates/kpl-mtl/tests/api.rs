@@ -1,0 +1,156 @@
+//! The progressor's contract with its callers: errors leave it unchanged, time must increase,
+//! decided formulas stay decided, host functions and bound variables work, and the types can be
+//! shared across threads.
+
+#![allow(clippy::unwrap_used)] // a test fails loudly
+
+use std::sync::Arc;
+
+use kpl_core::{Record, TimeUnit, Value};
+use kpl_mtl::{
+    BinOp, Context, EvalError, EveryMonitor, Formula, Function, Mtl, Progressor, SlotState, StartVerdict,
+    State, Term, Window,
+};
+
+fn bools(p: bool) -> SlotState {
+    SlotState::bools(&[p])
+}
+
+#[test]
+fn shared_types_can_cross_threads() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<Formula>();
+    assert_send_sync::<Progressor>();
+    assert_send_sync::<EveryMonitor>();
+}
+
+#[test]
+fn a_failed_step_changes_nothing() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let p = ctx.declare_value("p");
+    let f = Mtl::always(Window::bounded(0, 10), Mtl::atom(Term::slot(p)));
+    let mut progressor = Progressor::new(Arc::new(Formula::new(&f, &ctx).unwrap()));
+    progressor.step(0, &bools(true)).unwrap();
+    let before = progressor.residual();
+    // The state has no value for p.
+    let err = progressor.step(5, &SlotState::new(vec![None])).unwrap_err();
+    assert_eq!(err, EvalError::Missing { name: "p".into() });
+    assert_eq!(progressor.residual(), before);
+    assert_eq!(progressor.last_time(), Some(0));
+    // Time must increase; an equal time stamp is refused and changes nothing either.
+    assert!(matches!(
+        progressor.step(0, &bools(true)),
+        Err(EvalError::TimeNotIncreasing { time: 0, previous: 0 })
+    ));
+    // The same time stamp with a good state then goes through.
+    assert_eq!(progressor.step(5, &bools(true)).unwrap(), None);
+    assert_eq!(progressor.step(11, &bools(false)).unwrap(), Some(true));
+    assert_eq!(progressor.decided_at(), Some(11));
+    // Decided: later states change nothing, even ones that would have failed.
+    assert_eq!(progressor.step(12, &SlotState::new(vec![None])).unwrap(), Some(true));
+}
+
+#[test]
+fn host_functions_and_link_variables() {
+    // reestablish: eventually[0, 1s] xydist(from.pos, to.pos) < 10 and on_road(from.pos)
+    let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Ms);
+    let from = ctx.declare_value("from");
+    let to = ctx.declare_value("to");
+    let on_road = ctx.register_function(Function::new("on_road", (1, Some(1)), |args| match &args[0] {
+        Value::Vec2([_, y]) => Ok(Value::Bool(y.abs() < 5.0)),
+        other => Err(format!("expected a position, found {}", other.kind())),
+    }));
+    let xydist = ctx.function("xydist").unwrap();
+    let pos = |slot| Term::slot(slot).field("pos");
+    let close = Term::binary(BinOp::Lt, Term::call(xydist, vec![pos(from), pos(to)]), Term::num(10.0));
+    let f = Mtl::eventually(
+        Window::bounded(0, 1_000_000),
+        Mtl::and(vec![Mtl::atom(close), Mtl::atom(Term::call(on_road, vec![pos(from)]))]),
+    );
+    let formula = Arc::new(Formula::new(&f, &ctx).unwrap());
+    let object = |x: f64, y: f64| {
+        Some(Value::Record(Arc::new(Record {
+            id: None,
+            fields: vec![(Arc::from("pos"), Value::vec2(x, y))],
+        })))
+    };
+    let mut progressor = Progressor::new(formula.clone());
+    // 20 m apart, then 6 m apart but off road, then 6 m apart on the road: true at 0.5 s.
+    let states = [(0, object(0.0, 0.0), object(20.0, 0.0)), (250_000, object(0.0, 8.0), object(6.0, 8.0))];
+    for (t, a, b) in states {
+        assert_eq!(progressor.step(t, &SlotState::new(vec![a, b])).unwrap(), None);
+    }
+    let state = SlotState::new(vec![object(0.0, 1.0), object(6.0, 1.0)]);
+    assert_eq!(progressor.step(500_000, &state).unwrap(), Some(true));
+    // A function's error is reported with its name; a missing attribute with its path.
+    let bad_pos =
+        Some(Value::Record(Arc::new(Record { id: None, fields: vec![(Arc::from("pos"), Value::Int(1))] })));
+    let mut progressor = Progressor::new(formula.clone());
+    let err = progressor.step(0, &SlotState::new(vec![bad_pos, object(0.0, 0.0)])).unwrap_err();
+    assert!(matches!(&err, EvalError::Function { func, .. } if func == "xydist"), "{err}");
+    let mut progressor = Progressor::new(formula);
+    let err = progressor.step(0, &SlotState::new(vec![Some(Value::Int(1)), object(0.0, 0.0)])).unwrap_err();
+    assert_eq!(err.to_string(), "`from` has no attribute `pos`");
+}
+
+#[test]
+fn every_monitor_verdicts_are_in_decision_order_with_their_start() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let p = ctx.declare_value("p");
+    let f = Mtl::eventually(Window::bounded(0, 2), Mtl::atom(Term::slot(p)));
+    let mut monitor = EveryMonitor::new(Arc::new(Formula::new(&f, &ctx).unwrap()));
+    let mut out: Vec<StartVerdict> = Vec::new();
+    for (t, v) in [(0, false), (1, false), (2, true), (10, false)] {
+        monitor.step(t, &bools(v), &mut out).unwrap();
+    }
+    monitor.finish(&mut out);
+    let got: Vec<(usize, bool, Option<i64>)> =
+        out.iter().map(|v| (v.start, v.verdict, v.decided_at)).collect();
+    assert_eq!(
+        got,
+        vec![(0, true, Some(2)), (1, true, Some(2)), (2, true, Some(2)), (3, false, None)],
+        "the last state's window is still open at the end"
+    );
+}
+
+#[test]
+fn quantified_objects_are_followed_by_id() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let car = ctx.declare_object_type("Car");
+    // forall c: Car . always (c.speed < 25)
+    let speed = Term::binary(BinOp::Lt, Term::Var(0).field("speed"), Term::num(25.0));
+    let f = Mtl::Forall(car, Box::new(Mtl::always(Window::UNBOUNDED, Mtl::atom(speed))));
+    let formula = Arc::new(Formula::new(&f, &ctx).unwrap());
+    let cars = |list: &[(&str, f64)]| SlotState {
+        values: vec![],
+        objects: vec![
+            list.iter()
+                .map(|(id, s)| {
+                    Value::Record(Arc::new(Record {
+                        id: Some(Arc::from(*id)),
+                        fields: vec![(Arc::from("speed"), Value::Float(*s))],
+                    }))
+                })
+                .collect(),
+        ],
+    };
+    let mut progressor = Progressor::new(formula.clone());
+    progressor.step(0, &cars(&[("c1", 10.0), ("c2", 20.0)])).unwrap();
+    // A car that appears later is not in the domain of the quantifier evaluated at 0.
+    assert_eq!(progressor.step(1, &cars(&[("c1", 11.0), ("c2", 21.0), ("c3", 99.0)])).unwrap(), None);
+    // A bound car that left is a missing object: an error, not a guess.
+    let err = progressor.step(2, &cars(&[("c1", 12.0)])).unwrap_err();
+    assert!(matches!(err, EvalError::MissingObject { ref id, .. } if id == "c2"), "{err}");
+    assert_eq!(progressor.step(2, &cars(&[("c1", 12.0), ("c2", 30.0)])).unwrap(), Some(false));
+    let state = cars(&[("c1", 1.0)]);
+    assert!(state.object(car, "c1").is_some() && state.object(car, "c9").is_none());
+}
+
+#[test]
+fn malformed_windows_are_refused() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let p = Mtl::atom(Term::slot(ctx.declare_value("p")));
+    assert!(Formula::new(&Mtl::eventually(Window::bounded(5, 2), p.clone()), &ctx).is_err());
+    assert!(Formula::new(&Mtl::eventually(Window::bounded(-1, 2), p.clone()), &ctx).is_err());
+    assert!(Formula::new(&Mtl::atom(Term::Var(0)), &ctx).is_err());
+}
