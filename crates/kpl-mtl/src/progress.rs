@@ -173,29 +173,41 @@ impl Arena {
     /// The node equal to `node` with these children, created if new.
     fn intern(&mut self, mut node: Node, kids: &[u32]) -> u32 {
         let h = Arena::hash(&node, kids);
-        let head = self.table.get(&h).copied().unwrap_or(NONE);
-        let mut candidate = head;
-        while candidate != NONE {
-            let other = &self.nodes[candidate as usize];
-            if other.kind == node.kind
-                && other.lo == node.lo
-                && other.hi == node.hi
-                && other.tpl == node.tpl
-                && other.env == node.env
-                && other.n_kids as usize == kids.len()
-                && self.kids_of(other).iter().zip(kids).all(|(a, b)| a == b)
-            {
-                return candidate;
+        let id = self.nodes.len() as u32;
+        let head = match self.table.entry(h) {
+            std::collections::hash_map::Entry::Vacant(slot) => {
+                slot.insert(id);
+                NONE
             }
-            candidate = self.chain[candidate as usize];
-        }
+            std::collections::hash_map::Entry::Occupied(mut slot) => {
+                let head = *slot.get();
+                let mut candidate = head;
+                while candidate != NONE {
+                    let other = &self.nodes[candidate as usize];
+                    if other.kind == node.kind
+                        && other.lo == node.lo
+                        && other.hi == node.hi
+                        && other.tpl == node.tpl
+                        && other.env == node.env
+                        && other.n_kids as usize == kids.len()
+                        && self.kids[other.kids as usize..(other.kids + other.n_kids) as usize]
+                            .iter()
+                            .zip(kids)
+                            .all(|(a, b)| a == b)
+                    {
+                        return candidate;
+                    }
+                    candidate = self.chain[candidate as usize];
+                }
+                slot.insert(id);
+                head
+            }
+        };
         node.kids = self.kids.len() as u32;
         node.n_kids = kids.len() as u32;
         self.kids.extend_from_slice(kids);
-        let id = self.nodes.len() as u32;
         self.nodes.push(node);
         self.chain.push(head);
-        self.table.insert(h, id);
         id
     }
 
