@@ -107,6 +107,10 @@ pub fn registry() -> Registry {
         .param(Param::required("key", ParamType::Str, "key expression to subscribe to")),
     );
     r.add(
+        Entry::new(EntryKind::Compute, "kpl.merge", "Forwards every sample of each of its inputs, in arrival order.")
+            .variadic(1, "in", TypeReq::Any, "streams to merge"),
+    );
+    r.add(
         Entry::new(EntryKind::Sink, "console", "Prints each sample as a JSON line on standard output.")
             .variadic(1, "in", TypeReq::Any, "streams to print"),
     );

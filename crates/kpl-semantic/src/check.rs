@@ -39,6 +39,10 @@ pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
     let mut diagnostics = checker.diagnostics;
     diagnostics.sort_by_key(|d| (d.span.start, d.span.end));
     let has_errors = diagnostics.iter().any(Diagnostic::is_error);
+    if has_errors {
+        // With errors, "never used" is mostly a consequence of an input that did not resolve.
+        diagnostics.retain(|d| !matches!(d.code, diag::UNUSED_STREAM | diag::UNUSED_OUTPUT));
+    }
     Checked { spec: if has_errors { None } else { Some(result) }, diagnostics }
 }
 
@@ -798,9 +802,12 @@ impl Resolver<'_, '_, '_> {
     /// stream if it has exactly one, else the producer's output directly. Subtypes do not count:
     /// in an object linkage structure an on-road object `oo3` is a different object from the
     /// world object `wo5` it was linked from, though its type inherits `WorldObject`'s attributes.
-    fn producers_of(&mut self, ty: &str) -> Vec<hir::StreamRef> {
+    fn producers_of(&mut self, ty: &str, consumer: &str) -> Vec<hir::StreamRef> {
         let mut refs = Vec::new();
         for (id, draft) in self.drafts.iter().enumerate() {
+            if draft.name.name == consumer {
+                continue;
+            }
             let produces = match &draft.output {
                 Some(ValueType::Record(r)) => &*r.name == ty,
                 _ => false,
@@ -850,7 +857,7 @@ impl Resolver<'_, '_, '_> {
             .collect();
         if explicit.is_empty() {
             if from.is_some() {
-                let producers = self.producers_of(&l.from_type.name);
+                let producers = self.producers_of(&l.from_type.name, &l.name.name);
                 if producers.is_empty() {
                     self.checker.diagnostics.push(diag::no_producer(
                         l.from_type.span,
@@ -974,7 +981,7 @@ impl Resolver<'_, '_, '_> {
             .map(|stream| hir::Input { port: "state".into(), stream })
             .collect();
         for ty in &quantified {
-            let producers = self.producers_of(ty);
+            let producers = self.producers_of(ty, &m.name.name);
             if producers.is_empty() {
                 self.checker.diagnostics.push(diag::no_producer(
                     m.name.span,
@@ -1028,7 +1035,10 @@ impl StreamScope for MonitorScope<'_, '_, '_, '_> {
         match self.resolver.checker.names.get(&name.name).map(|(n, _)| *n) {
             Some(Named::Stream(index)) => {
                 self.resolver.used[index] = true;
-                let stream = self.resolver.streams[index].clone()?;
+                // A declared stream whose own declaration failed was reported there.
+                let Some(stream) = self.resolver.streams[index].clone() else {
+                    return Some(Ok(ValueType::Any));
+                };
                 let ty = stream.ty.clone();
                 self.refs.insert(name.name.clone(), stream);
                 Some(Ok(ty))

@@ -98,14 +98,10 @@ pub fn unknown_function(span: Span, name: &str, candidates: &[&str]) -> Diagnost
         )
 }
 
-pub fn arity(span: Span, signature: &str, given: usize) -> Diagnostic {
-    Diagnostic::error(
-        ARITY,
-        span,
-        format!("wrong number of arguments: `{signature}` takes a different number than {given}"),
-    )
-    .with_label(format!("{given} given"))
-    .with_hint(format!("the signature is `{signature}`"))
+pub fn arity(span: Span, name: &str, expected: &str, given: usize, signature: &str) -> Diagnostic {
+    Diagnostic::error(ARITY, span, format!("`{name}` takes {expected}, {given} given"))
+        .with_label("wrong number of arguments")
+        .with_hint(format!("the signature is `{signature}`"))
 }
 
 pub fn duplicate_symbol(span: Span, symbol: &str, ty: &str, other: &str, first: Span) -> Diagnostic {

@@ -316,7 +316,20 @@ impl FormulaChecker<'_> {
         };
         if !function.accepts(args.len()) {
             let span = args.first().map_or(func.span, |a| func.span.to(a.span));
-            self.diagnostics.push(diag::arity(span, &function.signature(), args.len()));
+            let n = function.params.len();
+            let plural = |n: usize| if n == 1 { "1 argument".to_string() } else { format!("{n} arguments") };
+            let expected = if function.variadic {
+                format!("at least {}", plural(n.saturating_sub(1).max(1)))
+            } else {
+                plural(n)
+            };
+            self.diagnostics.push(diag::arity(
+                span,
+                &function.name,
+                &expected,
+                args.len(),
+                &function.signature(),
+            ));
             return function.returns.clone();
         }
         for (i, (arg, found)) in args.iter().zip(&arg_types).enumerate() {

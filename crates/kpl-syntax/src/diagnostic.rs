@@ -180,9 +180,22 @@ impl Diagnostic {
         let pad = " ".repeat(gutter);
         let _ = writeln!(out, "{pad}--> {file}:{line}:{column}");
         let _ = writeln!(out, "{pad} |");
-        snippet(&mut out, source, index, self.span, self.label.as_deref(), '^', gutter);
+        // The primary span's line first, with any secondary labels on that same line under it;
+        // then each other line once, with its labels.
+        let mut marks: Vec<(usize, Span, Option<&str>, char)> =
+            vec![(line, self.span, self.label.as_deref(), '^')];
         for (span, label) in &self.secondary {
-            snippet(&mut out, source, index, *span, Some(label), '-', gutter);
+            marks.push((index.line_col(source, span.start).0, *span, Some(label.as_str()), '-'));
+        }
+        let mut shown_lines: Vec<usize> = Vec::new();
+        for &(mark_line, ..) in &marks {
+            if shown_lines.contains(&mark_line) {
+                continue;
+            }
+            shown_lines.push(mark_line);
+            let on_line: Vec<_> =
+                marks.iter().filter(|m| m.0 == mark_line).map(|m| (m.1, m.2, m.3)).collect();
+            snippet(&mut out, source, index, &on_line, gutter);
         }
         if let Some(hint) = &self.hint {
             let _ = writeln!(out, "{pad} = hint: {hint}");
@@ -199,32 +212,38 @@ fn snippet(
     out: &mut String,
     source: &str,
     index: &LineIndex,
-    span: Span,
-    label: Option<&str>,
-    mark: char,
+    marks: &[(Span, Option<&str>, char)],
     gutter: usize,
 ) {
     use std::fmt::Write;
-    let (line, column) = index.line_col(source, span.start);
-    let (end_line, end_column) = index.line_col(source, span.end);
+    let Some((first, ..)) = marks.first() else { return };
+    let (line, column) = index.line_col(source, first.start);
     let text = index.line_text(source, line);
-    // Very long lines (a 50 MB single-line file) are cut around the span.
+    // Very long lines (a 50 MB single-line file) are cut around the first span.
     let (shown, first_col) = window(text, column);
-    let width = if end_line == line {
-        end_column.saturating_sub(column).max(1)
-    } else {
-        text.chars().count().saturating_sub(column - 1).max(1)
-    };
-    let width = width.min(shown.chars().count().saturating_sub(column - first_col).max(1));
+    let shown_len = shown.chars().count();
     let _ = writeln!(out, "{line:>gutter$} | {}", shown.replace('\t', " "));
-    let marker: String = std::iter::repeat_n(mark, width).collect();
-    let indent = " ".repeat(column - first_col);
-    match label {
-        Some(label) => {
-            let _ = writeln!(out, "{:gutter$} | {indent}{marker} {label}", "");
+    for (span, label, mark) in marks {
+        let (_, column) = index.line_col(source, span.start);
+        let (end_line, end_column) = index.line_col(source, span.end);
+        if column < first_col || column - first_col > shown_len {
+            continue;
         }
-        None => {
-            let _ = writeln!(out, "{:gutter$} | {indent}{marker}", "");
+        let width = if end_line == line {
+            end_column.saturating_sub(column)
+        } else {
+            text.chars().count() + 1 - column
+        };
+        let width = width.clamp(1, (shown_len + 1 - (column - first_col)).max(1));
+        let marker: String = std::iter::repeat_n(*mark, width).collect();
+        let indent = " ".repeat(column - first_col);
+        match label {
+            Some(label) => {
+                let _ = writeln!(out, "{:gutter$} | {indent}{marker} {label}", "");
+            }
+            None => {
+                let _ = writeln!(out, "{:gutter$} | {indent}{marker}", "");
+            }
         }
     }
 }

@@ -63,7 +63,11 @@ pub fn parse(source: &str) -> Parse {
             parse.spec = conv.file(pairs);
         }
         Err(whole_error) => {
-            // Parse each item on its own so that every broken item gets its message.
+            // Parse each item on its own so that every broken item gets its message, with
+            // pest's error detail on (it lists expected punctuation, not only rules). It stays
+            // on: it costs a little on every later parse, and turning it off could race with
+            // another thread's error path.
+            pest::set_error_detail(true);
             let mut bounds: Vec<usize> = scan.item_starts.iter().map(|&s| s as usize).collect();
             if bounds.first() != Some(&0) {
                 bounds.insert(0, 0);
@@ -79,11 +83,11 @@ pub fn parse(source: &str) -> Parse {
                         let spec = conv.file(pairs);
                         parse.spec.items.extend(spec.items);
                     }
-                    Err(err) => parse.diagnostics.push(syntax_error(chunk, &err).shifted(start as u32)),
+                    Err(err) => parse.diagnostics.push(syntax_error(source, start, &err)),
                 }
             }
             if !parse.has_errors() {
-                parse.diagnostics.push(syntax_error(source, &whole_error));
+                parse.diagnostics.push(syntax_error(source, 0, &whole_error));
             }
         }
     }
@@ -99,8 +103,11 @@ pub fn parse_formula(source: &str) -> Result<ast::Expr, Vec<Diagnostic>> {
     if let Some(span) = scan.too_deep {
         return Err(vec![diag::nesting_too_deep(span, lex::MAX_NESTING)]);
     }
-    let mut pairs =
-        KplParser::parse(Rule::formula_input, source).map_err(|e| vec![syntax_error(source, &e)])?;
+    let mut pairs = KplParser::parse(Rule::formula_input, source).map_err(|e| {
+        pest::set_error_detail(true);
+        let detailed = KplParser::parse(Rule::formula_input, source).err().unwrap_or(e);
+        vec![syntax_error(source, 0, &detailed)]
+    })?;
     let mut diagnostics = Vec::new();
     let expr = {
         let mut conv = Converter::new(0, &mut diagnostics, source, &scan.comments);
@@ -117,32 +124,101 @@ pub fn parse_formula(source: &str) -> Result<ast::Expr, Vec<Diagnostic>> {
 // ---------------------------------------------------------------------------------------------
 // syntax errors in the user's words
 
-fn syntax_error(source: &str, err: &pest::error::Error<Rule>) -> Diagnostic {
-    let pos = match err.location {
-        InputLocation::Pos(p) => p,
-        InputLocation::Span((s, _)) => s,
+/// Turns a pest error in `chunk` (which starts at byte `offset` of `source`) into a diagnostic.
+/// With pest's error detail on, the error lists the tokens that were expected (including
+/// punctuation such as `)`), which say more than the rules.
+fn syntax_error(source: &str, offset: usize, err: &pest::error::Error<Rule>) -> Diagnostic {
+    let classic_pos = offset
+        + match err.location {
+            InputLocation::Pos(p) => p,
+            InputLocation::Span((s, _)) => s,
+        };
+    let positives: &[Rule] = match &err.variant {
+        ErrorVariant::ParsingError { positives, .. } => positives,
+        ErrorVariant::CustomError { .. } => &[],
     };
+    // A reserved word where a name was expected: pest's detailed attempts wander into the
+    // `!keyword` look-ahead; the rule-level error says it better.
+    let reserved_word = positives.contains(&Rule::ident) && keyword(found_text(source, classic_pos));
+    let attempts = if reserved_word { None } else { err.parse_attempts() };
+    let pos = offset
+        + match (&attempts, &err.location) {
+            (Some(a), _) => a.max_position,
+            (None, InputLocation::Pos(p)) => *p,
+            (None, InputLocation::Span((s, _))) => *s,
+        };
+    // pest does not export its token type; its text (`)`, `and`, `0..9`) is what we need.
+    let tokens: Vec<String> = attempts
+        .as_ref()
+        .map(|a| a.expected_tokens().iter().map(ToString::to_string).collect())
+        .unwrap_or_default();
+    let mut expected = describe_tokens(&tokens);
+    if expected.iter().any(|e| e.starts_with("a time unit")) {
+        // `50` could also go on as `50.5` or `5e1`; the unit is what is missing.
+        expected.retain(|e| e.starts_with("a time unit"));
+    }
+    if expected.is_empty() {
+        expected = positives.iter().map(|r| rule_name(*r).to_string()).collect();
+        expected.sort();
+        expected.dedup();
+    }
     let found = describe_found(source, pos);
-    let span = found_span(source, pos);
-    let (expected, hint) = match &err.variant {
-        ErrorVariant::ParsingError { positives, .. } => {
-            let mut names: Vec<&'static str> = positives.iter().map(|r| rule_name(*r)).collect();
-            names.sort_unstable();
-            names.dedup();
-            (names, hint_for(positives, source, pos))
-        }
-        ErrorVariant::CustomError { message } => (vec![], Some(message.clone())),
-    };
     let message = match expected.as_slice() {
         [] => format!("unexpected {found}"),
         [one] => format!("expected {one}, found {found}"),
-        many if many.len() <= 8 => {
-            let (last, rest) = many.split_last().unwrap_or((&"", &[]));
+        many if many.len() <= 10 => {
+            let (last, rest) = many.split_last().map_or(("", &[][..]), |(l, r)| (l.as_str(), r));
             format!("expected {} or {last}, found {found}", rest.join(", "))
         }
         _ => format!("unexpected {found}"),
     };
-    Diagnostic::error(diag::SYNTAX, span, message).with_label("unexpected here").with_hint_opt(hint)
+    // When the unexpected token is on a later line, point just after the last token instead:
+    // that is where something is missing (an unclosed `{`, a missing `)`).
+    let before = source[..pos.min(source.len())].trim_end_matches(char::is_whitespace);
+    let (span, label) = if source[before.len()..pos.min(source.len())].contains('\n') && !before.is_empty() {
+        (Span::new(before.len() as u32, before.len() as u32), "expected here")
+    } else {
+        (found_span(source, pos), "unexpected here")
+    };
+    let hint = hint_for(positives, &expected, source, pos);
+    Diagnostic::error(diag::SYNTAX, span, message).with_label(label).with_hint_opt(hint)
+}
+
+/// The tokens pest expected, in the user's words: punctuation and words quoted, character
+/// classes named, operators grouped, white space and comment starters left out.
+fn describe_tokens(tokens: &[String]) -> Vec<String> {
+    const OPERATORS: [&str; 15] =
+        ["!=", "%", "*", "+", "-", "->", "/", "<", "<=", "==", ">", ">=", "and", "or", "until"];
+    const UNITS: [&str; 5] = ["us", "ms", "s", "min", "h"];
+    let mut out: Vec<String> = Vec::new();
+    let mut push = |s: String| {
+        if !out.contains(&s) {
+            out.push(s);
+        }
+    };
+    let mut operators = 0;
+    for token in tokens {
+        match token.as_str() {
+            " " | "\t" | "\n" | "\r" | "//" | "/*" | "BUILTIN_RULE" => {}
+            "_" | "a..z" | "A..Z" => push("a name".into()),
+            "0..9" => push("a number".into()),
+            "\"" => push("a string".into()),
+            t if UNITS.contains(&t) => push("a time unit (us, ms, s, min, h)".into()),
+            t if OPERATORS.contains(&t) => operators += 1,
+            t => push(format!("`{t}`")),
+        }
+    }
+    // Quoted tokens first, then the classes, in a stable order.
+    out.sort_by_key(|s| (!s.starts_with('`'), s.clone()));
+    if operators > 2 {
+        out.push("an operator".into());
+    } else if operators > 0 {
+        // A few operators are worth naming (`->` in a link header).
+        for token in tokens.iter().filter(|t| OPERATORS.contains(&t.as_str())) {
+            out.push(format!("`{token}`"));
+        }
+    }
+    out
 }
 
 fn found_span(source: &str, pos: usize) -> Span {
@@ -155,6 +231,10 @@ fn found_span(source: &str, pos: usize) -> Span {
         Some(c) => c.len_utf8(),
     };
     Span::new(pos as u32, (pos + len) as u32)
+}
+
+fn found_text(source: &str, pos: usize) -> &str {
+    source.get(found_span(source, pos).range()).unwrap_or("")
 }
 
 fn describe_found(source: &str, pos: usize) -> String {
@@ -187,10 +267,11 @@ fn keyword(word: &str) -> bool {
     )
 }
 
-fn hint_for(positives: &[Rule], source: &str, pos: usize) -> Option<String> {
+fn hint_for(positives: &[Rule], expected: &[String], source: &str, pos: usize) -> Option<String> {
     let rest = source.get(pos..).unwrap_or("");
     let word: String = rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
-    if positives.contains(&Rule::ident) && keyword(&word) {
+    let expects = |s: &str| expected.iter().any(|e| e == s);
+    if (positives.contains(&Rule::ident) || expects("a name")) && keyword(&word) {
         return Some(format!("`{word}` is a reserved word of formulas; choose another name"));
     }
     if word == "inf" {
@@ -198,7 +279,7 @@ fn hint_for(positives: &[Rule], source: &str, pos: usize) -> Option<String> {
             "`inf` is only allowed as the upper bound of an interval, as in `eventually[1s, inf]`".into(),
         );
     }
-    if positives.contains(&Rule::unit) {
+    if positives.contains(&Rule::unit) || expects("a time unit (us, ms, s, min, h)") {
         return Some(
             "a duration needs a unit right after the number: `us`, `ms`, `s`, `min` or `h` (e.g. `100ms`)"
                 .into(),
@@ -207,14 +288,17 @@ fn hint_for(positives: &[Rule], source: &str, pos: usize) -> Option<String> {
     if positives.contains(&Rule::policy) {
         return Some("policies are: no approximation, use most recent, any update, any change, sample every T, max delay T, from T to T, any order, monotone order, strict order, queue N block, queue N drop oldest, feedback".into());
     }
-    if rest.starts_with('=')
-        && !rest.starts_with("==")
-        && positives.iter().any(|r| matches!(r, Rule::op_eq | Rule::op_lt))
-    {
+    if rest.starts_with('=') && !rest.starts_with("==") && expects("an operator") {
         return Some("equality in a formula is written `==`".into());
     }
     if rest.starts_with("&&") || rest.starts_with("||") || rest.starts_with('!') && !rest.starts_with("!=") {
         return Some("formulas use the words `and`, `or` and `not`".into());
+    }
+    if expects("`}`") && (rest.is_empty() || lex::ITEM_KEYWORDS.contains(&word.as_str())) {
+        return Some("a `{` block is not closed before the next item".into());
+    }
+    if expects("`)`") && (rest.is_empty() || lex::ITEM_KEYWORDS.contains(&word.as_str())) {
+        return Some("a `(` is not closed before the next item".into());
     }
     if positives.contains(&Rule::EOI) && positives.len() <= 2 {
         return Some("a file is a sequence of items: type, source, compute, sink, stream, link, predict, forget, monitor, deploy".into());
