@@ -266,10 +266,10 @@ fn check(seed: u64, cases: usize, quantifiers: bool) {
 
 #[test]
 fn agrees_with_the_naive_evaluator_on_random_formulas() {
-    check(0x5eed_0001, 5000, false);
+    check(0x5eed_0001, 10_000, false);
 }
 
 #[test]
 fn agrees_with_the_naive_evaluator_with_quantifiers() {
-    check(0x5eed_0002, 1500, true);
+    check(0x5eed_0002, 3000, true);
 }
