@@ -125,7 +125,12 @@ impl Aapa {
             percept_used[r] = true;
             let percept = &percepts[r];
             let w = &mut work[c];
-            let new_centre = centre(&percept.bbox);
+            let observed = if p.extensions.restore_partial_boxes {
+                restore_partial_box(&mut w.anchor, r, percepts)
+            } else {
+                percept.bbox
+            };
+            let new_centre = centre(&observed);
             w.anchor.velocity = match (w.previous_centre, dt_seconds) {
                 (Some(old), Some(dt)) if dt > 0.0 => {
                     let measured = [(new_centre[0] - old[0]) / dt, (new_centre[1] - old[1]) / dt];
@@ -138,7 +143,7 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
-            w.anchor.bbox = percept.bbox;
+            w.anchor.bbox = observed;
             vote_type(&mut w.anchor, &percept.object_type);
             w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
             w.anchor.status = AnchorStatus::Visible;
@@ -168,6 +173,14 @@ impl Aapa {
                     moving: false,
                     moving_until: None,
                     moving_since: None,
+                    full_size: None,
+                    last_percept_box: Some([
+                        percept.bbox.x1,
+                        percept.bbox.y1,
+                        percept.bbox.x2,
+                        percept.bbox.y2,
+                    ]),
+                    partial: false,
                     attachment: None,
                     for_inference: false,
                     type_votes: vec![(percept.object_type.clone(), 1)],
@@ -669,6 +682,67 @@ fn apply_rule(
             }
         }
     }
+}
+
+/// Extension: a detector boxes only the visible part of a partly hidden object. A percept is taken
+/// as such a part when it overlaps another detection, is clearly smaller than the object's last
+/// unoccluded size, one edge (not its opposite) lies inside an overlapping detection, and, compared
+/// with the previous percept, that edge moved inwards while the opposite edge stayed put (an object
+/// that changes depth or slides moves both). Then, and for as long as that stays so, the cut edge is
+/// moved out to restore the remembered size. A percept overlapping nothing refreshes the size.
+fn restore_partial_box(anchor: &mut Anchor, own: usize, percepts: &[Percept]) -> BBox {
+    const SHRUNK: f64 = 0.85;
+    const TOLERANCE: f64 = 2.0;
+    let b = percepts[own].bbox;
+    let previous = anchor.last_percept_box.map(|[x1, y1, x2, y2]| BBox::new(x1, y1, x2, y2));
+    anchor.last_percept_box = Some([b.x1, b.y1, b.x2, b.y2]);
+    let was_partial = std::mem::take(&mut anchor.partial);
+    let occluders: Vec<&BBox> = percepts
+        .iter()
+        .enumerate()
+        .filter(|&(k, other)| k != own && intersects(&b, &other.bbox))
+        .map(|(_, other)| &other.bbox)
+        .collect();
+    if occluders.is_empty() {
+        anchor.full_size = Some(size(&b));
+        return b;
+    }
+    let (Some([full_w, full_h]), Some(prev)) = (anchor.full_size, previous) else { return b };
+    let within = |v: f64, lo: f64, hi: f64| lo - TOLERANCE <= v && v <= hi + TOLERANCE;
+    let kept = |now: f64, then: f64| (now - then).abs() <= TOLERANCE;
+    // The cut edge is shrinking now, or the part was already being restored.
+    let cutting = |now: f64, then: f64, inwards: f64| was_partial || (now - then) * inwards > 0.5;
+    let mut restored = b;
+    if b.height() < SHRUNK * full_h {
+        let overlaps_x = |d: &&&BBox| d.x1 < b.x2 && b.x1 < d.x2;
+        let top_cut = occluders.iter().filter(overlaps_x).any(|d| within(b.y1, d.y1, d.y2) && d.y1 < b.y1);
+        let bottom_cut = occluders.iter().filter(overlaps_x).any(|d| within(b.y2, d.y1, d.y2) && d.y2 > b.y2);
+        match (top_cut, bottom_cut) {
+            (true, false) if kept(b.y2, prev.y2) && cutting(b.y1, prev.y1, 1.0) => {
+                restored.y1 = b.y2 - full_h
+            }
+            (false, true) if kept(b.y1, prev.y1) && cutting(b.y2, prev.y2, -1.0) => {
+                restored.y2 = b.y1 + full_h
+            }
+            _ => {}
+        }
+    }
+    if b.width() < SHRUNK * full_w {
+        let overlaps_y = |d: &&&BBox| d.y1 < b.y2 && b.y1 < d.y2;
+        let left_cut = occluders.iter().filter(overlaps_y).any(|d| within(b.x1, d.x1, d.x2) && d.x1 < b.x1);
+        let right_cut = occluders.iter().filter(overlaps_y).any(|d| within(b.x2, d.x1, d.x2) && d.x2 > b.x2);
+        match (left_cut, right_cut) {
+            (true, false) if kept(b.x2, prev.x2) && cutting(b.x1, prev.x1, 1.0) => {
+                restored.x1 = b.x2 - full_w
+            }
+            (false, true) if kept(b.x1, prev.x1) && cutting(b.x2, prev.x2, -1.0) => {
+                restored.x2 = b.x1 + full_w
+            }
+            _ => {}
+        }
+    }
+    anchor.partial = restored != b;
+    restored
 }
 
 /// Counts one detection of `object_type` for the anchor and makes its type the most frequent one

@@ -68,6 +68,12 @@ pub struct Extensions {
     pub scale_attached: bool,
     /// How a move that is not seen is assumed to proceed between its start and its expected end.
     pub motion_profile: MotionProfile,
+    /// For detectors that box only the visible part of a partly hidden object (not for ground-truth
+    /// boxes): a percept that overlaps other detections, is smaller than the object's remembered
+    /// size and is being cut on one side is taken as its visible part, and the cut edge is moved out
+    /// to restore the size (the paper names box size under partial occlusion as a failure). Off by
+    /// default: it describes the sensor.
+    pub restore_partial_boxes: bool,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -90,6 +96,7 @@ impl Default for Extensions {
             reacquire: true,
             scale_attached: true,
             motion_profile: MotionProfile::EaseInOut,
+            restore_partial_boxes: false,
         }
     }
 }
@@ -228,6 +235,7 @@ impl Params {
                 reacquire: false,
                 scale_attached: false,
                 motion_profile: MotionProfile::ConstantVelocity,
+                restore_partial_boxes: false,
             },
             ..Params::cater()
         }

@@ -158,6 +158,16 @@ pub struct Anchor {
     pub moving: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_until: Option<Time>,
+    /// Width and height when last seen with no other detection overlapping it (partial-box
+    /// restoration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_size: Option<[f64; 2]>,
+    /// The last percept aligned to this anchor, as detected (before any restoration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_percept_box: Option<[f64; 4]>,
+    /// The current box is a restored partial view.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub partial: bool,
     /// When the action moving this object started.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_since: Option<Time>,

@@ -439,3 +439,34 @@ fn world_state_and_params_round_trip_through_json() {
         serde_json::from_str(r#"{"label": "a", "type": "cube", "box": [1, 2, 3, 4]}"#).unwrap();
     assert_eq!(percept.bbox, bx(1., 2., 3., 4.));
 }
+
+#[test]
+fn partial_boxes_are_restored_only_when_one_side_is_being_cut() {
+    let restoring = Params {
+        extensions: Extensions { restore_partial_boxes: true, ..Extensions::default() },
+        ..Params::cater()
+    };
+    let aapa = Aapa::new(restoring).unwrap();
+    let cone = p("cone0", "cone", bx(90., 40., 130., 95.));
+    // Seen whole (alone), then a cone comes down: the visible part loses its top row by row.
+    let mut frames = vec![(vec![p("s", "snitch", bx(100., 80., 120., 100.))], vec![]); 2];
+    for top in [84., 88., 92.] {
+        frames.push((vec![p("s", "snitch", bx(100., top, 120., 100.)), cone.clone()], vec![]));
+    }
+    let last = run(&aapa, &frames).pop().unwrap();
+    assert_eq!(last.anchor("s").unwrap().bbox, bx(100., 80., 120., 100.));
+    // Without the extension the anchor takes the cut box.
+    let plain = run(&cater(), &frames).pop().unwrap();
+    assert_eq!(plain.anchor("s").unwrap().bbox, bx(100., 92., 120., 100.));
+    // An object that shrinks because it moves away (both edges move) keeps its new size.
+    let mut away = vec![(vec![p("s", "snitch", bx(100., 80., 120., 100.))], vec![]); 2];
+    for k in 1..=3 {
+        let d = 2.0 * k as f64;
+        away.push((
+            vec![p("s", "snitch", bx(100. + d, 80. + d, 120. - d, 100. - 1.5 * d)), cone.clone()],
+            vec![],
+        ));
+    }
+    let last = run(&aapa, &away).pop().unwrap();
+    assert_eq!(last.anchor("s").unwrap().bbox, bx(106., 86., 114., 91.));
+}

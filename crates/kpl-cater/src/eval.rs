@@ -98,7 +98,7 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
     if let Some(dir) = &options.predictions_dir {
         std::fs::create_dir_all(dir).map_err(|source| CaterError::Io { path: dir.clone(), source })?;
     }
-    let params = options.params.clone().unwrap_or_else(|| options.model.default_params());
+    let params = options.params.clone().unwrap_or_else(|| options.model.default_params(options.perception));
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<VideoScore>>> = Mutex::new(vec![None; videos.len()]);
     let first_error: Mutex<Option<(usize, CaterError)>> = Mutex::new(None);

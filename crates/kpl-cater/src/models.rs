@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use kpl_aapa::{Aapa, Action, Params, WorldState};
 use kpl_core::{BBox, Time};
 
+use crate::dataset::Perception;
 use crate::error::CaterError;
 use crate::formats::{IntBox, PerceptionFile, SNITCH_CLASS, Scene};
 
@@ -38,11 +39,17 @@ impl Model {
         Model::ALL.into_iter().find(|m| m.name() == name)
     }
 
-    /// The AAPA parameters this model uses unless overridden.
-    pub fn default_params(self) -> Params {
+    /// The AAPA parameters this model uses unless overridden. With the detector, which boxes only
+    /// the visible part of a partly hidden object, `aapa` and `aapa-no-actions` restore partial
+    /// boxes; perfect perception gives whole boxes, so there it is off.
+    pub fn default_params(self, perception: Perception) -> Params {
         match self {
             Model::AapaPaper => Params::paper_cater(),
-            _ => Params::cater(),
+            _ => {
+                let mut params = Params::cater();
+                params.extensions.restore_partial_boxes = perception == Perception::Detector;
+                params
+            }
         }
     }
 }

@@ -99,8 +99,9 @@ fn cone_slides_away_with_the_snitch() -> VideoData {
 fn aapa_follows_the_cone_that_carries_the_snitch() {
     let video = cone_slides_away_with_the_snitch();
     let truth = video.ground_truth.snitch_boxes(std::path::Path::new("handmade")).unwrap();
-    let run =
-        |model: Model| predict(model, &model.default_params(), &video.scene, &video.perception).unwrap();
+    let run = |model: Model| {
+        predict(model, &model.default_params(Perception::Perfect), &video.scene, &video.perception).unwrap()
+    };
     let aapa = run(Model::Aapa);
     // Carried (60..=100) and contained after the slide: AAPA's snitch is under the cone.
     for f in (60..=100).chain([120, 149]) {
@@ -118,13 +119,17 @@ fn aapa_follows_the_cone_that_carries_the_snitch() {
     for predictions in [&aapa, &blind, &heuristic] {
         assert!(iou(predictions[200], truth[200]) > 0.9);
     }
-    let (score, _) =
-        evaluate_video(&video, Model::Aapa, &Model::Aapa.default_params(), std::path::Path::new("h"))
-            .unwrap();
+    let (score, _) = evaluate_video(
+        &video,
+        Model::Aapa,
+        &Model::Aapa.default_params(Perception::Perfect),
+        std::path::Path::new("h"),
+    )
+    .unwrap();
     let (h_score, _) = evaluate_video(
         &video,
         Model::Heuristic,
-        &Model::Heuristic.default_params(),
+        &Model::Heuristic.default_params(Perception::Perfect),
         std::path::Path::new("h"),
     )
     .unwrap();

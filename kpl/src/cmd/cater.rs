@@ -148,7 +148,7 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     };
     let params = match &args.params {
         None => None,
-        Some(path) => Some(read_params(path, model)?),
+        Some(path) => Some(read_params(path, model, perception)?),
     };
     let started = Instant::now();
     let report = eval::evaluate(&EvalOptions {
@@ -172,11 +172,11 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-fn read_params(path: &std::path::Path, model: Model) -> Result<Params, Failure> {
+fn read_params(path: &std::path::Path, model: Model, perception: Perception) -> Result<Params, Failure> {
     let text =
         std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
     // Fields missing from the file keep the model's defaults.
-    let mut base = serde_json::to_value(model.default_params())
+    let mut base = serde_json::to_value(model.default_params(perception))
         .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
     let overrides: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;
