@@ -243,16 +243,18 @@ impl PerceptionFile {
     /// the frame, the way a detector numbers instances (and so not stable over time).
     pub fn percepts(&self, frame: usize) -> Vec<Percept> {
         let Some(detections) = self.frames.get(frame) else { return Vec::new() };
+        let class_of = |d: &Detection| self.classes.get(d.class as usize).map(String::as_str);
         let shape_of = |d: &Detection| {
-            let class = self.classes[d.class as usize].as_str();
+            let class = class_of(d).unwrap_or("");
             class.split('_').nth(2).unwrap_or(class)
         };
-        let mut order: Vec<&Detection> = detections.iter().collect();
+        // Detections naming no class are skipped (`read` rejects such files).
+        let mut order: Vec<&Detection> = detections.iter().filter(|d| class_of(d).is_some()).collect();
         order.sort_by(|a, b| shape_of(a).cmp(shape_of(b)).then(a.bbox[0].total_cmp(&b.bbox[0])));
         let mut out = Vec::with_capacity(order.len());
         let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
         for d in order {
-            let class = self.classes[d.class as usize].as_str();
+            let class = class_of(d).unwrap_or("");
             let shape = shape_of(d);
             let n = counts.entry(shape).or_insert(0);
             let [x1, y1, x2, y2] = d.bbox;
