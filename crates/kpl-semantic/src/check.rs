@@ -116,12 +116,33 @@ impl<'a> Checker<'a> {
             streams.push(resolved);
         }
 
+        // Who produces objects of each type, and which streams are declared over each process.
+        let mut producers: BTreeMap<String, Vec<ProcessId>> = BTreeMap::new();
+        for (id, draft) in drafts.iter().enumerate() {
+            let is_sink = matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink);
+            if let (Some(ValueType::Record(r)), false) = (&draft.output, is_sink) {
+                producers.entry(r.name.to_string()).or_default().push(id);
+            }
+        }
+        let mut declared_over: BTreeMap<ProcessId, Vec<usize>> = BTreeMap::new();
+        for (index, stream) in streams.iter().enumerate() {
+            if let Some(stream) = stream.as_ref().filter(|s| s.port.is_none()) {
+                declared_over.entry(stream.producer).or_default().push(index);
+            }
+        }
+
         // Inputs, parameters and formulas.
         let mut used_streams = vec![false; stream_decls.len()];
         let mut processes = Vec::with_capacity(drafts.len());
         for (id, draft) in drafts.iter().enumerate() {
-            let mut resolver =
-                Resolver { checker: self, drafts: &drafts, streams: &streams, used: &mut used_streams };
+            let mut resolver = Resolver {
+                checker: self,
+                drafts: &drafts,
+                streams: &streams,
+                used: &mut used_streams,
+                producers: &producers,
+                declared_over: &declared_over,
+            };
             let (kind, inputs) = resolver.process(draft);
             processes.push(hir::Process {
                 id,
@@ -703,6 +724,10 @@ struct Resolver<'c, 'a, 's> {
     drafts: &'c [Draft<'s>],
     streams: &'c [Option<hir::StreamRef>],
     used: &'c mut [bool],
+    /// Processes producing objects of each record type (by exact type), in declaration order.
+    producers: &'c BTreeMap<String, Vec<ProcessId>>,
+    /// The declared streams over each process's default output.
+    declared_over: &'c BTreeMap<ProcessId, Vec<usize>>,
 }
 
 impl Resolver<'_, '_, '_> {
@@ -804,26 +829,13 @@ impl Resolver<'_, '_, '_> {
     /// world object `wo5` it was linked from, though its type inherits `WorldObject`'s attributes.
     fn producers_of(&mut self, ty: &str, consumer: &str) -> Vec<hir::StreamRef> {
         let mut refs = Vec::new();
-        for (id, draft) in self.drafts.iter().enumerate() {
+        for &id in self.producers.get(ty).map_or(&[][..], Vec::as_slice) {
+            let draft = &self.drafts[id];
             if draft.name.name == consumer {
                 continue;
             }
-            let produces = match &draft.output {
-                Some(ValueType::Record(r)) => &*r.name == ty,
-                _ => false,
-            };
-            if !produces || matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink) {
-                continue;
-            }
-            let declared: Vec<usize> = self
-                .streams
-                .iter()
-                .enumerate()
-                .filter(|(_, s)| s.as_ref().is_some_and(|s| s.producer == id && s.port.is_none()))
-                .map(|(i, _)| i)
-                .collect();
-            match declared.as_slice() {
-                [one] => {
+            match self.declared_over.get(&id).map(Vec::as_slice) {
+                Some([one]) => {
                     self.used[*one] = true;
                     if let Some(s) = self.streams[*one].clone() {
                         refs.push(s);
@@ -952,28 +964,32 @@ impl Resolver<'_, '_, '_> {
     }
 
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
-        let mut scope = MonitorScope { refs: BTreeMap::new(), resolver: self };
-        let (used_streams, quantified) = {
-            let mut diagnostics = Vec::new();
-            let registry = scope.resolver.checker.registry;
-            let types = scope.resolver.checker.types.clone();
-            let mut checker = FormulaChecker {
-                registry,
-                local_functions: &[],
-                types: &types,
-                context: Context::Monitor,
-                vars: Vec::new(),
-                streams: Some(&mut scope),
-                diagnostics: &mut diagnostics,
-                used_streams: Vec::new(),
-                quantified_types: Vec::new(),
-            };
-            checker.check_formula(&m.formula);
-            let used = std::mem::take(&mut checker.used_streams);
-            let quantified = std::mem::take(&mut checker.quantified_types);
-            scope.resolver.checker.diagnostics.extend(diagnostics);
-            (used, quantified)
+        // Borrow the checker's parts separately: the formula checker reads the types and the
+        // registry while the scope resolves stream names and marks streams used.
+        let mut diagnostics = Vec::new();
+        let mut scope = MonitorScope {
+            refs: BTreeMap::new(),
+            names: &self.checker.names,
+            drafts: self.drafts,
+            streams: self.streams,
+            used: self.used,
         };
+        let mut checker = FormulaChecker {
+            registry: self.checker.registry,
+            local_functions: &[],
+            types: &self.checker.types,
+            context: Context::Monitor,
+            vars: Vec::new(),
+            streams: Some(&mut scope),
+            diagnostics: &mut diagnostics,
+            used_streams: Vec::new(),
+            quantified_types: Vec::new(),
+        };
+        checker.check_formula(&m.formula);
+        let used_streams = std::mem::take(&mut checker.used_streams);
+        let quantified = std::mem::take(&mut checker.quantified_types);
+        drop(checker);
+        self.checker.diagnostics.extend(diagnostics);
         let refs = std::mem::take(&mut scope.refs);
         let mut inputs: Vec<hir::Input> = used_streams
             .iter()
@@ -1021,22 +1037,25 @@ impl Resolver<'_, '_, '_> {
 }
 
 /// Resolves the stream names a monitor's formula uses.
-struct MonitorScope<'r, 'c, 'a, 's> {
+struct MonitorScope<'r, 's> {
     refs: BTreeMap<String, hir::StreamRef>,
-    resolver: &'r mut Resolver<'c, 'a, 's>,
+    names: &'r BTreeMap<String, (Named, Span)>,
+    drafts: &'r [Draft<'s>],
+    streams: &'r [Option<hir::StreamRef>],
+    used: &'r mut [bool],
 }
 
-impl StreamScope for MonitorScope<'_, '_, '_, '_> {
+impl StreamScope for MonitorScope<'_, '_> {
     fn stream_type(&mut self, name: &ast::Ident) -> Option<Result<ValueType, Diagnostic>> {
         if let Some(stream) = self.refs.get(&name.name) {
             return Some(Ok(stream.ty.clone()));
         }
         let path = ast::Path { segments: vec![name.clone()], span: name.span };
-        match self.resolver.checker.names.get(&name.name).map(|(n, _)| *n) {
+        match self.names.get(&name.name).map(|(n, _)| *n) {
             Some(Named::Stream(index)) => {
-                self.resolver.used[index] = true;
+                self.used[index] = true;
                 // A declared stream whose own declaration failed was reported there.
-                let Some(stream) = self.resolver.streams[index].clone() else {
+                let Some(stream) = self.streams[index].clone() else {
                     return Some(Ok(ValueType::Any));
                 };
                 let ty = stream.ty.clone();
@@ -1044,7 +1063,7 @@ impl StreamScope for MonitorScope<'_, '_, '_, '_> {
                 Some(Ok(ty))
             }
             Some(Named::Process(id)) => {
-                let draft = &self.resolver.drafts[id];
+                let draft = &self.drafts[id];
                 if matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink) {
                     return Some(Err(diag::not_a_stream(name.span, &name.name, "a sink")));
                 }
@@ -1064,7 +1083,7 @@ impl StreamScope for MonitorScope<'_, '_, '_, '_> {
     }
 
     fn stream_names(&self) -> Vec<String> {
-        self.resolver.checker.names.keys().cloned().collect()
+        self.names.keys().cloned().collect()
     }
 }
 

@@ -1150,13 +1150,16 @@ impl<'d> Converter<'d> {
                     Infix::And | Infix::Or => {
                         let and = matches!(infix, Infix::And);
                         let depth = flat_depth(&lhs, and).max(flat_depth(&rhs, and));
-                        let mut items = Vec::new();
-                        for side in [lhs.expr, rhs.expr] {
-                            match side.kind {
-                                ast::ExprKind::And(children) if and => items.extend(children),
-                                ast::ExprKind::Or(children) if !and => items.extend(children),
-                                kind => items.push(ast::Expr { kind, span: side.span }),
-                            }
+                        // Extend the left operand's list in place: a chain of n `and`s costs O(n).
+                        let mut items = match lhs.expr.kind {
+                            ast::ExprKind::And(children) if and => children,
+                            ast::ExprKind::Or(children) if !and => children,
+                            kind => vec![ast::Expr { kind, span: lhs.expr.span }],
+                        };
+                        match rhs.expr.kind {
+                            ast::ExprKind::And(children) if and => items.extend(children),
+                            ast::ExprKind::Or(children) if !and => items.extend(children),
+                            kind => items.push(ast::Expr { kind, span: rhs.expr.span }),
                         }
                         let kind = if and { ast::ExprKind::And(items) } else { ast::ExprKind::Or(items) };
                         Operand { expr: ast::Expr { kind, span }, depth, bare_comparison: false }
