@@ -9,8 +9,28 @@ fn overview_spec_parses() {
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../specs/ok/overview.kpl")).unwrap();
     let parse = parse(&src);
     assert!(parse.diagnostics.is_empty(), "{:#?}", parse.diagnostics);
-    println!("{}", serde_json::to_string_pretty(&parse.spec).unwrap());
-    assert_eq!(parse.spec.items.len(), 14);
+    let kinds: Vec<&str> = parse
+        .spec
+        .items
+        .iter()
+        .map(|i| match i {
+            ast::Item::Type(_) => "type",
+            ast::Item::Process(_) => "process",
+            ast::Item::Stream(_) => "stream",
+            ast::Item::Link(_) => "link",
+            ast::Item::Predict(_) => "predict",
+            ast::Item::Forget(_) => "forget",
+            ast::Item::Monitor(_) => "monitor",
+            ast::Item::Deploy(_) => "deploy",
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            "type", "type", "type", "type", "process", "stream", "link", "link", "link", "predict", "predict", "forget",
+            "monitor", "process", "deploy"
+        ]
+    );
 }
 
 #[test]
