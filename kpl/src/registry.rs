@@ -26,6 +26,7 @@ fn functions(registry: &mut Registry) {
     registry.add_function(Function::new("min", vec![Float], Float, "smallest of its arguments").variadic());
     registry.add_function(Function::new("max", vec![Float], Float, "largest of its arguments").variadic());
     registry.add_function(Function::new("norm", vec![Vec2], Float, "length of a vector"));
+    registry.add_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
     registry.add_function(Function::new(
         "xydist",
         vec![Any, Any],

@@ -161,6 +161,7 @@ impl<'a> Checker<'a> {
         }
 
         let (predictions, forget) = self.anchoring(spec);
+        let identifications = self.identifications(spec, &drafts);
         let deploy = self.deploy(spec, &drafts, &stream_decls);
         let graph = self.graph(&processes);
 
@@ -176,6 +177,7 @@ impl<'a> Checker<'a> {
             streams: stream_map,
             predictions,
             forget,
+            identifications,
             deploy,
             graph,
         }
@@ -541,6 +543,57 @@ impl<'a> Checker<'a> {
             }
         }
         (predictions, forget)
+    }
+
+    fn identifications(&mut self, spec: &ast::Spec, drafts: &[Draft<'_>]) -> Vec<hir::Identification> {
+        let mut out: Vec<hir::Identification> = Vec::new();
+        let mut seen: BTreeMap<String, Span> = BTreeMap::new();
+        for item in &spec.items {
+            let ast::Item::Identify(decl) = item else { continue };
+            if let Some(first) =
+                seen.get(&decl.name.name).or_else(|| self.names.get(&decl.name.name).map(|(_, s)| s))
+            {
+                self.diagnostics.push(diag::duplicate(decl.name.span, "name", &decl.name.name, *first));
+                continue;
+            }
+            seen.insert(decl.name.name.clone(), decl.name.span);
+            let Some(ty) = self.record_type(&decl.ty) else { continue };
+            let linked_into =
+                drafts.iter().any(|d| matches!(d.decl, Decl::Link(l) if l.to_type.name == decl.ty.name));
+            if !linked_into {
+                self.diagnostics.push(
+                    diag::no_producer(
+                        decl.ty.span,
+                        &decl.ty.name,
+                        &format!("identification `{}`", decl.name.name),
+                    )
+                    .with_hint(format!(
+                        "an identification is completed by a link into its type: declare `link ... -> {}`",
+                        decl.ty.name
+                    )),
+                );
+            }
+            let mut diagnostics = Vec::new();
+            let mut checker = FormulaChecker {
+                registry: self.registry,
+                local_functions: &[],
+                types: &self.types,
+                context: Context::Identify,
+                vars: vec![("this".to_string(), ty)],
+                streams: None,
+                diagnostics: &mut diagnostics,
+                used_streams: Vec::new(),
+                quantified_types: Vec::new(),
+            };
+            checker.check_formula(&decl.description);
+            self.diagnostics.extend(diagnostics);
+            out.push(hir::Identification {
+                name: decl.name.name.clone(),
+                ty: decl.ty.name.clone(),
+                description: decl.description.clone(),
+            });
+        }
+        out
     }
 
     fn no_inputs(&mut self, entry: &Entry, call: &ast::Call) {

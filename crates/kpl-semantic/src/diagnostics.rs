@@ -46,7 +46,7 @@ pub const UNUSED_OUTPUT: &str = "W0202";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
-        .with_label(format!("no {what} of this name"))
+        .with_label(format!("no {what} is called `{name}`"))
         .with_hint_opt(did_you_mean(name, candidates))
 }
 

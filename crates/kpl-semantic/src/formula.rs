@@ -19,6 +19,8 @@ pub(crate) enum Context {
     Link { to_bound: bool },
     /// A monitor: names are streams; quantifiers range over objects of a type.
     Monitor,
+    /// A top-down identification: `this` is the sought object.
+    Identify,
 }
 
 /// Resolves a stream or process name to the type of its samples (monitors only). A monitor names
@@ -252,17 +254,23 @@ impl FormulaChecker<'_> {
             if matches!(self.context, Context::Link { .. }) {
                 names.extend(["from", "to"]);
             }
-            self.diagnostics.push(diag::unknown_name(first.span, "name", &first.name, &names).with_hint_opt(
-                Some(match self.context {
-                    Context::Link { to_bound: true } => {
-                        "link conditions talk about `from` and `to` (e.g. `from.pos`)".to_string()
-                    }
-                    Context::Link { to_bound: false } => {
-                        "an establish condition talks about `from` (e.g. `from.pos`)".to_string()
-                    }
-                    Context::Monitor => "monitors name streams and quantified variables".to_string(),
-                }),
-            ));
+            let context_hint = match self.context {
+                Context::Link { to_bound: true } => {
+                    "link conditions talk about `from` and `to` (e.g. `from.pos`)"
+                }
+                Context::Link { to_bound: false } => {
+                    "an establish condition talks about `from` (e.g. `from.pos`)"
+                }
+                Context::Monitor => "monitors name streams and quantified variables",
+                Context::Identify => {
+                    "an identification describes `this`, the object sought (e.g. `this.pos`)"
+                }
+            };
+            let mut d = diag::unknown_name(first.span, "name", &first.name, &names);
+            if d.hint.is_none() {
+                d = d.with_hint(context_hint);
+            }
+            self.diagnostics.push(d);
             return ValueType::Any;
         };
         for segment in &path.segments[1..] {

@@ -23,6 +23,8 @@ pub struct Spec {
     pub streams: BTreeMap<String, StreamRef>,
     pub predictions: Vec<Prediction>,
     pub forget: Forget,
+    /// Objects asked for by description (top-down identification).
+    pub identifications: Vec<Identification>,
     pub deploy: Option<Deploy>,
     pub graph: ProcessGraph,
 }
@@ -294,6 +296,15 @@ impl Policy {
 pub struct Prediction {
     pub ty: String,
     pub model: Call,
+}
+
+/// `identify NAME : TYPE where FORMULA`: a partial object of `ty` named `name`, to be anchored to
+/// an object that satisfies the description (`this` is the candidate, of type `ty`).
+#[derive(Debug, Clone)]
+pub struct Identification {
+    pub name: String,
+    pub ty: String,
+    pub description: ast::Expr,
 }
 
 /// When objects that are not anchored are removed.

@@ -69,6 +69,7 @@ pub enum Item {
     Link(LinkDecl),
     Predict(PredictDecl),
     Forget(ForgetDecl),
+    Identify(IdentifyDecl),
     Monitor(MonitorDecl),
     Deploy(DeployDecl),
 }
@@ -82,6 +83,7 @@ impl Item {
             Item::Link(d) => d.span,
             Item::Predict(d) => d.span,
             Item::Forget(d) => d.span,
+            Item::Identify(d) => d.span,
             Item::Monitor(d) => d.span,
             Item::Deploy(d) => d.span,
         }
@@ -377,6 +379,18 @@ pub struct PredictDecl {
 pub struct ForgetDecl {
     pub ty: Option<Ident>,
     pub after: DurationLit,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// `identify suspect : Car where xydist(this.pos, vec2(120.0, 40.0)) < 20.0 and this.vel.y > 0.0`:
+/// top-down identification. A partial object of the type is added, and anchoring tries to
+/// complete it from incoming percepts; `this` is the candidate object of that type.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IdentifyDecl {
+    pub name: Ident,
+    pub ty: Ident,
+    pub description: Expr,
     #[serde(skip)]
     pub span: Span,
 }

@@ -156,6 +156,12 @@ impl Formatter<'_> {
                 duration(&mut self.out, &decl.after);
                 self.end_line(decl.span.end);
             }
+            ast::Item::Identify(decl) => {
+                self.begin_line(decl.span, "", false);
+                let _ = write!(self.out, "identify {} : {} where ", decl.name.name, decl.ty.name);
+                expr(&mut self.out, &decl.description, 0);
+                self.end_line(decl.span.end);
+            }
             ast::Item::Monitor(decl) => {
                 self.begin_line(decl.span, "", false);
                 let _ = write!(self.out, "monitor {} = ", decl.name.name);

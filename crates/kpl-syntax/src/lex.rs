@@ -8,8 +8,10 @@ use crate::ast::Span;
 pub const MAX_NESTING: usize = 64;
 
 /// Words that start a top-level item.
-pub const ITEM_KEYWORDS: [&str; 10] =
-    ["type", "source", "compute", "sink", "stream", "link", "predict", "forget", "monitor", "deploy"];
+pub const ITEM_KEYWORDS: [&str; 11] = [
+    "type", "source", "compute", "sink", "stream", "link", "predict", "forget", "identify", "monitor",
+    "deploy",
+];
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Comment {

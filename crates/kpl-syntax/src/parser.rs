@@ -301,7 +301,7 @@ fn hint_for(positives: &[Rule], expected: &[String], source: &str, pos: usize) -
         return Some("a `(` is not closed before the next item".into());
     }
     if positives.contains(&Rule::EOI) && positives.len() <= 2 {
-        return Some("a file is a sequence of items: type, source, compute, sink, stream, link, predict, forget, monitor, deploy".into());
+        return Some("a file is a sequence of items: type, source, compute, sink, stream, link, predict, forget, identify, monitor, deploy".into());
     }
     None
 }
@@ -312,7 +312,7 @@ fn rule_name(rule: Rule) -> &'static str {
     match rule {
         Rule::EOI => "end of file",
         Rule::item => {
-            "an item (type, source, compute, sink, stream, link, predict, forget, monitor or deploy)"
+            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor or deploy)"
         }
         Rule::digits | Rule::exponent => "a number",
         Rule::arg => "an input stream or a parameter `name: value`",
@@ -321,7 +321,7 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::infix => "an operator",
         Rule::WHITESPACE | Rule::COMMENT => "a comment",
         Rule::file => {
-            "an item (type, source, compute, sink, stream, link, predict, forget, monitor or deploy)"
+            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor or deploy)"
         }
         Rule::formula_input => "a formula",
         Rule::ident_char | Rule::ident | Rule::keyword => "a name",
@@ -340,6 +340,9 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::kw_predict => "`predict`",
         Rule::kw_forget => "`forget`",
         Rule::kw_after => "`after`",
+        Rule::kw_identify => "`identify`",
+        Rule::kw_where => "`where`",
+        Rule::identify_decl => "an identification `identify NAME : TYPE where FORMULA`",
         Rule::kw_monitor => "`monitor`",
         Rule::kw_deploy => "`deploy`",
         Rule::kw_host => "`host`",
@@ -577,6 +580,7 @@ impl<'d> Converter<'d> {
                 Rule::link_decl => ast::Item::Link(self.link_decl(pair)),
                 Rule::predict_decl => ast::Item::Predict(self.predict_decl(pair)),
                 Rule::forget_decl => ast::Item::Forget(self.forget_decl(pair)),
+                Rule::identify_decl => ast::Item::Identify(self.identify_decl(pair)),
                 Rule::monitor_decl => ast::Item::Monitor(self.monitor_decl(pair)),
                 Rule::deploy_decl => ast::Item::Deploy(self.deploy_decl(pair)),
                 _ => continue, // EOI
@@ -917,6 +921,23 @@ impl<'d> Converter<'d> {
             }
         }
         decl
+    }
+
+    fn identify_decl(&mut self, pair: Pair<'_, Rule>) -> ast::IdentifyDecl {
+        let span = self.span(&pair);
+        let mut idents = Vec::new();
+        let mut description = ast::Expr { kind: ast::ExprKind::Bool(true), span };
+        for p in pair.into_inner() {
+            match p.as_rule() {
+                Rule::ident => idents.push(self.ident(p)),
+                Rule::expr => description = self.expr(p),
+                _ => {}
+            }
+        }
+        let mut idents = idents.into_iter();
+        let name = idents.next().unwrap_or_else(|| placeholder_ident(span));
+        let ty = idents.next().unwrap_or_else(|| placeholder_ident(span));
+        ast::IdentifyDecl { name, ty, description, span }
     }
 
     fn monitor_decl(&mut self, pair: Pair<'_, Rule>) -> ast::MonitorDecl {

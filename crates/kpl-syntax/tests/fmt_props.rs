@@ -201,6 +201,7 @@ fn item() -> BoxedStrategy<String> {
             None => format!("forget after {d}"),
         }),
         (name(), formula()).prop_map(|(n, f)| format!("monitor {n} = {f}")),
+        (name(), type_name(), formula()).prop_map(|(n, t, f)| format!("identify {n} : {t} where {f}")),
         proptest::collection::vec((name(), proptest::collection::vec(name(), 0..3), any::<bool>()), 0..3)
             .prop_map(|hosts| {
                 let hosts: Vec<String> = hosts

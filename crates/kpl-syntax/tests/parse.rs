@@ -20,6 +20,7 @@ fn overview_spec_parses() {
             ast::Item::Link(_) => "link",
             ast::Item::Predict(_) => "predict",
             ast::Item::Forget(_) => "forget",
+            ast::Item::Identify(_) => "identify",
             ast::Item::Monitor(_) => "monitor",
             ast::Item::Deploy(_) => "deploy",
         })
@@ -27,8 +28,8 @@ fn overview_spec_parses() {
     assert_eq!(
         kinds,
         [
-            "type", "type", "type", "type", "process", "stream", "link", "link", "link", "predict", "predict", "forget",
-            "monitor", "process", "deploy"
+            "type", "type", "type", "type", "process", "stream", "link", "link", "link", "predict",
+            "predict", "forget", "identify", "monitor", "process", "deploy"
         ]
     );
 }
