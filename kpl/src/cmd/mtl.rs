@@ -301,6 +301,10 @@ pub struct BenchArgs {
     /// columns are left empty.
     #[arg(long)]
     r2u2_cli: Option<PathBuf>,
+    /// Object pairs for the link-condition table (one progressor per pair and condition, as a link
+    /// process keeps them); 0 skips it.
+    #[arg(long, default_value_t = 10_000)]
+    links: usize,
 }
 
 /// A state of a Timescales trace, as the engine reads it.
@@ -534,6 +538,9 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         }
     }
     let _ = std::fs::remove_dir_all(&scratch);
+    if args.links > 0 {
+        bench_links(args.links, &mut stdout);
+    }
     if let (Some(lo), Some(hi)) = (args.bounds.first(), args.bounds.last()) {
         let _ =
             writeln!(stdout, "\nCost per state, bound {hi} relative to bound {lo} (target: at most 2):\n");
@@ -550,4 +557,110 @@ pub fn bench(args: BenchArgs) -> ExitCode {
 /// `1234567.0` as `1.23 M`.
 fn si(x: f64) -> String {
     if x >= 1e6 { format!("{:.2} M", x / 1e6) } else { format!("{:.0} k", x / 1e3) }
+}
+
+/// The state of one link instance: the two objects bound to `from` and `to`.
+struct PairState<'a> {
+    from: &'a Value,
+    to: &'a Value,
+}
+
+impl State for PairState<'_> {
+    fn value(&self, slot: kpl_mtl::SlotId) -> Option<&Value> {
+        match slot {
+            0 => Some(self.from),
+            1 => Some(self.to),
+            _ => None,
+        }
+    }
+}
+
+/// DyKnow's link conditions (paper, section V) for `links` object pairs at 10 Hz for 10 s, in
+/// microseconds with millisecond bounds, as the runtime will run them: one progressor per pair.
+fn bench_links(links: usize, out: &mut impl Write) {
+    const STEPS: usize = 100;
+    const DT: Time = 100_000;
+    let conditions = [
+        ("reestablish", "eventually[0, 1000] xydist(from.pos, to.pos) < 10.0"),
+        ("establish", "eventually[1000, inf] always[0, 1000] on_road(from.pos)"),
+        ("maintain", "always eventually[0, 10000] always[0, 1000] on_road(from.pos)"),
+    ];
+    // Object i moves along x at 10 m/s; its partner is 4 m (pairs of even i) or 30 m away; it
+    // leaves the road (|y| >= 5) for 0.3 s every 1.7 s, shifted by i.
+    let objects = |step: usize, offset: f64| -> Vec<Value> {
+        (0..links)
+            .map(|i| {
+                let x = i as f64 * 50.0 + step as f64 + offset * if i % 2 == 0 { 4.0 } else { 30.0 };
+                let off_road = (step + i) % 17 < 3;
+                let y = if off_road { 8.0 } else { 1.0 };
+                let fields = vec![(Arc::from("pos"), Value::vec2(x, y))];
+                Value::Record(Arc::new(kpl_core::Record { id: None, fields }))
+            })
+            .collect()
+    };
+    let from: Vec<Vec<Value>> = (0..STEPS).map(|k| objects(k, 0.0)).collect();
+    let to: Vec<Vec<Value>> = (0..STEPS).map(|k| objects(k, 1.0)).collect();
+    let _ = writeln!(
+        out,
+        "\nLink conditions: {links} object pairs, one progressor each, {STEPS} states 100 ms apart:\n"
+    );
+    let _ = writeln!(
+        out,
+        "| condition | formula | instance-steps/s | ns per instance-step | largest residual | decisions |"
+    );
+    let _ = writeln!(out, "|---|---|---:|---:|---:|---:|");
+    for (name, text) in conditions {
+        let mut context = Context::new(TimeUnit::Us, TimeUnit::Ms);
+        context.declare_value("from");
+        context.declare_value("to");
+        context.register_function(kpl_mtl::Function::new("on_road", (1, Some(1)), |args| match &args[0] {
+            Value::Vec2([_, y]) => Ok(Value::Bool(y.abs() < 5.0)),
+            other => Err(format!("expected a position, found {}", other.kind())),
+        }));
+        let formula = match kpl_syntax::parse_formula(text)
+            .map_err(|_| "syntax".to_string())
+            .and_then(|e| Formula::from_ast(&e, &mut context).map_err(|e| format!("{e:?}")))
+        {
+            Ok(f) => Arc::new(f),
+            Err(e) => {
+                eprintln!("error: {name}: {e}");
+                return;
+            }
+        };
+        let mut progressors: Vec<Progressor> = (0..links).map(|_| Progressor::new(formula.clone())).collect();
+        let start = Instant::now();
+        let mut largest = 0;
+        let mut decisions = 0usize;
+        for step in 0..STEPS {
+            let time = step as Time * DT;
+            for (i, progressor) in progressors.iter_mut().enumerate() {
+                let state = PairState { from: &from[step][i], to: &to[step][i] };
+                match progressor.step(time, &state) {
+                    // A decided condition is started again, as a link process does when it goes
+                    // back to unlinked, so every instance works at every state.
+                    Ok(Some(_)) => {
+                        decisions += 1;
+                        progressor.reset();
+                    }
+                    Ok(None) => {}
+                    Err(e) => {
+                        eprintln!("error: {name}: {e}");
+                        return;
+                    }
+                }
+            }
+            // Sizes are sampled every second so the timing stays about stepping.
+            if step % 10 == 9 {
+                largest = largest.max(progressors.iter().map(Progressor::residual_size).max().unwrap_or(0));
+            }
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let steps = (links * STEPS) as f64;
+        let _ = writeln!(
+            out,
+            "| {name} | `{text}` | {} | {:.0} | {largest} | {decisions} |",
+            si(steps / seconds),
+            seconds * 1e9 / steps
+        );
+    }
 }
