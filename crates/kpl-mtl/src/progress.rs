@@ -594,9 +594,8 @@ impl<S: State + ?Sized> Stepper<'_, S> {
         }
         items.sort_unstable();
         items.dedup();
-        if items.len() > 1 {
-            self.merge_windows(is_and, &mut items);
-        }
+        // Children stay sorted (the canonical order for hash-consing) unless windows merged.
+        let merged = items.len() > 1 && self.merge_windows(is_and, &mut items);
         if items.len() > 1 && items.len() <= IMPLICATION_CHECK_LIMIT {
             self.drop_implied(is_and, &mut items);
         }
@@ -604,7 +603,9 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             0 => neutral,
             1 => items[0],
             _ => {
-                items.sort_unstable();
+                if merged {
+                    items.sort_unstable();
+                }
                 let node = Node { kind, lo: 0, hi: 0, tpl: 0, env: 0, kids: 0, n_kids: 0 };
                 self.new.intern(node, &items)
             }
@@ -617,7 +618,8 @@ impl<S: State + ?Sized> Stepper<'_, S> {
     /// in an `and`, `always`/`release` windows that overlap or touch become their union and an
     /// `eventually`/`until` whose window contains another's is dropped (it is implied); in an
     /// `or`, the duals.
-    fn merge_windows(&mut self, is_and: bool, items: &mut Vec<u32>) {
+    /// Returns whether `items` changed (and so needs sorting again).
+    fn merge_windows(&mut self, is_and: bool, items: &mut Vec<u32>) -> bool {
         let mut windows = std::mem::take(&mut self.scratch.windows);
         windows.clear();
         for &id in items.iter() {
@@ -628,14 +630,14 @@ impl<S: State + ?Sized> Stepper<'_, S> {
         }
         if windows.len() < 2 {
             self.scratch.windows = windows;
-            return;
+            return false;
         }
         windows.sort_unstable_by_key(|w| (w.op, w.tpl, w.env, w.lo, w.hi));
         let shares_body =
             windows.windows(2).any(|p| (p[0].op, p[0].tpl, p[0].env) == (p[1].op, p[1].tpl, p[1].env));
         if !shares_body {
             self.scratch.windows = windows;
-            return;
+            return false;
         }
         items.retain(|id| !matches!(self.new.nodes[*id as usize].kind, Kind::Temporal(_)));
         let mut group_start = 0;
@@ -680,6 +682,7 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             group_start = group_end;
         }
         self.scratch.windows = windows;
+        true
     }
 
     fn window_node(&mut self, w: WindowItem) -> u32 {
