@@ -158,8 +158,8 @@ fn finite(x: f64, func: &str) -> Result<Value, String> {
 }
 
 /// The built-in functions: `abs`, `sqrt`, `min`, `max`, `floor`, `ceil`, `norm` (length of a
-/// vec2), `dist` and `xydist` (Euclidean distance of two vec2 positions, or of two records' `pos`;
-/// `dist` of two numbers is `|a - b|`).
+/// vec2), `vec2(x, y)`, `dist` and `xydist` (Euclidean distance of two vec2 positions, or of two
+/// records' `pos`; `dist` of two numbers is `|a - b|`).
 pub fn builtins() -> Vec<Function> {
     vec![
         Function::new("abs", (1, Some(1)), |a| match &a[0] {
@@ -177,6 +177,10 @@ pub fn builtins() -> Vec<Function> {
         Function::new("norm", (1, Some(1)), |a| {
             let [x, y] = point(&a[0], "norm")?;
             finite(x.hypot(y), "norm")
+        }),
+        Function::new("vec2", (2, Some(2)), |a| {
+            let (x, y) = (number(&a[0], "vec2")?, number(&a[1], "vec2")?);
+            Ok(Value::Vec2([x, y]))
         }),
         Function::new("xydist", (2, Some(2)), |a| {
             let [x1, y1] = point(&a[0], "xydist")?;
@@ -487,6 +491,8 @@ mod tests {
         let f = builtins();
         let xydist = f.iter().find(|f| &*f.name == "xydist").unwrap();
         assert_eq!((xydist.body)(&[Value::vec2(0.0, 0.0), Value::vec2(3.0, 4.0)]), Ok(Value::Float(5.0)));
+        let vec2 = f.iter().find(|f| &*f.name == "vec2").unwrap();
+        assert_eq!((vec2.body)(&[Value::Int(3), Value::Float(4.5)]), Ok(Value::vec2(3.0, 4.5)));
         assert!((xydist.body)(&[Value::Int(1), Value::vec2(3.0, 4.0)]).is_err());
         let max = f.iter().find(|f| &*f.name == "max").unwrap();
         assert_eq!((max.body)(&[Value::Int(1), Value::Int(7), Value::Int(3)]), Ok(Value::Int(7)));
