@@ -1,0 +1,61 @@
+//! Formula functions: the signatures of `kpl-mtl`'s built-ins, and `vec2(x, y)`.
+
+use kpl_core::{Value, ValueType};
+use kpl_semantic::registry::Function;
+
+use crate::registry::Registry;
+
+pub(super) fn register(registry: &mut Registry) {
+    use ValueType::{Any, Float, Vec2};
+    for (name, summary) in [
+        ("abs", "absolute value"),
+        ("sqrt", "square root (an error on negative numbers)"),
+        ("floor", "largest integer not above"),
+        ("ceil", "smallest integer not below"),
+    ] {
+        registry.add_builtin_function(Function::new(name, vec![Float], Float, summary));
+    }
+    registry.add_builtin_function(
+        Function::new("min", vec![Float], Float, "smallest of its arguments").variadic(),
+    );
+    registry.add_builtin_function(
+        Function::new("max", vec![Float], Float, "largest of its arguments").variadic(),
+    );
+    registry.add_builtin_function(Function::new("norm", vec![Vec2], Float, "length of a vector"));
+    registry.add_builtin_function(Function::new(
+        "xydist",
+        vec![Any, Any],
+        Float,
+        "distance in the x/y plane between two positions, or two objects' `pos`",
+    ));
+    registry.add_builtin_function(Function::new(
+        "dist",
+        vec![Any, Any],
+        Float,
+        "distance between two positions (or objects' `pos`), or |a - b| of two numbers",
+    ));
+    registry.add_function(
+        Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"),
+        kpl_mtl::Function::new("vec2", (2, Some(2)), |args| match (args[0].as_f64(), args[1].as_f64()) {
+            (Some(x), Some(y)) => Ok(Value::vec2(x, y)),
+            _ => Err(format!("vec2 needs two numbers, found {} and {}", args[0].kind(), args[1].kind())),
+        }),
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every function the registry declares as built in is one `kpl-mtl` implements.
+    #[test]
+    fn builtin_signatures_match_the_engine() {
+        let registry = crate::registry::Registry::with_builtins();
+        let engine: Vec<String> = kpl_mtl::builtins().iter().map(|f| f.name.to_string()).collect();
+        let own: Vec<String> = registry.functions().iter().map(|f| f.name.to_string()).collect();
+        for f in registry.signatures().functions() {
+            assert!(engine.contains(&f.name) || own.contains(&f.name), "{} has no implementation", f.name);
+        }
+        for name in &engine {
+            assert!(registry.signatures().function(name).is_some(), "{name} has no signature");
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! What a running process can use: its outputs, the clock, the stop signal, its counters.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use kpl_core::{Time, Value};
+
+use crate::clock::Clock;
+use crate::edge::{Closed, EdgeSender};
+use crate::process::ProcessError;
+use crate::sample::Sample;
+use crate::stats::{Malformed, ProcessStats, RunStats};
+use crate::transport::RemoteSender;
+
+/// Asks every source to stop (Ctrl-C, the end of `--for`, a failure in a `--strict` run).
+#[derive(Debug, Clone, Default)]
+pub struct StopSignal {
+    stopped: Arc<AtomicBool>,
+    notify: Arc<tokio::sync::Notify>,
+}
+
+impl StopSignal {
+    pub fn stop(&self) {
+        self.stopped.store(true, Ordering::SeqCst);
+        self.notify.notify_waiters();
+    }
+
+    pub fn is_stopped(&self) -> bool {
+        self.stopped.load(Ordering::SeqCst)
+    }
+
+    /// Resolves once the run is asked to stop.
+    pub async fn stopped(&self) {
+        loop {
+            let notified = self.notify.notified();
+            if self.is_stopped() {
+                return;
+            }
+            notified.await;
+        }
+    }
+}
+
+/// The output ports of a process: for each port, the edges to local consumers and the remote
+/// publishers (streams going to other hosts).
+#[derive(Default)]
+pub struct Outputs {
+    pub(crate) ports: Vec<Port>,
+}
+
+#[derive(Default)]
+pub(crate) struct Port {
+    pub(crate) local: Vec<EdgeSender>,
+    pub(crate) remote: Vec<Box<dyn RemoteSender>>,
+}
+
+impl std::fmt::Debug for Outputs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Outputs").field("ports", &self.ports.len()).finish()
+    }
+}
+
+impl Outputs {
+    pub(crate) fn with_ports(n: usize) -> Outputs {
+        Outputs { ports: (0..n).map(|_| Port::default()).collect() }
+    }
+
+    /// Sends a sample to every consumer of output `port`. A consumer that has stopped is
+    /// forgotten; the others still get the sample.
+    pub async fn send(&mut self, port: usize, sample: Sample) {
+        let Some(p) = self.ports.get_mut(port) else { return };
+        let mut gone = Vec::new();
+        for (i, sender) in p.local.iter().enumerate() {
+            // Cloning a sample shares its payload.
+            if sender.send(sample.clone()).await == Err(Closed) {
+                gone.push(i);
+            }
+        }
+        for i in gone.into_iter().rev() {
+            p.local.remove(i);
+        }
+        for remote in &mut p.remote {
+            remote.send(&sample).await;
+        }
+    }
+
+    /// Whether nothing consumes any output (a sink, or a process whose consumers all stopped).
+    pub fn is_empty(&self) -> bool {
+        self.ports.iter().all(|p| p.local.is_empty() && p.remote.is_empty())
+    }
+
+    /// Ends every output: local consumers see the end of their input, remote ones an end marker.
+    pub async fn close(&mut self) {
+        for port in &mut self.ports {
+            port.local.clear();
+            for remote in &mut port.remote {
+                remote.end().await;
+            }
+            port.remote.clear();
+        }
+    }
+}
+
+/// What a [`crate::process::Source`] runs with.
+pub struct SourceContext {
+    pub name: String,
+    pub clock: Clock,
+    pub(crate) outputs: Outputs,
+    pub(crate) stop: StopSignal,
+    /// The run ends at this clock time (`--for`), if set: later samples are not emitted.
+    pub end: Option<Time>,
+    pub(crate) strict: bool,
+    pub stats: Arc<ProcessStats>,
+    pub(crate) run_stats: Arc<RunStats>,
+}
+
+impl std::fmt::Debug for SourceContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SourceContext").field("name", &self.name).field("end", &self.end).finish()
+    }
+}
+
+impl SourceContext {
+    pub fn now(&self) -> Time {
+        self.clock.now()
+    }
+
+    /// Whether the source should stop now (Ctrl-C, `--for` reached, a strict failure).
+    pub fn should_stop(&self) -> bool {
+        self.stop.is_stopped() || self.end.is_some_and(|end| self.clock.now() > end)
+    }
+
+    /// Waits until clock time `t`. Returns false if the run stops first, or if `t` is past the
+    /// run's end (the sample at `t` must then not be emitted).
+    pub async fn wait_until(&self, t: Time) -> bool {
+        if self.end.is_some_and(|end| t > end) {
+            return false;
+        }
+        tokio::select! {
+            biased;
+            () = self.stop.stopped() => false,
+            () = self.clock.sleep_until(t) => !self.stop.is_stopped(),
+        }
+    }
+
+    /// Emits a value on the default output, valid at `valid`, available now.
+    pub async fn emit(&mut self, valid: Time, value: Value) {
+        let now = self.clock.now();
+        self.emit_sample(Sample::new(valid, now, value)).await;
+    }
+
+    /// Emits a sample on the default output as it is (replay keeps recorded times).
+    pub async fn emit_sample(&mut self, sample: Sample) {
+        self.run_stats.observe_time(sample.available);
+        self.outputs.send(0, sample).await;
+    }
+
+    /// Counts a malformed input and says where it came from; in a `--strict` run it is an error
+    /// that stops the run.
+    pub fn malformed(
+        &self,
+        location: impl Into<String>,
+        error: impl Into<String>,
+    ) -> Result<(), ProcessError> {
+        let malformed = Malformed { location: location.into(), error: error.into() };
+        tracing::warn!(process = %self.name, location = %malformed.location, "malformed input: {}", malformed.error);
+        if self.strict {
+            return Err(ProcessError::Strict { location: malformed.location, error: malformed.error });
+        }
+        self.stats.malformed(malformed);
+        Ok(())
+    }
+
+    /// Whether every consumer of this source has stopped.
+    pub fn unconsumed(&self) -> bool {
+        self.outputs.is_empty()
+    }
+}

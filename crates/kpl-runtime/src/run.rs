@@ -1,0 +1,729 @@
+//! Running a checked spec: build every process from the registry, wire the edges (in-process
+//! queues, or a transport between hosts), start the tasks, stop cleanly, and report.
+//!
+//! With `ClockKind::Sim` the run happens on a single-threaded tokio runtime with paused time,
+//! so a run with a fixed seed produces the same output files every time; with `ClockKind::Wall`
+//! on a multi-threaded one. A run ends when every source has ended and every queue has drained,
+//! when `--for` has passed, or on Ctrl-C; sinks are flushed in every case.
+
+use std::collections::BTreeMap;
+use std::future::poll_fn;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::task::Poll;
+use std::time::{Duration, Instant};
+
+use kpl_core::Time;
+use kpl_semantic::hir::{self, ProcessId};
+use kpl_semantic::registry::EntryKind;
+use kpl_syntax::ast::Overflow;
+
+use crate::clock::{Clock, ClockKind};
+use crate::context::{Outputs, SourceContext, StopSignal};
+use crate::edge::{EdgeReceiver, EdgeSender, Received, edge};
+use crate::policy::PolicyFilter;
+use crate::process::{AsyncUnit, Emitter, Input, ProcessError, Source, SyncUnit, Trigger};
+use crate::registry::{BuildContext, BuildError, Extensions, Registry};
+use crate::sample::Sample;
+use crate::stats::{ProcessStats, RunStats, Summary};
+use crate::sync::{StateSync, SyncInput, SyncState};
+use crate::transport::{Remote, StreamKey, Transport, TransportError};
+
+/// How to run a spec.
+#[derive(Debug, Clone)]
+pub struct RunConfig {
+    pub clock: ClockKind,
+    /// Stop after this much clock time (`--for`).
+    pub duration: Option<Time>,
+    /// The run's seed (`--seed`).
+    pub seed: u64,
+    /// Where sinks write relative paths (`--out`).
+    pub out_dir: PathBuf,
+    /// The spec's directory: where sources read relative paths.
+    pub spec_dir: PathBuf,
+    /// The spec's name (its file stem): names the streams between hosts.
+    pub spec_name: String,
+    /// Stop at the first malformed input (`--strict`).
+    pub strict: bool,
+    /// Run only this host's processes (`--host`).
+    pub host: Option<String>,
+    /// Print a progress line on stderr once a second.
+    pub progress: bool,
+}
+
+impl Default for RunConfig {
+    fn default() -> RunConfig {
+        RunConfig {
+            clock: ClockKind::Sim,
+            duration: None,
+            seed: 0,
+            out_dir: PathBuf::from("out"),
+            spec_dir: PathBuf::from("."),
+            spec_name: "spec".into(),
+            strict: false,
+            host: None,
+            progress: false,
+        }
+    }
+}
+
+/// Why a run could not start or was cut short.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("cannot build {} process(es):\n{}", .0.len(), .0.iter().map(|e| format!("  {e}")).collect::<Vec<_>>().join("\n"))]
+    Build(Vec<BuildError>),
+    #[error("{0}")]
+    Host(String),
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    #[error("cannot start the runtime: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ending {
+    /// Every source ended and every queue drained.
+    SourcesEnded,
+    /// `--for` passed.
+    DurationReached,
+    Interrupted,
+    /// A malformed input in a `--strict` run.
+    Strict,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunReport {
+    pub ending: Ending,
+    /// Clock time elapsed (simulated or wall), microseconds.
+    pub clock_elapsed: Time,
+    /// Wall time the run took, microseconds.
+    pub wall_elapsed: Time,
+    /// Processes that stopped with an error.
+    pub failures: Vec<String>,
+    pub summary: Summary,
+}
+
+/// Opens the transport for streams between hosts (`kpl-zenoh` implements it).
+pub trait TransportFactory: Send + Sync {
+    fn open<'a>(
+        &'a self,
+        spec: &'a hir::Spec,
+        host: &'a str,
+    ) -> crate::process::BoxFuture<'a, Result<Arc<dyn Transport>, TransportError>>;
+}
+
+/// Runs a spec to its end on a runtime of the configured kind.
+pub fn run(
+    spec: &hir::Spec,
+    registry: &Registry,
+    config: &RunConfig,
+    transport: Option<&dyn TransportFactory>,
+) -> Result<RunReport, RunError> {
+    let runtime = match config.clock {
+        ClockKind::Sim => {
+            tokio::runtime::Builder::new_current_thread().enable_time().start_paused(true).build()?
+        }
+        ClockKind::Wall => {
+            tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?
+        }
+    };
+    let report = runtime.block_on(run_async(spec, registry, config, transport));
+    // Instances and transport tasks that outlive the run are cut off here.
+    runtime.shutdown_timeout(Duration::from_millis(200));
+    report
+}
+
+struct ProcessTask {
+    id: ProcessId,
+    kind: TaskKind,
+    outputs: Outputs,
+    inputs: Vec<InputEdge>,
+}
+
+enum TaskKind {
+    Source(Box<dyn Source>),
+    Unit(Box<dyn AsyncUnit>),
+}
+
+struct InputEdge {
+    rx: EdgeReceiver,
+    filter: PolicyFilter,
+    feedback: bool,
+    name: Arc<str>,
+}
+
+/// Runs a spec on the current tokio runtime (which must match the clock: paused and
+/// single-threaded for `Sim`).
+pub async fn run_async(
+    spec: &hir::Spec,
+    registry: &Registry,
+    config: &RunConfig,
+    transport_factory: Option<&dyn TransportFactory>,
+) -> Result<RunReport, RunError> {
+    let wall_start = Instant::now();
+    let clock = Clock::new(config.clock);
+    let stats = Arc::new(RunStats::default());
+    let stop = StopSignal::default();
+    let end = config.duration.map(|d| clock.start() + d);
+
+    let local = local_processes(spec, config.host.as_deref())?;
+    let transport = match (&config.host, transport_factory) {
+        (Some(host), Some(factory)) if needs_transport(spec, &local) => Some(factory.open(spec, host).await?),
+        (Some(_), None) if needs_transport(spec, &local) => {
+            return Err(RunError::Host(
+                "this spec sends streams between hosts, but no transport is available".into(),
+            ));
+        }
+        _ => None,
+    };
+
+    // Build every local process.
+    let mut shared = Extensions::default();
+    let mut tasks: BTreeMap<ProcessId, ProcessTask> = BTreeMap::new();
+    let mut errors = Vec::new();
+    for &id in &local {
+        let process = &spec.processes[id];
+        let process_stats = stats.process(&process.name);
+        let mut ctx = BuildContext {
+            spec,
+            process,
+            spec_dir: &config.spec_dir,
+            out_dir: &config.out_dir,
+            run_seed: config.seed,
+            clock: config.clock,
+            shared: &mut shared,
+        };
+        let built = match &process.kind {
+            hir::ProcessKind::Source(call) => {
+                registry.build_source(&mut ctx, &call.entry).map(TaskKind::Source)
+            }
+            hir::ProcessKind::Compute(call) => {
+                registry.build_unit(&mut ctx, EntryKind::Compute, &call.entry).map(TaskKind::Unit)
+            }
+            hir::ProcessKind::Sink(call) => {
+                registry.build_unit(&mut ctx, EntryKind::Sink, &call.entry).map(TaskKind::Unit)
+            }
+            hir::ProcessKind::Link(_) => registry.build_link(&mut ctx).map(TaskKind::Unit),
+            hir::ProcessKind::Monitor(monitor) => {
+                crate::monitor::build(process, monitor, registry, process_stats)
+                    .map(|m| TaskKind::Unit(Box::new(SyncUnit(m)) as Box<dyn AsyncUnit>))
+            }
+        };
+        match built {
+            Ok(kind) => {
+                tasks.insert(
+                    id,
+                    ProcessTask {
+                        id,
+                        kind,
+                        outputs: Outputs::with_ports(1 + process.ports.len()),
+                        inputs: Vec::new(),
+                    },
+                );
+            }
+            Err(e) => errors.push(e),
+        }
+    }
+    if !errors.is_empty() {
+        return Err(RunError::Build(errors));
+    }
+
+    // Wire the edges: in-process queues between local processes, subscriptions from remote ones.
+    let mut remote_feeds: BTreeMap<(ProcessId, Option<String>), Vec<EdgeSender>> = BTreeMap::new();
+    for &consumer in &local {
+        let process = &spec.processes[consumer];
+        for input in &process.inputs {
+            let policy = &input.stream.policy;
+            let overflow = if policy.feedback { Overflow::DropOldest } else { policy.queue.overflow };
+            let capacity = usize::try_from(policy.queue.capacity).unwrap_or(usize::MAX);
+            let edge_stats = stats.edge(&input.stream.name, &process.name);
+            let (tx, rx) = edge(capacity, overflow, edge_stats.clone());
+            let producer = input.stream.producer;
+            let port = port_index(&spec.processes[producer], input.stream.port.as_deref());
+            match tasks.get_mut(&producer) {
+                Some(task) if local.contains(&producer) => task.outputs.ports[port].local.push(tx),
+                _ => remote_feeds.entry((producer, input.stream.port.clone())).or_default().push(tx),
+            }
+            if let Some(task) = tasks.get_mut(&consumer) {
+                task.inputs.push(InputEdge {
+                    rx,
+                    filter: PolicyFilter::new(policy.clone(), edge_stats),
+                    feedback: policy.feedback,
+                    name: Arc::from(input.stream.name.as_str()),
+                });
+            }
+        }
+    }
+
+    // Streams to other hosts: one publisher per produced stream with remote consumers.
+    if let Some(transport) = &transport {
+        for (producer, port, hosts) in remote_streams(spec, &local) {
+            let key = stream_key(config, spec, producer, port.clone());
+            let mut publisher = transport.publisher(&key).await?;
+            let ready = publisher.wait_for_subscribers(hosts).await;
+            if ready < hosts {
+                tracing::warn!(stream = ?key, ready, hosts, "not every consuming host subscribed in time");
+            }
+            if let Some(task) = tasks.get_mut(&producer) {
+                let index = port_index(&spec.processes[producer], port.as_deref());
+                task.outputs.ports[index].remote.push(publisher);
+            }
+        }
+    }
+
+    let mut join = tokio::task::JoinSet::new();
+    if let Some(transport) = &transport {
+        for ((producer, port), senders) in remote_feeds {
+            let key = stream_key(config, spec, producer, port);
+            let receiver = transport.subscriber(&key).await?;
+            let feed_stats = stats.process(&format!("{}@remote", key.producer));
+            let stop = stop.clone();
+            join.spawn(async move {
+                feed_remote(receiver, senders, feed_stats, stop).await;
+                Ok::<(), (String, ProcessError)>(())
+            });
+        }
+    }
+
+    // Ctrl-C and --for.
+    let interrupted = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let watchers = {
+        let stop = stop.clone();
+        let interrupted = interrupted.clone();
+        let clock = clock.clone();
+        tokio::spawn(async move {
+            let duration = async {
+                match end {
+                    Some(end) => clock.sleep_until(end).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => interrupted.store(true, Ordering::SeqCst),
+                () = duration => {}
+            }
+            stop.stop();
+        })
+    };
+    let progress = config.progress.then(|| Progress::start(stats.clone(), clock.kind()));
+
+    for (id, task) in tasks {
+        let name = spec.processes[id].name.clone();
+        let process_stats = stats.process(&name);
+        let run_stats = stats.clone();
+        let clock = clock.clone();
+        let stop = stop.clone();
+        let strict = config.strict;
+        let port_names: Arc<[String]> = spec.processes[id].ports.iter().map(|(n, _)| n.clone()).collect();
+        join.spawn(async move {
+            let result = match task.kind {
+                TaskKind::Source(mut source) => {
+                    let mut ctx = SourceContext {
+                        name: name.clone(),
+                        clock,
+                        outputs: task.outputs,
+                        stop,
+                        end,
+                        strict,
+                        stats: process_stats,
+                        run_stats,
+                    };
+                    let result = source.run(&mut ctx).await;
+                    ctx.outputs.close().await;
+                    result
+                }
+                TaskKind::Unit(unit) => {
+                    run_unit(
+                        unit,
+                        task.inputs,
+                        task.outputs,
+                        port_names,
+                        clock,
+                        process_stats,
+                        run_stats,
+                        strict,
+                    )
+                    .await
+                }
+            };
+            tracing::debug!(process = %name, id = task.id, "process ended");
+            result.map_err(|e| (name, e))
+        });
+    }
+
+    let mut failures = Vec::new();
+    let mut strict_failure = false;
+    while let Some(joined) = join.join_next().await {
+        match joined {
+            Ok(Ok(())) => {}
+            Ok(Err((name, error))) => {
+                tracing::error!(process = %name, "{error}");
+                if matches!(error, ProcessError::Strict { .. }) {
+                    strict_failure = true;
+                    stop.stop();
+                }
+                failures.push(format!("{name}: {error}"));
+            }
+            Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
+        }
+    }
+    let duration_reached = stop.is_stopped() && !interrupted.load(Ordering::SeqCst) && !strict_failure;
+    watchers.abort();
+    if let Some(progress) = progress {
+        progress.finish();
+    }
+    if let Some(transport) = transport {
+        transport.close().await;
+    }
+    let ending = if strict_failure {
+        Ending::Strict
+    } else if interrupted.load(Ordering::SeqCst) {
+        Ending::Interrupted
+    } else if duration_reached {
+        Ending::DurationReached
+    } else {
+        Ending::SourcesEnded
+    };
+    Ok(RunReport {
+        ending,
+        clock_elapsed: clock.elapsed(),
+        wall_elapsed: i64::try_from(wall_start.elapsed().as_micros()).unwrap_or(i64::MAX),
+        failures,
+        summary: stats.summary(),
+    })
+}
+
+/// The processes this run executes: all, or one host's.
+fn local_processes(spec: &hir::Spec, host: Option<&str>) -> Result<Vec<ProcessId>, RunError> {
+    let Some(host) = host else { return Ok((0..spec.processes.len()).collect()) };
+    let deploy = spec
+        .deploy
+        .as_ref()
+        .ok_or_else(|| RunError::Host(format!("--host {host}: the spec has no deploy section")))?;
+    match deploy.hosts.iter().find(|h| h.name == host) {
+        Some(h) => Ok(h.processes.clone()),
+        None => {
+            let names: Vec<&str> = deploy.hosts.iter().map(|h| h.name.as_str()).collect();
+            Err(RunError::Host(format!(
+                "--host {host}: the deploy section has the hosts {}",
+                names.join(", ")
+            )))
+        }
+    }
+}
+
+fn needs_transport(spec: &hir::Spec, local: &[ProcessId]) -> bool {
+    spec.processes
+        .iter()
+        .any(|p| p.inputs.iter().any(|i| local.contains(&p.id) != local.contains(&i.stream.producer)))
+}
+
+/// Streams produced here and consumed elsewhere: (producer, port, number of consuming hosts).
+fn remote_streams(spec: &hir::Spec, local: &[ProcessId]) -> Vec<(ProcessId, Option<String>, usize)> {
+    let mut hosts: BTreeMap<(ProcessId, Option<String>), std::collections::BTreeSet<String>> =
+        BTreeMap::new();
+    for consumer in &spec.processes {
+        if local.contains(&consumer.id) {
+            continue;
+        }
+        for input in &consumer.inputs {
+            if local.contains(&input.stream.producer) {
+                let host = spec.host_of(consumer.id).unwrap_or("").to_string();
+                hosts.entry((input.stream.producer, input.stream.port.clone())).or_default().insert(host);
+            }
+        }
+    }
+    hosts.into_iter().map(|((p, port), h)| (p, port, h.len())).collect()
+}
+
+fn stream_key(config: &RunConfig, spec: &hir::Spec, producer: ProcessId, port: Option<String>) -> StreamKey {
+    StreamKey { spec: config.spec_name.clone(), producer: spec.processes[producer].name.clone(), port }
+}
+
+fn port_index(process: &hir::Process, port: Option<&str>) -> usize {
+    match port {
+        None => 0,
+        Some(name) => process.ports.iter().position(|(n, _)| n == name).map_or(0, |i| i + 1),
+    }
+}
+
+async fn feed_remote(
+    mut receiver: Box<dyn crate::transport::RemoteReceiver>,
+    senders: Vec<EdgeSender>,
+    stats: Arc<ProcessStats>,
+    stop: StopSignal,
+) {
+    loop {
+        let received = tokio::select! {
+            biased;
+            () = stop.stopped() => None,
+            r = receiver.recv() => r,
+        };
+        match received {
+            Some(Remote::Sample(sample)) => {
+                for sender in &senders {
+                    let _ = sender.send(sample.clone()).await;
+                }
+            }
+            Some(Remote::Malformed { location, error }) => {
+                stats.malformed(crate::stats::Malformed { location, error })
+            }
+            Some(Remote::End) | None => break,
+        }
+    }
+}
+
+/// One unit's loop: receive from the input edges (fairly, in batches), apply each consumer
+/// policy, synchronize if the unit asks for it, run the unit, send what it emits.
+#[allow(clippy::too_many_arguments)] // the pieces of one task, passed once
+async fn run_unit(
+    mut unit: Box<dyn AsyncUnit>,
+    mut inputs: Vec<InputEdge>,
+    mut outputs: Outputs,
+    port_names: Arc<[String]>,
+    clock: Clock,
+    stats: Arc<ProcessStats>,
+    run_stats: Arc<RunStats>,
+    strict: bool,
+) -> Result<(), ProcessError> {
+    let names: Vec<Arc<str>> = inputs.iter().map(|i| i.name.clone()).collect();
+    let synchronized = unit.synchronized();
+    let mut sync = synchronized.then(|| {
+        StateSync::new(
+            inputs
+                .iter()
+                .map(|i| SyncInput {
+                    max_delay: i.filter.policy().max_delay,
+                    feedback: i.feedback,
+                    stats: i.rx.stats().clone(),
+                })
+                .collect(),
+        )
+    });
+    let mut latest: Vec<Option<Sample>> = vec![None; inputs.len()];
+    let mut ended = vec![false; inputs.len()];
+    let mut emitter = Emitter::new(port_names);
+    let mut batch: Vec<Sample> = Vec::new();
+    let mut delivered: Vec<Sample> = Vec::new();
+    let mut states: Vec<SyncState> = Vec::new();
+    let mut next = 0usize;
+    let live =
+        |ended: &[bool], inputs: &[InputEdge]| ended.iter().zip(inputs).any(|(e, i)| !e && !i.feedback);
+
+    while live(&ended, &inputs) {
+        let deadline = inputs
+            .iter()
+            .filter_map(|i| i.filter.deadline())
+            .chain(sync.as_ref().and_then(StateSync::deadline))
+            .min();
+        let mut sleep = deadline.map(|t| Box::pin(tokio::time::sleep_until(clock.instant(t))));
+        enum Event {
+            Samples(usize),
+            Ended(usize),
+            Timer,
+        }
+        let event = poll_fn(|cx| {
+            let n = inputs.len();
+            for k in 0..n {
+                let i = (next + k) % n;
+                if ended[i] {
+                    continue;
+                }
+                match inputs[i].rx.poll_recv_many(cx, &mut batch, 256) {
+                    Poll::Ready(Received::Samples) => return Poll::Ready(Event::Samples(i)),
+                    Poll::Ready(Received::Ended) => return Poll::Ready(Event::Ended(i)),
+                    Poll::Pending => {}
+                }
+            }
+            if let Some(sleep) = &mut sleep
+                && sleep.as_mut().poll(cx).is_ready()
+            {
+                return Poll::Ready(Event::Timer);
+            }
+            Poll::Pending
+        })
+        .await;
+        let now = clock.now();
+        match event {
+            Event::Samples(port) => {
+                next = (port + 1) % inputs.len();
+                for sample in batch.drain(..) {
+                    run_stats.observe_time(sample.available);
+                    inputs[port].filter.on_sample(sample, now, &mut delivered);
+                }
+                for sample in delivered.drain(..) {
+                    match &mut sync {
+                        Some(sync) => sync.push(port, sample, now, &mut states),
+                        None => {
+                            let valid = sample.valid;
+                            latest[port] = Some(sample);
+                            let input = Input {
+                                now,
+                                valid,
+                                trigger: Trigger::Sample(port),
+                                values: &latest,
+                                names: &names,
+                            };
+                            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict)
+                                .await?;
+                        }
+                    }
+                }
+            }
+            Event::Ended(port) => {
+                ended[port] = true;
+                if let Some(sync) = &mut sync {
+                    sync.end(port, now, &mut states);
+                }
+            }
+            Event::Timer => {
+                for (port, input) in inputs.iter_mut().enumerate() {
+                    input.filter.on_timer(now, &mut delivered);
+                    for sample in delivered.drain(..) {
+                        match &mut sync {
+                            Some(sync) => sync.push(port, sample, now, &mut states),
+                            None => {
+                                let valid = sample.valid;
+                                latest[port] = Some(sample);
+                                let input = Input {
+                                    now,
+                                    valid,
+                                    trigger: Trigger::Sample(port),
+                                    values: &latest,
+                                    names: &names,
+                                };
+                                call(
+                                    &mut unit,
+                                    &input,
+                                    &mut emitter,
+                                    &mut outputs,
+                                    &stats,
+                                    &run_stats,
+                                    strict,
+                                )
+                                .await?;
+                            }
+                        }
+                    }
+                }
+                if let Some(sync) = &mut sync {
+                    sync.on_timer(now, &mut states);
+                }
+            }
+        }
+        for state in std::mem::take(&mut states) {
+            let input = Input {
+                now,
+                valid: state.valid,
+                trigger: Trigger::State,
+                values: &state.values,
+                names: &names,
+            };
+            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
+        }
+    }
+    if let Some(sync) = &mut sync {
+        sync.finish(&mut states);
+        let now = clock.now();
+        for state in std::mem::take(&mut states) {
+            let input = Input {
+                now,
+                valid: state.valid,
+                trigger: Trigger::State,
+                values: &state.values,
+                names: &names,
+            };
+            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
+        }
+    }
+    let now = clock.now();
+    emitter.begin(now, now);
+    if let Err(e) = unit.on_end(&mut emitter).await {
+        stats.error(e.to_string());
+    }
+    for (port, sample) in emitter.take() {
+        outputs.send(port, sample).await;
+    }
+    outputs.close().await;
+    Ok(())
+}
+
+/// Runs the unit once and sends what it emitted. A unit's error is counted and the run goes on
+/// (a failing input must not stop the other processes), except in a `--strict` run.
+async fn call(
+    unit: &mut Box<dyn AsyncUnit>,
+    input: &Input<'_>,
+    emitter: &mut Emitter,
+    outputs: &mut Outputs,
+    stats: &ProcessStats,
+    run_stats: &RunStats,
+    strict: bool,
+) -> Result<(), ProcessError> {
+    emitter.begin(input.now, input.valid);
+    if let Err(e) = unit.on_input(input, emitter).await {
+        if strict {
+            return Err(e);
+        }
+        stats.error(e.to_string());
+    }
+    for port in std::mem::take(&mut emitter.unknown_ports) {
+        stats.error(format!("emitted on `{port}`, which is not an output of this process"));
+    }
+    let emitted = emitter.take();
+    run_stats.delivered.fetch_add(emitted.len() as u64, Ordering::Relaxed);
+    for (port, sample) in emitted {
+        outputs.send(port, sample).await;
+    }
+    Ok(())
+}
+
+/// The progress line: clock and wall time and the rate of samples, once a second on stderr,
+/// from its own thread (so a simulated run is not disturbed).
+struct Progress {
+    done: Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Progress {
+    fn start(stats: Arc<RunStats>, kind: ClockKind) -> Progress {
+        let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = done.clone();
+        let thread = std::thread::spawn(move || {
+            use std::io::Write;
+            let start = Instant::now();
+            let first = stats.now.load(Ordering::Relaxed);
+            let mut last_count = 0u64;
+            let mut last_tick = Instant::now();
+            while !flag.load(Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(100));
+                if last_tick.elapsed() < Duration::from_secs(1) {
+                    continue;
+                }
+                let count = stats.delivered.load(Ordering::Relaxed);
+                let rate = (count - last_count) as f64 / last_tick.elapsed().as_secs_f64();
+                last_count = count;
+                last_tick = Instant::now();
+                let clock = (stats.now.load(Ordering::Relaxed) - first).max(0) as f64 / 1e6;
+                let label = if kind == ClockKind::Sim { "sim" } else { "clock" };
+                let mut stderr = std::io::stderr().lock();
+                let _ = writeln!(
+                    stderr,
+                    "{label} {clock:.1}s  wall {:.1}s  {rate:.0} samples/s  ({count} samples)",
+                    start.elapsed().as_secs_f64()
+                );
+            }
+        });
+        Progress { done, thread: Some(thread) }
+    }
+
+    fn finish(mut self) {
+        self.done.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}

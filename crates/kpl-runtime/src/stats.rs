@@ -1,0 +1,232 @@
+//! Counters of a run: per stream edge (produced, delivered, dropped by reason, policy
+//! violations), per process (malformed input, process instances), and the run's progress. Shared
+//! atomics, so the progress line can be printed from another thread without disturbing a
+//! simulated run.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use kpl_core::Time;
+use serde::Serialize;
+
+/// Why a sample did not reach its consumer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DropReason {
+    /// The queue was full and its policy is `drop oldest`.
+    QueueFull,
+    /// Valid time went back (`monotone order`) or did not advance (`strict order`).
+    OutOfOrder,
+    /// Available more than `max delay` after its valid time, with `no approximation`.
+    Late,
+    /// Valid time outside the `from T to T` window.
+    OutsideWindow,
+    /// The same value as the previous sample, with `any change`.
+    Unchanged,
+    /// Replaced by resampling (`sample every`): only the most recent value per period is kept.
+    Resampled,
+    /// Arrived after the state for its valid time was already emitted (state synchronization).
+    LateForState,
+}
+
+impl DropReason {
+    pub const ALL: [DropReason; 7] = [
+        DropReason::QueueFull,
+        DropReason::OutOfOrder,
+        DropReason::Late,
+        DropReason::OutsideWindow,
+        DropReason::Unchanged,
+        DropReason::Resampled,
+        DropReason::LateForState,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DropReason::QueueFull => "queue_full",
+            DropReason::OutOfOrder => "out_of_order",
+            DropReason::Late => "late",
+            DropReason::OutsideWindow => "outside_window",
+            DropReason::Unchanged => "unchanged",
+            DropReason::Resampled => "resampled",
+            DropReason::LateForState => "late_for_state",
+        }
+    }
+
+    /// Whether the drop means the stream broke its policy (rather than the policy filtering).
+    pub fn is_violation(self) -> bool {
+        matches!(self, DropReason::OutOfOrder | DropReason::Late | DropReason::LateForState)
+    }
+}
+
+/// Counters of one edge (a stream as one consumer sees it).
+#[derive(Debug, Default)]
+pub struct EdgeStats {
+    pub produced: AtomicU64,
+    pub delivered: AtomicU64,
+    /// Samples made up by approximation (`use most recent`, `sample every`).
+    pub approximated: AtomicU64,
+    dropped: [AtomicU64; 7],
+}
+
+impl EdgeStats {
+    pub fn count_drop(&self, reason: DropReason) {
+        self.dropped[reason as usize].fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub fn dropped(&self, reason: DropReason) -> u64 {
+        self.dropped[reason as usize].load(Ordering::Relaxed)
+    }
+}
+
+/// A malformed input: where it came from and what was wrong.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Malformed {
+    /// `file.jsonl:17`, a zenoh key, ...
+    pub location: String,
+    pub error: String,
+}
+
+/// Counters of one process.
+#[derive(Debug, Default)]
+pub struct ProcessStats {
+    pub malformed: AtomicU64,
+    /// The first malformed inputs (at most [`ProcessStats::KEEP`]).
+    pub malformed_examples: Mutex<Vec<Malformed>>,
+    pub errors: AtomicU64,
+    pub error_examples: Mutex<Vec<String>>,
+    /// Process instances created and removed at run time (link processes: one per object).
+    pub instances_created: AtomicU64,
+    pub instances_removed: AtomicU64,
+}
+
+impl ProcessStats {
+    pub const KEEP: usize = 5;
+
+    pub fn malformed(&self, malformed: Malformed) {
+        self.malformed.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut examples) = self.malformed_examples.lock()
+            && examples.len() < Self::KEEP
+        {
+            examples.push(malformed);
+        }
+    }
+
+    pub fn error(&self, error: String) {
+        self.errors.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut examples) = self.error_examples.lock()
+            && examples.len() < Self::KEEP
+        {
+            examples.push(error);
+        }
+    }
+}
+
+/// Everything counted in a run.
+#[derive(Debug, Default)]
+pub struct RunStats {
+    /// By `(stream, consumer)` name, in graph order.
+    pub edges: Mutex<Vec<(String, String, Arc<EdgeStats>)>>,
+    pub processes: Mutex<BTreeMap<String, Arc<ProcessStats>>>,
+    /// The latest clock time any process reported (for the progress line).
+    pub now: AtomicI64,
+    /// Samples delivered to consumers, all edges.
+    pub delivered: AtomicU64,
+}
+
+impl RunStats {
+    pub fn edge(&self, stream: &str, consumer: &str) -> Arc<EdgeStats> {
+        let stats = Arc::new(EdgeStats::default());
+        if let Ok(mut edges) = self.edges.lock() {
+            edges.push((stream.to_string(), consumer.to_string(), stats.clone()));
+        }
+        stats
+    }
+
+    pub fn process(&self, name: &str) -> Arc<ProcessStats> {
+        let Ok(mut processes) = self.processes.lock() else { return Arc::default() };
+        processes.entry(name.to_string()).or_default().clone()
+    }
+
+    pub fn observe_time(&self, t: Time) {
+        self.now.fetch_max(t, Ordering::Relaxed);
+    }
+
+    /// A snapshot for the end-of-run summary.
+    pub fn summary(&self) -> Summary {
+        let edges = self.edges.lock().map(|e| e.clone()).unwrap_or_default();
+        let streams = edges
+            .iter()
+            .map(|(stream, consumer, s)| {
+                let dropped: BTreeMap<&'static str, u64> = DropReason::ALL
+                    .iter()
+                    .map(|r| (r.as_str(), s.dropped(*r)))
+                    .filter(|(_, n)| *n > 0)
+                    .collect();
+                let violations =
+                    DropReason::ALL.iter().filter(|r| r.is_violation()).map(|r| s.dropped(*r)).sum();
+                StreamSummary {
+                    stream: stream.clone(),
+                    consumer: consumer.clone(),
+                    produced: s.produced.load(Ordering::Relaxed),
+                    delivered: s.delivered.load(Ordering::Relaxed),
+                    approximated: s.approximated.load(Ordering::Relaxed),
+                    dropped,
+                    policy_violations: violations,
+                }
+            })
+            .collect();
+        let processes = self
+            .processes
+            .lock()
+            .map(|p| {
+                p.iter()
+                    .map(|(name, s)| ProcessSummary {
+                        process: name.clone(),
+                        malformed: s.malformed.load(Ordering::Relaxed),
+                        malformed_examples: s
+                            .malformed_examples
+                            .lock()
+                            .map(|e| e.clone())
+                            .unwrap_or_default(),
+                        errors: s.errors.load(Ordering::Relaxed),
+                        error_examples: s.error_examples.lock().map(|e| e.clone()).unwrap_or_default(),
+                        instances_created: s.instances_created.load(Ordering::Relaxed),
+                        instances_removed: s.instances_removed.load(Ordering::Relaxed),
+                    })
+                    .filter(|p| p.malformed + p.errors + p.instances_created > 0)
+                    .collect()
+            })
+            .unwrap_or_default();
+        Summary { streams, processes }
+    }
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct StreamSummary {
+    pub stream: String,
+    pub consumer: String,
+    pub produced: u64,
+    pub delivered: u64,
+    pub approximated: u64,
+    pub dropped: BTreeMap<&'static str, u64>,
+    pub policy_violations: u64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessSummary {
+    pub process: String,
+    pub malformed: u64,
+    pub malformed_examples: Vec<Malformed>,
+    pub errors: u64,
+    pub error_examples: Vec<String>,
+    pub instances_created: u64,
+    pub instances_removed: u64,
+}
+
+/// The end-of-run summary (`kpl run` prints it and writes it as `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub streams: Vec<StreamSummary>,
+    pub processes: Vec<ProcessSummary>,
+}
