@@ -1,0 +1,285 @@
+//! The three conditions of a link specification compiled once per link (`Formula`s shared by all
+//! the progressors of its per-object instances), the state a condition reads (`from`, `to` and,
+//! for identifications, `this`), and the **gate** of the reestablish condition: the distance
+//! within which a candidate pair is worth progressing at all.
+//!
+//! The gate is read off the formula: if `reestablish` can only become true when, at some state,
+//! `xydist(from.pos, to.pos) < c` (or `<=`, `dist`, `norm(from.pos - to.pos)`, objects instead
+//! of their `pos`), the gate is `c`. Formally, for the formula in negation normal form: an atom
+//! comparing the distance below `c` requires `c`; `and` requires the smallest requirement of its
+//! parts, `or` the largest (none if some part has none); `eventually`, `always` (non-vacuous:
+//! every window of a link condition starting at 0 contains the current state) and the right side
+//! of `until` pass theirs on; anything else requires nothing. A link whose reestablish condition
+//! has no such bound has no gate: every unlinked object is a candidate (quadratic; the engine
+//! reports it in its notes).
+
+use std::sync::Arc;
+
+use kpl_core::{TimeUnit, Value};
+use kpl_mtl::{BinOp, CompileError, Context, Formula, Function, Mtl, SlotId, State, Term};
+use kpl_semantic::hir::{self, SPEC_TICK};
+use kpl_syntax::ast;
+
+/// Slots every link condition is compiled with.
+pub const FROM: SlotId = 0;
+pub const TO: SlotId = 1;
+pub const THIS: SlotId = 2;
+
+/// What a link condition reads at one time stamp.
+#[derive(Debug, Clone, Copy)]
+pub struct LinkState<'a> {
+    pub from: &'a Value,
+    pub to: Option<&'a Value>,
+    pub this: Option<&'a Value>,
+}
+
+impl State for LinkState<'_> {
+    fn value(&self, slot: SlotId) -> Option<&Value> {
+        match slot {
+            FROM => Some(self.from),
+            TO => self.to,
+            THIS => self.this,
+            _ => None,
+        }
+    }
+}
+
+/// A link's compiled conditions.
+#[derive(Debug, Clone)]
+pub struct LinkConditions {
+    pub context: Context,
+    pub establish: Arc<Formula>,
+    pub reestablish: Arc<Formula>,
+    pub maintain: Arc<Formula>,
+    reestablish_mtl: Mtl,
+    /// Distance within which a pair is a candidate for reestablish (see the module doc).
+    pub gate: Option<f64>,
+}
+
+/// Why a condition does not compile (the checker reports these first; this is a second line).
+#[derive(Debug, Clone)]
+pub struct ConditionError {
+    pub condition: &'static str,
+    pub messages: Vec<String>,
+}
+
+fn messages(errors: Vec<CompileError>) -> Vec<String> {
+    errors.into_iter().map(|e| e.message).collect()
+}
+
+/// A context with `from`, `to` and `this` (slots 0, 1, 2), time stamps in microseconds and bare
+/// bounds in milliseconds, and the unit's functions.
+pub fn link_context(functions: Vec<Function>) -> Context {
+    let mut context = Context::new(TimeUnit::Us, SPEC_TICK);
+    let slots = [context.declare_value("from"), context.declare_value("to"), context.declare_value("this")];
+    debug_assert_eq!(slots, [FROM, TO, THIS]);
+    for function in functions {
+        context.register_function(function);
+    }
+    context
+}
+
+fn compile_one(
+    expr: &ast::Expr,
+    context: &mut Context,
+    condition: &'static str,
+) -> Result<(Mtl, Arc<Formula>), ConditionError> {
+    let mtl =
+        kpl_mtl::lower(expr, context).map_err(|e| ConditionError { condition, messages: messages(e) })?;
+    let formula = Formula::new(&mtl, context)
+        .map_err(|e| ConditionError { condition, messages: vec![e.to_string()] })?;
+    Ok((mtl, Arc::new(formula)))
+}
+
+impl LinkConditions {
+    pub fn compile(link: &hir::Link, functions: Vec<Function>) -> Result<LinkConditions, ConditionError> {
+        let mut context = link_context(functions);
+        let (_, establish) = compile_one(&link.establish, &mut context, "establish")?;
+        let (reestablish_mtl, reestablish) = compile_one(&link.reestablish, &mut context, "reestablish")?;
+        let (_, maintain) = compile_one(&link.maintain, &mut context, "maintain")?;
+        let gate = distance_gate(&reestablish_mtl, &context);
+        Ok(LinkConditions { context, establish, reestablish, maintain, reestablish_mtl, gate })
+    }
+
+    /// `reestablish and description`, for completing an identification through this link: `to`
+    /// and `this` are both the object this link would make of `from`.
+    pub fn identification(&self, description: &ast::Expr) -> Result<Arc<Formula>, Vec<String>> {
+        let mut context = self.context.clone();
+        let description = kpl_mtl::lower(description, &mut context).map_err(messages)?;
+        let both = Mtl::and(vec![self.reestablish_mtl.clone(), description]);
+        Formula::new(&both, &context).map(Arc::new).map_err(|e| vec![e.to_string()])
+    }
+}
+
+/// The description of an identification alone (`this` is an existing object of the type).
+pub fn description_formula(
+    description: &ast::Expr,
+    functions: Vec<Function>,
+) -> Result<Arc<Formula>, Vec<String>> {
+    let mut context = link_context(functions);
+    let mtl = kpl_mtl::lower(description, &mut context).map_err(messages)?;
+    Formula::new(&mtl, &context).map(Arc::new).map_err(|e| vec![e.to_string()])
+}
+
+/// The gate of a formula over `from` and `to` (module doc).
+pub fn distance_gate(formula: &Mtl, context: &Context) -> Option<f64> {
+    let distance_functions: Vec<u32> =
+        ["xydist", "dist"].iter().filter_map(|name| context.function(name)).collect();
+    let norm = context.function("norm");
+    let analysis = Gate { distance_functions, norm };
+    analysis.requirement(formula, true).filter(|c| c.is_finite())
+}
+
+struct Gate {
+    distance_functions: Vec<u32>,
+    norm: Option<u32>,
+}
+
+/// `None`: no requirement. `Some(c)`: true only if the distance is below `c` at some state.
+type Requirement = Option<f64>;
+
+fn both(a: Requirement, b: Requirement) -> Requirement {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(x.min(y)),
+        (x, None) | (None, x) => x,
+    }
+}
+
+fn either(a: Requirement, b: Requirement) -> Requirement {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(x.max(y)),
+        _ => None,
+    }
+}
+
+impl Gate {
+    /// What `formula` (or its negation when `positive` is false) requires to be true.
+    fn requirement(&self, formula: &Mtl, positive: bool) -> Requirement {
+        match formula {
+            // `false` can never be true: a requirement no distance meets.
+            Mtl::Const(b) => (*b != positive).then_some(0.0),
+            Mtl::Atom(term) => self.atom(term, positive),
+            Mtl::Not(inner) => self.requirement(inner, !positive),
+            Mtl::And(items) | Mtl::Or(items) => {
+                let conjunction = matches!(formula, Mtl::And(_)) == positive;
+                let mut parts = items.iter().map(|f| self.requirement(f, positive));
+                let first = parts.next()?;
+                if conjunction { parts.fold(first, both) } else { parts.fold(first, either) }
+            }
+            Mtl::Implies(a, b) => {
+                let (na, pb) = (self.requirement(a, !positive), self.requirement(b, positive));
+                if positive { either(na, pb) } else { both(na, pb) }
+            }
+            Mtl::Eventually(_, body) | Mtl::Always(_, body) => self.requirement(body, positive),
+            Mtl::Until(_, _, rhs) if positive => self.requirement(rhs, true),
+            Mtl::Until(..) | Mtl::Forall(..) | Mtl::Exists(..) => None,
+        }
+    }
+
+    fn atom(&self, term: &Term, positive: bool) -> Requirement {
+        let Term::Binary(op, lhs, rhs) = term else { return None };
+        // Normalise to `distance OP constant`.
+        let (op, distance, constant) = match (self.is_distance(lhs), self.is_distance(rhs)) {
+            (true, false) => (*op, lhs, rhs),
+            (false, true) => (flip(*op)?, rhs, lhs),
+            _ => return None,
+        };
+        let _ = distance;
+        let Term::Const(c) = &**constant else { return None };
+        let c = c.as_f64()?;
+        // Positive `d < c` / `d <= c`, or negated `d > c` / `d >= c`, require d <= c.
+        match (op, positive) {
+            (BinOp::Lt | BinOp::Le, true) | (BinOp::Gt | BinOp::Ge, false) => Some(c),
+            _ => None,
+        }
+    }
+
+    fn is_distance(&self, term: &Term) -> bool {
+        match term {
+            Term::Call(f, args) if self.distance_functions.contains(f) && args.len() == 2 => {
+                let (a, b) = (object_slot(&args[0]), object_slot(&args[1]));
+                matches!((a, b), (Some(FROM), Some(TO)) | (Some(TO), Some(FROM)))
+            }
+            Term::Call(f, args) if Some(*f) == self.norm && args.len() == 1 => match &args[0] {
+                Term::Binary(BinOp::Sub, a, b) => {
+                    let (a, b) = (object_slot(a), object_slot(b));
+                    matches!((a, b), (Some(FROM), Some(TO)) | (Some(TO), Some(FROM)))
+                }
+                _ => false,
+            },
+            _ => false,
+        }
+    }
+}
+
+fn flip(op: BinOp) -> Option<BinOp> {
+    Some(match op {
+        BinOp::Lt => BinOp::Gt,
+        BinOp::Le => BinOp::Ge,
+        BinOp::Gt => BinOp::Lt,
+        BinOp::Ge => BinOp::Le,
+        _ => return None,
+    })
+}
+
+/// `from`/`to` or their `pos`: the slot of the object whose position the term is.
+fn object_slot(term: &Term) -> Option<SlotId> {
+    match term {
+        Term::Slot(s) => Some(*s),
+        Term::Field(inner, name) if &**name == "pos" => match &**inner {
+            Term::Slot(s) => Some(*s),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    fn gate(text: &str) -> Option<f64> {
+        let mut context =
+            link_context(vec![Function::new("on_road", (1, Some(1)), |_| Ok(Value::Bool(true)))]);
+        let expr = kpl_syntax::parse_formula(text).unwrap();
+        let mtl = kpl_mtl::lower(&expr, &mut context).unwrap();
+        distance_gate(&mtl, &context)
+    }
+
+    #[test]
+    fn gates_are_read_off_the_formula() {
+        assert_eq!(gate("eventually[0, 1s] xydist(from.pos, to.pos) < 10.0"), Some(10.0));
+        assert_eq!(gate("eventually[0, 1000] xydist(from, to) <= 7"), Some(7.0));
+        assert_eq!(gate("eventually[0, 1s] 12.5 > dist(to.pos, from.pos)"), Some(12.5));
+        assert_eq!(
+            gate("eventually[0, 1s] (norm(from.pos - to.pos) < 4.0 and on_road(from.pos))"),
+            Some(4.0)
+        );
+        assert_eq!(gate("eventually[0, 1s] not (xydist(from.pos, to.pos) >= 6.0)"), Some(6.0));
+        // The tighter of two requirements, the looser of two alternatives.
+        assert_eq!(
+            gate("xydist(from.pos, to.pos) < 10.0 and always[0, 1s] xydist(from.pos, to.pos) < 3.0"),
+            Some(3.0)
+        );
+        assert_eq!(gate("xydist(from.pos, to.pos) < 10.0 or xydist(from.pos, to.pos) < 3.0"), Some(10.0));
+        // No bound: no gate.
+        assert_eq!(gate("xydist(from.pos, to.pos) < 10.0 or on_road(to.pos)"), None);
+        assert_eq!(gate("eventually[0, 1s] xydist(from.pos, to.pos) > 10.0"), None);
+        assert_eq!(gate("not (xydist(from.pos, to.pos) < 10.0)"), None);
+        assert_eq!(gate("on_road(from.pos) -> xydist(from.pos, to.pos) < 5.0"), None);
+        assert_eq!(gate("false"), Some(0.0));
+        assert_eq!(gate("true until[0, 1s] xydist(from.pos, to.pos) < 2.0"), Some(2.0));
+    }
+
+    #[test]
+    fn link_state_reads_its_slots() {
+        let a = Value::Int(1);
+        let b = Value::Int(2);
+        let s = LinkState { from: &a, to: Some(&b), this: None };
+        assert_eq!(s.value(FROM), Some(&a));
+        assert_eq!(s.value(TO), Some(&b));
+        assert_eq!(s.value(THIS), None);
+        assert_eq!(s.value(9), None);
+    }
+}

@@ -1,0 +1,102 @@
+//! The implementations of link units and prediction models by registered name, as a spec names
+//! them (`via anchor.snap_to_lane(...)`, `predict OnRoadObject = along_roads(...)`). Users add
+//! their own with [`Implementations::add_link_unit`] and [`Implementations::add_model`]; their
+//! signatures go into the checker's registry (see [`crate::registry`]).
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::sync::Arc;
+
+use kpl_core::Value;
+
+use crate::networks::Networks;
+use crate::predict::{AlongRoads, ConstantVelocity, DEFAULT_MAX_HYPOTHESES, PredictionModel, Stationary};
+use crate::units::{Copy, LinkUnit, SnapToLane, WorldFromPercept};
+
+/// The parameters of a call, defaults filled in (`hir::Call::params`).
+pub type Params = BTreeMap<String, Value>;
+
+/// Builds a link unit from its parameters.
+pub type LinkUnitFactory =
+    Arc<dyn Fn(&Params, &mut Networks) -> Result<Arc<dyn LinkUnit>, String> + Send + Sync>;
+/// Builds a prediction model from its parameters.
+pub type ModelFactory =
+    Arc<dyn Fn(&Params, &mut Networks) -> Result<Arc<dyn PredictionModel>, String> + Send + Sync>;
+
+/// Link units and prediction models by name.
+#[derive(Clone)]
+pub struct Implementations {
+    link_units: BTreeMap<String, LinkUnitFactory>,
+    models: BTreeMap<String, ModelFactory>,
+}
+
+impl fmt::Debug for Implementations {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Implementations")
+            .field("link_units", &self.link_units.keys().collect::<Vec<_>>())
+            .field("models", &self.models.keys().collect::<Vec<_>>())
+            .finish()
+    }
+}
+
+impl Default for Implementations {
+    /// The built-in link units and prediction models.
+    fn default() -> Implementations {
+        let mut i = Implementations { link_units: BTreeMap::new(), models: BTreeMap::new() };
+        i.add_link_unit("anchor.copy", |_, _| Ok(Arc::new(Copy)));
+        i.add_link_unit("anchor.world_from_percept", |_, _| Ok(Arc::new(WorldFromPercept)));
+        i.add_link_unit("anchor.snap_to_lane", |params, networks| {
+            Ok(Arc::new(SnapToLane::new(networks.resolve(params)?)))
+        });
+        i.add_model("constant_velocity", |_, _| Ok(Arc::new(ConstantVelocity)));
+        i.add_model("stationary", |_, _| Ok(Arc::new(Stationary)));
+        i.add_model("along_roads", |params, networks| {
+            let max = match params.get("max_hypotheses") {
+                None => DEFAULT_MAX_HYPOTHESES,
+                Some(Value::Int(n)) if (1..=1000).contains(n) => *n as usize,
+                Some(other) => {
+                    return Err(format!("max_hypotheses must be an int from 1 to 1000, found {other}"));
+                }
+            };
+            Ok(Arc::new(AlongRoads::new(networks.resolve(params)?, max)))
+        });
+        i
+    }
+}
+
+impl Implementations {
+    pub fn add_link_unit(
+        &mut self,
+        name: &str,
+        factory: impl Fn(&Params, &mut Networks) -> Result<Arc<dyn LinkUnit>, String> + Send + Sync + 'static,
+    ) {
+        self.link_units.insert(name.to_string(), Arc::new(factory));
+    }
+
+    pub fn add_model(
+        &mut self,
+        name: &str,
+        factory: impl Fn(&Params, &mut Networks) -> Result<Arc<dyn PredictionModel>, String>
+        + Send
+        + Sync
+        + 'static,
+    ) {
+        self.models.insert(name.to_string(), Arc::new(factory));
+    }
+
+    pub fn link_unit(&self, name: &str) -> Option<&LinkUnitFactory> {
+        self.link_units.get(name)
+    }
+
+    pub fn model(&self, name: &str) -> Option<&ModelFactory> {
+        self.models.get(name)
+    }
+
+    pub fn link_unit_names(&self) -> impl Iterator<Item = &str> {
+        self.link_units.keys().map(String::as_str)
+    }
+
+    pub fn model_names(&self) -> impl Iterator<Item = &str> {
+        self.models.keys().map(String::as_str)
+    }
+}

@@ -1,0 +1,647 @@
+//! A link process: one link specification `<A, B, unit, establish, reestablish, maintain>` and,
+//! for every object p of type A, an instance running the paper's state machine (section IV-B):
+//!
+//! - **unlinked**: `establish(p)` and `reestablish(p, o)` for each candidate o are progressed.
+//!   Candidates are the objects of type B not linked by this link specification; an object
+//!   becomes a candidate of p when it is within the gate (see [`crate::conditions`]) and stops
+//!   being one when it is removed or linked from another A object. A candidate whose reestablish
+//!   condition became false is dropped, and comes back only after it left the gate, or was linked
+//!   and unlinked again. When `establish` becomes true a new B object is created and linked; when
+//!   some `reestablish(p, o)` becomes true p is linked to o.
+//! - **linked**: B's state is computed from A's by the link unit; `maintain(p, o)` is progressed;
+//!   when it becomes false the link is removed and p is unlinked again (both objects remain).
+//!
+//! Decisions taken at one state are resolved together, so the order of objects does not matter:
+//! maintain failures first; then the reestablish matches, closest pairs first (by the gate's
+//! distance, then creation order), each A and B object taking part in at most one; then
+//! identifications; then the establish conditions of the A objects still unlinked. Conditions
+//! started by a decision (maintain after a link, establish and reestablish after an unlink) see
+//! their first state at the next step.
+
+use std::sync::Arc;
+
+use kpl_core::{Record, RecordType, Value};
+use kpl_mtl::{Formula, Progressor};
+
+use crate::change::{Cause, Change, ChangeKind};
+use crate::conditions::{LinkConditions, LinkState};
+use crate::engine::{Identification, StepCtx};
+use crate::gate::GateGrid;
+use crate::records::value_position;
+use crate::store::{LinkId, ObjectKey, Origin, TypeId};
+use crate::units::LinkUnit;
+
+/// A condition being progressed, or its verdict.
+#[derive(Debug)]
+pub enum Condition {
+    Pending(Box<Progressor>),
+    Decided(bool),
+}
+
+impl Condition {
+    pub fn new(formula: &Arc<Formula>) -> Condition {
+        Condition::Pending(Box::new(Progressor::new(formula.clone())))
+    }
+
+    /// `None` while pending.
+    pub fn verdict(&self) -> Option<bool> {
+        match self {
+            Condition::Pending(_) => None,
+            Condition::Decided(v) => Some(*v),
+        }
+    }
+}
+
+/// A candidate `to` object of an unlinked instance.
+#[derive(Debug)]
+pub struct Candidate {
+    pub to: ObjectKey,
+    pub condition: Condition,
+}
+
+/// An identification this link may complete, with its formula (`reestablish and description`).
+#[derive(Debug, Clone)]
+pub struct LinkIdentification {
+    pub ident: usize,
+    pub formula: Arc<Formula>,
+}
+
+#[derive(Debug)]
+pub struct Unlinked {
+    pub establish: Condition,
+    pub candidates: Vec<Candidate>,
+    /// (identification index, condition)
+    pub identifications: Vec<(usize, Condition)>,
+}
+
+#[derive(Debug)]
+pub enum InstanceState {
+    Unlinked(Unlinked),
+    Linked { to: ObjectKey, maintain: Condition },
+}
+
+/// The per-object process of a link process, for one A object.
+#[derive(Debug)]
+pub struct Instance {
+    pub from: ObjectKey,
+    pub state: InstanceState,
+}
+
+impl InstanceState {
+    fn unlinked(conditions: &LinkConditions) -> InstanceState {
+        InstanceState::Unlinked(Unlinked {
+            establish: Condition::new(&conditions.establish),
+            candidates: Vec::new(),
+            identifications: Vec::new(),
+        })
+    }
+}
+
+/// Counts for benchmarks and reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Condition progressions (establish, reestablish, maintain, identification), all steps.
+    pub condition_steps: u64,
+    /// Of these, reestablish progressions of candidate pairs.
+    pub candidate_steps: u64,
+    /// Link unit computations.
+    pub unit_computations: u64,
+}
+
+#[derive(Debug)]
+pub struct LinkProcess {
+    pub name: Arc<str>,
+    pub from_ty: TypeId,
+    pub to_ty: TypeId,
+    pub unit_name: String,
+    pub unit: Arc<dyn LinkUnit>,
+    pub conditions: LinkConditions,
+    pub identifications: Vec<LinkIdentification>,
+    pub(crate) instances: Vec<Option<Instance>>,
+    grid: GateGrid<ObjectKey>,
+    pub stats: LinkStats,
+}
+
+/// A reestablish condition that became true.
+#[derive(Debug, Clone, Copy)]
+struct Match {
+    distance: f64,
+    from_seq: u64,
+    to_seq: u64,
+    from: ObjectKey,
+    to: ObjectKey,
+    hypothesis: u32,
+    hypotheses: usize,
+}
+
+#[derive(Debug, Default)]
+struct Decisions {
+    unlink: Vec<(ObjectKey, ObjectKey)>,
+    reestablish: Vec<Match>,
+    identify: Vec<(usize, u64, ObjectKey)>,
+    establish: Vec<ObjectKey>,
+}
+
+/// The hypothesis of `value`/`hypotheses` closest to `pos`: (index, value, distance).
+fn closest<'v>(value: &'v Value, hypotheses: &'v [Value], pos: Option<[f64; 2]>) -> (u32, &'v Value, f64) {
+    let distance = |v: &Value| match (pos, value_position(v)) {
+        (Some(a), Some(b)) => (a[0] - b[0]).hypot(a[1] - b[1]),
+        _ => f64::INFINITY,
+    };
+    if hypotheses.len() <= 1 {
+        return (0, value, distance(value));
+    }
+    let mut best = (0u32, &hypotheses[0], distance(&hypotheses[0]));
+    for (i, h) in hypotheses.iter().enumerate().skip(1) {
+        let d = distance(h);
+        if d < best.2 {
+            best = (i as u32, h, d);
+        }
+    }
+    best
+}
+
+impl LinkProcess {
+    pub fn new(
+        name: Arc<str>,
+        from_ty: TypeId,
+        to_ty: TypeId,
+        unit_name: String,
+        unit: Arc<dyn LinkUnit>,
+        conditions: LinkConditions,
+    ) -> LinkProcess {
+        let grid = GateGrid::new(conditions.gate.unwrap_or(1.0));
+        LinkProcess {
+            name,
+            from_ty,
+            to_ty,
+            unit_name,
+            unit,
+            conditions,
+            identifications: Vec::new(),
+            instances: Vec::new(),
+            grid,
+            stats: LinkStats::default(),
+        }
+    }
+
+    pub fn instance(&self, from: ObjectKey) -> Option<&Instance> {
+        self.instances.get(from.index())?.as_ref().filter(|i| i.from == from)
+    }
+
+    /// Drops the instance of a removed A object.
+    pub(crate) fn drop_instance(&mut self, from: ObjectKey) {
+        if let Some(slot) = self.instances.get_mut(from.index())
+            && slot.as_ref().is_some_and(|i| i.from == from)
+        {
+            *slot = None;
+        }
+    }
+
+    /// Puts the instance of `from` back to unlinked (its linked-to object was removed).
+    pub(crate) fn reset_instance(&mut self, from: ObjectKey) {
+        if let Some(Some(instance)) = self.instances.get_mut(from.index())
+            && instance.from == from
+        {
+            instance.state = InstanceState::unlinked(&self.conditions);
+        }
+    }
+
+    fn set_state(&mut self, from: ObjectKey, state: InstanceState) {
+        let i = from.index();
+        if self.instances.len() <= i {
+            self.instances.resize_with(i + 1, || None);
+        }
+        self.instances[i] = Some(Instance { from, state });
+    }
+
+    /// Builds the gate grid over the objects of type B not linked by this link.
+    fn build_grid(&mut self, id: LinkId, cx: &StepCtx<'_>) {
+        self.grid.clear();
+        let gated = self.conditions.gate.is_some();
+        for key in cx.store.objects_of(self.to_ty) {
+            let Some(o) = cx.store.get(key) else { continue };
+            if o.is_partial() || o.incoming_via(id).is_some() {
+                continue;
+            }
+            if !gated {
+                self.grid.insert_unplaced(key);
+            } else if o.hypotheses.len() > 1 {
+                for (h, v) in o.hypotheses.iter().enumerate() {
+                    match value_position(v) {
+                        Some(p) => self.grid.insert(key, h as u32, p),
+                        None => self.grid.insert_unplaced(key),
+                    }
+                }
+            } else {
+                match value_position(&o.value) {
+                    Some(p) => self.grid.insert(key, 0, p),
+                    None => self.grid.insert_unplaced(key),
+                }
+            }
+        }
+        self.grid.finish();
+    }
+
+    /// One step of the link process at `cx.time`: the link unit for every linked pair, every
+    /// instance's conditions, then the decisions.
+    pub(crate) fn run(&mut self, id: LinkId, cx: &mut StepCtx<'_>, keys: &mut Vec<ObjectKey>) {
+        keys.clear();
+        keys.extend(cx.store.objects_of(self.from_ty));
+        let to_type = cx.types[self.to_ty as usize].record.clone();
+        let mut decisions = Decisions::default();
+        let mut grid_ready = false;
+        let mut near: Vec<ObjectKey> = Vec::new();
+        for &p in keys.iter() {
+            let Some(p_obj) = cx.store.get(p) else { continue };
+            if p_obj.is_partial() {
+                continue;
+            }
+            let p_value = p_obj.value.clone();
+            let (p_measured, p_predicted, p_seq) = (p_obj.measured_at, p_obj.predicted, p_obj.seq);
+            let Some(p_record) = p_obj.record().cloned() else { continue };
+            let p_pos = value_position(&p_value);
+
+            // The instance of p, created when p is first seen.
+            let i = p.index();
+            if self.instances.len() <= i {
+                self.instances.resize_with(i + 1, || None);
+            }
+            if self.instances[i].as_ref().is_some_and(|inst| inst.from != p) {
+                self.instances[i] = None;
+            }
+            if self.instances[i].is_none() {
+                self.instances[i] =
+                    Some(Instance { from: p, state: InstanceState::unlinked(&self.conditions) });
+            }
+            let linked_to = match &self.instances[i] {
+                Some(Instance { state: InstanceState::Linked { to, .. }, .. }) => Some(*to),
+                _ => None,
+            };
+
+            if let Some(to) = linked_to {
+                // Linked: the unit computes B's state, then maintain.
+                let Some(o) = cx.store.get_mut(to) else {
+                    self.set_state(p, InstanceState::unlinked(&self.conditions));
+                    continue;
+                };
+                let fresher = match o.computed {
+                    Some((step, measured)) if step == cx.step => p_measured >= measured,
+                    _ => true,
+                };
+                if !o.on_prediction_path && fresher {
+                    self.stats.unit_computations += 1;
+                    let previous = o.record().cloned();
+                    match self.unit.compute(&p_record, previous.as_deref(), &to_type, &o.symbol) {
+                        Ok(record) => {
+                            o.set_state(record, cx.time);
+                            o.measured_at = p_measured;
+                            o.predicted = p_predicted;
+                            o.hypotheses.clear();
+                            o.computed = Some((cx.step, p_measured));
+                        }
+                        Err(message) => cx
+                            .out
+                            .warn(cx.time, format!("link `{}` ({}): {message}", self.name, self.unit_name)),
+                    }
+                }
+                let o_value = o.value.clone();
+                let o_symbol = o.symbol.clone();
+                if let Some(Instance { state: InstanceState::Linked { maintain, .. }, .. }) =
+                    &mut self.instances[i]
+                    && let Condition::Pending(progressor) = maintain
+                {
+                    self.stats.condition_steps += 1;
+                    let state = LinkState { from: &p_value, to: Some(&o_value), this: None };
+                    match progressor.step(cx.time, &state) {
+                        Ok(Some(verdict)) => {
+                            *maintain = Condition::Decided(verdict);
+                            if !verdict {
+                                decisions.unlink.push((p, to));
+                            }
+                        }
+                        Ok(None) => {}
+                        Err(e) => cx.out.warn(
+                            cx.time,
+                            format!(
+                                "link `{}`: maintain({}, {o_symbol}): {e}; the state was skipped",
+                                self.name,
+                                p_value_symbol(&p_value)
+                            ),
+                        ),
+                    }
+                }
+                continue;
+            }
+
+            // Unlinked: establish, the candidates, the identifications.
+            if !grid_ready {
+                self.build_grid(id, cx);
+                grid_ready = true;
+            }
+            self.grid.near(p_pos, &mut near);
+            let Some(Instance { state: InstanceState::Unlinked(u), .. }) = &mut self.instances[i] else {
+                continue;
+            };
+            if let Condition::Pending(progressor) = &mut u.establish {
+                self.stats.condition_steps += 1;
+                let state = LinkState { from: &p_value, to: None, this: None };
+                match progressor.step(cx.time, &state) {
+                    Ok(Some(verdict)) => {
+                        u.establish = Condition::Decided(verdict);
+                        if verdict {
+                            decisions.establish.push(p);
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(e) => cx.out.warn(
+                        cx.time,
+                        format!(
+                            "link `{}`: establish({}): {e}; the state was skipped",
+                            self.name,
+                            p_value_symbol(&p_value)
+                        ),
+                    ),
+                }
+            }
+            let store = &*cx.store;
+            u.candidates.retain(|c| {
+                store.get(c.to).is_some_and(|o| o.incoming_via(id).is_none())
+                    && (matches!(c.condition, Condition::Pending(_)) || near.contains(&c.to))
+            });
+            for &o in &near {
+                if !u.candidates.iter().any(|c| c.to == o) {
+                    u.candidates
+                        .push(Candidate { to: o, condition: Condition::new(&self.conditions.reestablish) });
+                }
+            }
+            for candidate in &mut u.candidates {
+                let Condition::Pending(progressor) = &mut candidate.condition else { continue };
+                let Some(o) = store.get(candidate.to) else { continue };
+                let (hypothesis, to_value, distance) = closest(&o.value, &o.hypotheses, p_pos);
+                self.stats.condition_steps += 1;
+                self.stats.candidate_steps += 1;
+                let state = LinkState { from: &p_value, to: Some(to_value), this: None };
+                match progressor.step(cx.time, &state) {
+                    Ok(Some(verdict)) => {
+                        candidate.condition = Condition::Decided(verdict);
+                        if verdict {
+                            decisions.reestablish.push(Match {
+                                distance,
+                                from_seq: p_seq,
+                                to_seq: o.seq,
+                                from: p,
+                                to: candidate.to,
+                                hypothesis,
+                                hypotheses: o.hypotheses.len().max(1),
+                            });
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(e) => {
+                        let message = format!(
+                            "link `{}`: reestablish({}, {}): {e}; the state was skipped",
+                            self.name,
+                            p_value_symbol(&p_value),
+                            o.symbol
+                        );
+                        cx.out.warn(cx.time, message);
+                    }
+                }
+            }
+            // Identifications this link may complete: `to` and `this` are what the unit makes of p.
+            let idents: &[Identification] = &*cx.identifications;
+            u.identifications.retain(|(ident, _)| !idents[*ident].done);
+            for link_ident in &self.identifications {
+                let ident = &idents[link_ident.ident];
+                if ident.done {
+                    continue;
+                }
+                let position = match u.identifications.iter().position(|(k, _)| *k == link_ident.ident) {
+                    Some(k) => k,
+                    None => {
+                        u.identifications.push((link_ident.ident, Condition::new(&link_ident.formula)));
+                        u.identifications.len() - 1
+                    }
+                };
+                let Condition::Pending(progressor) = &mut u.identifications[position].1 else { continue };
+                self.stats.unit_computations += 1;
+                let made = match self.unit.compute(&p_record, None, &to_type, &ident.symbol) {
+                    Ok(record) => Value::Record(Arc::new(record)),
+                    Err(message) => {
+                        cx.out.warn(cx.time, format!("link `{}` ({}): {message}", self.name, self.unit_name));
+                        continue;
+                    }
+                };
+                self.stats.condition_steps += 1;
+                let state = LinkState { from: &p_value, to: Some(&made), this: Some(&made) };
+                match progressor.step(cx.time, &state) {
+                    Ok(Some(verdict)) => {
+                        u.identifications[position].1 = Condition::Decided(verdict);
+                        if verdict {
+                            decisions.identify.push((link_ident.ident, p_seq, p));
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(e) => cx.out.warn(
+                        cx.time,
+                        format!(
+                            "link `{}`: identification `{}` for {}: {e}; the state was skipped",
+                            self.name,
+                            ident.name,
+                            p_value_symbol(&p_value)
+                        ),
+                    ),
+                }
+            }
+        }
+        self.apply(id, cx, decisions, &to_type);
+    }
+
+    fn is_unlinked(&self, p: ObjectKey) -> bool {
+        matches!(self.instance(p), Some(Instance { state: InstanceState::Unlinked(_), .. }))
+    }
+
+    fn apply(
+        &mut self,
+        id: LinkId,
+        cx: &mut StepCtx<'_>,
+        mut decisions: Decisions,
+        to_type: &Arc<RecordType>,
+    ) {
+        let b_name = cx.types[self.to_ty as usize].name.clone();
+        // Maintain conditions that became false.
+        for (p, o) in decisions.unlink {
+            if cx.store.unlink(id, p, o) {
+                self.set_state(p, InstanceState::unlinked(&self.conditions));
+                if let (Some(po), Some(oo)) = (cx.store.get(p), cx.store.get(o)) {
+                    let change = Change::new(
+                        cx.time,
+                        ChangeKind::Unlinked,
+                        oo.symbol.clone(),
+                        b_name.clone(),
+                        Cause::Maintain,
+                    )
+                    .link(&self.name)
+                    .from(&po.symbol);
+                    cx.out.changes.push(change);
+                }
+            }
+        }
+        // Reestablish: closest pairs first.
+        decisions.reestablish.sort_by(|a, b| {
+            a.distance.total_cmp(&b.distance).then(a.from_seq.cmp(&b.from_seq)).then(a.to_seq.cmp(&b.to_seq))
+        });
+        for m in decisions.reestablish {
+            let free = cx.store.get(m.to).is_some_and(|o| o.incoming_via(id).is_none() && !o.is_partial());
+            if !free || !self.is_unlinked(m.from) {
+                continue;
+            }
+            self.link_existing(id, cx, m.from, m.to, to_type);
+            let (Some(po), Some(oo)) = (cx.store.get(m.from), cx.store.get(m.to)) else { continue };
+            let mut change = Change::new(
+                cx.time,
+                ChangeKind::Linked,
+                oo.symbol.clone(),
+                b_name.clone(),
+                Cause::Reestablish,
+            )
+            .link(&self.name)
+            .from(&po.symbol);
+            if m.hypotheses > 1 {
+                change = change.hypotheses(m.hypotheses).hypothesis(m.hypothesis);
+            }
+            cx.out.changes.push(change);
+        }
+        // Identifications completed through this link.
+        decisions.identify.sort_by_key(|(ident, seq, _)| (*ident, *seq));
+        for (ident, _, p) in decisions.identify {
+            if cx.identifications[ident].done || !self.is_unlinked(p) {
+                continue;
+            }
+            let partial = cx.identifications[ident].partial;
+            let Some(obj) = cx.store.get_mut(partial) else { continue };
+            obj.origin = Origin::Derived;
+            self.link_existing(id, cx, p, partial, to_type);
+            let ident_name = cx.identifications[ident].name.clone();
+            cx.identifications[ident].done = true;
+            cx.identifications[ident].object = Some(partial);
+            let (Some(po), Some(oo)) = (cx.store.get(p), cx.store.get(partial)) else { continue };
+            let linked =
+                Change::new(cx.time, ChangeKind::Linked, oo.symbol.clone(), b_name.clone(), Cause::Identify)
+                    .link(&self.name)
+                    .from(&po.symbol)
+                    .name(&ident_name);
+            let identified = Change::new(
+                cx.time,
+                ChangeKind::Identified,
+                oo.symbol.clone(),
+                b_name.clone(),
+                Cause::Identify,
+            )
+            .link(&self.name)
+            .from(&po.symbol)
+            .name(&ident_name);
+            cx.out.changes.push(linked);
+            cx.out.changes.push(identified);
+        }
+        // Establish: a new B object for each A object still unlinked.
+        for p in decisions.establish {
+            if !self.is_unlinked(p) {
+                continue;
+            }
+            let Some(po) = cx.store.get(p) else { continue };
+            let (p_symbol, p_measured, p_predicted) = (po.symbol.clone(), po.measured_at, po.predicted);
+            let Some(p_record) = po.record().cloned() else { continue };
+            let symbol = cx.store.new_symbol(self.to_ty);
+            self.stats.unit_computations += 1;
+            let record = match self.unit.compute(&p_record, None, to_type, &symbol) {
+                Ok(record) => record,
+                Err(message) => {
+                    cx.out.warn(
+                        cx.time,
+                        format!(
+                            "link `{}` ({}): cannot create an object from {p_symbol}: {message}",
+                            self.name, self.unit_name
+                        ),
+                    );
+                    // Try again from the next state on.
+                    self.set_state(p, InstanceState::unlinked(&self.conditions));
+                    continue;
+                }
+            };
+            let key = cx.store.insert(self.to_ty, symbol.clone(), Origin::Derived, record, cx.time);
+            if let Some(o) = cx.store.get_mut(key) {
+                o.measured_at = p_measured;
+                o.predicted = p_predicted;
+                o.computed = Some((cx.step, p_measured));
+            }
+            cx.store.link(id, p, key);
+            self.set_state(
+                p,
+                InstanceState::Linked { to: key, maintain: Condition::new(&self.conditions.maintain) },
+            );
+            cx.out.changes.push(
+                Change::new(cx.time, ChangeKind::Created, symbol.clone(), b_name.clone(), Cause::Establish)
+                    .link(&self.name)
+                    .from(&p_symbol),
+            );
+            cx.out.changes.push(
+                Change::new(cx.time, ChangeKind::Linked, symbol, b_name.clone(), Cause::Establish)
+                    .link(&self.name)
+                    .from(&p_symbol),
+            );
+        }
+    }
+
+    /// Links `p` to the existing object `o`: o's state is computed from p, its prediction ends.
+    fn link_existing(
+        &mut self,
+        id: LinkId,
+        cx: &mut StepCtx<'_>,
+        p: ObjectKey,
+        o: ObjectKey,
+        to_type: &Arc<RecordType>,
+    ) {
+        cx.store.link(id, p, o);
+        self.set_state(
+            p,
+            InstanceState::Linked { to: o, maintain: Condition::new(&self.conditions.maintain) },
+        );
+        let Some(po) = cx.store.get(p) else { return };
+        let (p_measured, p_predicted) = (po.measured_at, po.predicted);
+        let p_record: Option<Arc<Record>> = po.record().cloned();
+        let Some(oo) = cx.store.get_mut(o) else { return };
+        let previous = if oo.value.as_record().is_some_and(|r| !r.fields.is_empty()) {
+            oo.record().cloned()
+        } else {
+            None
+        };
+        if let Some(p_record) = p_record {
+            self.stats.unit_computations += 1;
+            match self.unit.compute(&p_record, previous.as_deref(), to_type, &oo.symbol) {
+                Ok(record) => oo.set_state(record, cx.time),
+                Err(message) => {
+                    cx.out.warn(cx.time, format!("link `{}` ({}): {message}", self.name, self.unit_name))
+                }
+            }
+        }
+        oo.measured_at = p_measured;
+        oo.predicted = p_predicted;
+        oo.computed = Some((cx.step, p_measured));
+        oo.hypotheses.clear();
+        oo.on_prediction_path = false;
+        if let Some(run) = oo.prediction.take() {
+            for k in run.path {
+                if let Some(x) = cx.store.get_mut(k) {
+                    x.on_prediction_path = false;
+                    x.hypotheses.clear();
+                }
+            }
+        }
+    }
+}
+
+fn p_value_symbol(value: &Value) -> String {
+    value.as_record().and_then(|r| r.id.as_deref()).unwrap_or("?").to_string()
+}

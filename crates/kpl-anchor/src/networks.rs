@@ -1,0 +1,74 @@
+//! The road networks that link units (`anchor.snap_to_lane`) and prediction models
+//! (`along_roads`) of one spec use, loaded once per distinct `(scenario, network_file)` and
+//! shared. A caller may put a network in beforehand (a benchmark's generated town), and it is then
+//! used for those parameters instead of loading.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use kpl_core::Value;
+use kpl_sim::{Params, RoadNetwork};
+
+/// Road networks by the parameters that name them.
+#[derive(Debug, Default, Clone)]
+pub struct Networks {
+    loaded: BTreeMap<(String, String), Arc<RoadNetwork>>,
+}
+
+/// The `scenario` and `network_file` parameters of a call (`network_file` empty when not set).
+pub fn network_key(params: &BTreeMap<String, Value>) -> (String, String) {
+    let text = |name: &str| params.get(name).and_then(Value::as_str).unwrap_or("").to_string();
+    let scenario = match text("scenario") {
+        s if s.is_empty() => "crossing".to_string(),
+        s => s,
+    };
+    (scenario, text("network_file"))
+}
+
+impl Networks {
+    /// Uses `network` wherever a call names `scenario` (and no network file).
+    pub fn insert(&mut self, scenario: &str, network: Arc<RoadNetwork>) {
+        self.loaded.insert((scenario.to_string(), String::new()), network);
+    }
+
+    /// The network a call's parameters name: its `network_file` when set, else its built-in
+    /// `scenario` (default `crossing`; `grid_town` at its default size).
+    pub fn resolve(&mut self, params: &BTreeMap<String, Value>) -> Result<Arc<RoadNetwork>, String> {
+        let key = network_key(params);
+        if let Some(network) = self.loaded.get(&key) {
+            return Ok(network.clone());
+        }
+        let sim_params = Params {
+            scenario: key.0.clone(),
+            network_file: (!key.1.is_empty()).then(|| key.1.clone()),
+            ..Params::default()
+        };
+        let network = sim_params.load_network().map_err(|e| match &sim_params.network_file {
+            Some(file) => format!("cannot load road network `{file}`: {e}"),
+            None => format!("cannot build road network `{}`: {e}", key.0),
+        })?;
+        let network = Arc::new(network);
+        self.loaded.insert(key, network.clone());
+        Ok(network)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_network_per_parameters() {
+        let mut networks = Networks::default();
+        let mut params = BTreeMap::new();
+        params.insert("scenario".to_string(), Value::str("bridge"));
+        params.insert("network_file".to_string(), Value::str(""));
+        let a = networks.resolve(&params).unwrap();
+        let b = networks.resolve(&params).unwrap();
+        assert!(Arc::ptr_eq(&a, &b));
+        assert!(a.road_by_name("overpass").is_some());
+        params.insert("network_file".to_string(), Value::str("/nonexistent/roads.json"));
+        assert!(networks.resolve(&params).unwrap_err().contains("/nonexistent/roads.json"));
+    }
+}

@@ -1,0 +1,209 @@
+//! Prediction models: the state of an object that has no incoming link, from its last state
+//! (`predict TYPE = MODEL(params)`). A model may give several hypotheses, most likely first.
+//!
+//! Built in: `constant_velocity` (moves on with the velocity it last had), `stationary` (stays
+//! where it was last seen, velocity zero) and `along_roads` (keeps its speed along the lanes of a
+//! road network, one hypothesis per branch taken at every crossing on the way; straightest first).
+//!
+//! Predictions are always made from the state the object had when prediction began, never from
+//! the previous prediction, so errors do not accumulate step by step.
+
+use std::fmt;
+use std::sync::Arc;
+
+use kpl_core::{Record, Time, Value};
+use kpl_sim::{LanePosition, RoadNetwork, geom};
+
+use crate::records::{position, velocity, with_fields};
+use crate::units::heading_of_velocity;
+
+/// Where a prediction starts: the last known state, its time, and (for road models) the lane it
+/// was snapped to then.
+#[derive(Debug, Clone)]
+pub struct PredictionStart {
+    pub state: Arc<Record>,
+    pub time: Time,
+    pub lane: Option<LanePosition>,
+}
+
+/// How objects of a type move while nothing is linked to them.
+pub trait PredictionModel: fmt::Debug + Send + Sync {
+    /// The name used in specs and change records (`constant_velocity`).
+    fn name(&self) -> &str;
+
+    /// Begins a prediction from the last known `state` at `time`.
+    fn start(&self, state: Arc<Record>, time: Time) -> PredictionStart {
+        PredictionStart { state, time, lane: None }
+    }
+
+    /// The hypotheses at `time` (at or after the start), most likely first; at least one.
+    fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>);
+}
+
+fn seconds(from: Time, to: Time) -> f64 {
+    (to.saturating_sub(from)).max(0) as f64 / 1e6
+}
+
+/// `constant_velocity`: `pos + vel * dt`, `vel` unchanged. A state without a vec2 `pos` and
+/// `vel` stays as it is.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ConstantVelocity;
+
+impl PredictionModel for ConstantVelocity {
+    fn name(&self) -> &str {
+        "constant_velocity"
+    }
+
+    fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>) {
+        let dt = seconds(start.time, time);
+        match (position(&start.state), velocity(&start.state)) {
+            (Some(p), Some(v)) => {
+                out.push(with_fields(
+                    &start.state,
+                    &[("pos", Value::Vec2(geom::add(p, geom::scale(v, dt))))],
+                ));
+            }
+            _ => out.push((*start.state).clone()),
+        }
+    }
+}
+
+/// `stationary`: stays at its last position; a `vel` attribute becomes zero.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Stationary;
+
+impl PredictionModel for Stationary {
+    fn name(&self) -> &str {
+        "stationary"
+    }
+
+    fn predict(&self, start: &PredictionStart, _time: Time, out: &mut Vec<Record>) {
+        out.push(with_fields(&start.state, &[("vel", Value::vec2(0.0, 0.0))]));
+    }
+}
+
+/// `along_roads`: the object keeps the speed it had and follows the lanes of the network from the
+/// lane it was snapped to (preferring the lane of its direction of travel), branching into every
+/// successor lane at the end of a lane: one hypothesis per route, at most `max_hypotheses`,
+/// ordered by how little the route turns (straight on first). `pos` is the point on the lane
+/// centre, `vel` the speed along the lane there, and a `road` attribute (int) the road's index
+/// (-1 inside a crossing). An object that cannot be snapped (no lane within the snap radius) is
+/// predicted with constant velocity.
+#[derive(Debug, Clone)]
+pub struct AlongRoads {
+    network: Arc<RoadNetwork>,
+    max_hypotheses: usize,
+}
+
+/// Default cap on the hypotheses of `along_roads` (two four-way crossings give nine).
+pub const DEFAULT_MAX_HYPOTHESES: usize = 9;
+
+impl AlongRoads {
+    pub fn new(network: Arc<RoadNetwork>, max_hypotheses: usize) -> AlongRoads {
+        AlongRoads { network, max_hypotheses: max_hypotheses.max(1) }
+    }
+}
+
+impl PredictionModel for AlongRoads {
+    fn name(&self) -> &str {
+        "along_roads"
+    }
+
+    fn start(&self, state: Arc<Record>, time: Time) -> PredictionStart {
+        let lane = position(&state)
+            .and_then(|p| self.network.snap_to_lane(p, heading_of_velocity(velocity(&state))));
+        PredictionStart { state, time, lane }
+    }
+
+    fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>) {
+        let Some(lane) = &start.lane else {
+            ConstantVelocity.predict(start, time, out);
+            return;
+        };
+        let speed = velocity(&start.state).map_or(0.0, geom::norm);
+        let mut hypotheses =
+            self.network.advance(lane, speed * seconds(start.time, time), self.max_hypotheses);
+        // Straightest first; `advance` gives a deterministic order, which breaks ties.
+        let turn = |h: &kpl_sim::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
+        hypotheses.sort_by(|a, b| turn(a).total_cmp(&turn(b)));
+        for h in &hypotheses {
+            let road = h.position.road().map_or(-1, |r| i64::from(r.0));
+            let vel = geom::scale(geom::unit(h.position.heading), speed);
+            let mut record = with_fields(
+                &start.state,
+                &[("pos", Value::Vec2(h.position.point)), ("vel", Value::Vec2(vel))],
+            );
+            for (name, value) in &mut record.fields {
+                if &**name == "road" && matches!(value, Value::Int(_)) {
+                    *value = Value::Int(road);
+                }
+            }
+            out.push(record);
+        }
+        if out.is_empty() {
+            out.push((*start.state).clone());
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    fn state(pos: [f64; 2], vel: [f64; 2]) -> Arc<Record> {
+        Arc::new(Record {
+            id: Some("oo1".into()),
+            fields: vec![
+                ("pos".into(), Value::Vec2(pos)),
+                ("vel".into(), Value::Vec2(vel)),
+                ("road".into(), Value::Int(0)),
+            ],
+        })
+    }
+
+    fn predict(model: &dyn PredictionModel, s: Arc<Record>, dt_s: f64) -> Vec<Record> {
+        let start = model.start(s, 1_000_000);
+        let mut out = Vec::new();
+        model.predict(&start, 1_000_000 + (dt_s * 1e6) as Time, &mut out);
+        out
+    }
+
+    #[test]
+    fn constant_velocity_and_stationary() {
+        let out = predict(&ConstantVelocity, state([1.0, 2.0], [3.0, -1.0]), 2.0);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].get("pos"), Some(&Value::vec2(7.0, 0.0)));
+        assert_eq!(out[0].get("vel"), Some(&Value::vec2(3.0, -1.0)));
+        let out = predict(&Stationary, state([1.0, 2.0], [3.0, -1.0]), 2.0);
+        assert_eq!(out[0].get("pos"), Some(&Value::vec2(1.0, 2.0)));
+        assert_eq!(out[0].get("vel"), Some(&Value::vec2(0.0, 0.0)));
+    }
+
+    #[test]
+    fn along_roads_splits_at_a_crossing_straightest_first() {
+        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap());
+        let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
+        // Eastbound on `west`, 30 m before the crossing at 10 m/s: after 1 s still one hypothesis.
+        let out = predict(&model, state([-30.0, -1.75], [10.0, 0.0]), 1.0);
+        assert_eq!(out.len(), 1);
+        let pos = out[0].get("pos").unwrap().as_vec2().unwrap();
+        assert!((pos[0] + 20.0).abs() < 1e-6 && (pos[1] + 1.75).abs() < 1e-6, "{pos:?}");
+        // After 6 s (60 m) it has passed the crossing: left, straight on, right; straight first.
+        let out = predict(&model, state([-30.0, -1.75], [10.0, 0.0]), 6.0);
+        assert_eq!(out.len(), 3);
+        let first = out[0].get("pos").unwrap().as_vec2().unwrap();
+        assert!(first[0] > 20.0 && first[1].abs() < 3.0, "straight on first: {first:?}");
+        let east = network.road_by_name("east").unwrap().id;
+        assert_eq!(out[0].get("road"), Some(&Value::Int(i64::from(east.0))));
+        for h in &out {
+            let p = h.get("pos").unwrap().as_vec2().unwrap();
+            assert!(network.on_road(p), "{p:?}");
+            let v = h.get("vel").unwrap().as_vec2().unwrap();
+            assert!((geom::norm(v) - 10.0).abs() < 1e-9);
+        }
+        // Off the network: constant velocity.
+        let out = predict(&model, state([60.0, 60.0], [1.0, 0.0]), 2.0);
+        assert_eq!(out[0].get("pos"), Some(&Value::vec2(62.0, 60.0)));
+    }
+}

@@ -1,0 +1,205 @@
+//! Signatures for the checker (`kpl check`, `kpl list`): the link units and prediction models
+//! this crate implements ([`entries`]), the `sim.uav_tracker` source its [`crate::driver`] runs
+//! ([`tracker_entry`]), and [`signatures`], a registry with those and the formula functions, so
+//! that this crate's tests, benchmarks and driver check specs exactly as the command does.
+
+use std::fmt::Write as _;
+
+use kpl_core::{Value, ValueType};
+use kpl_semantic::hir;
+use kpl_semantic::registry::{Entry, EntryKind, Function, Param, ParamType, Registry, TypeReq};
+
+fn fields(list: &[(&str, ValueType)]) -> TypeReq {
+    TypeReq::Fields(list.iter().map(|(n, t)| (n.to_string(), t.clone())).collect())
+}
+
+fn network_params(entry: Entry) -> Entry {
+    entry
+        .param(Param::optional(
+            "scenario",
+            ParamType::Choice(kpl_sim::scenarios::NAMES.iter().map(|s| s.to_string()).collect()),
+            Value::str("crossing"),
+            "built-in road network (ignored when `network_file` is set)",
+        ))
+        .param(Param::optional(
+            "network_file",
+            ParamType::Str,
+            Value::str(""),
+            "road network JSON file (docs/simulator.md)",
+        ))
+}
+
+/// `on_road(pos)`, provided by `anchor.snap_to_lane`.
+pub fn on_road_signature() -> Function {
+    Function::new(
+        "on_road",
+        vec![ValueType::Any],
+        ValueType::Bool,
+        "whether a position (or an object's `pos`) is on a road of the network",
+    )
+}
+
+/// The link units and prediction models of [`crate::Implementations::default`].
+pub fn entries() -> Vec<Entry> {
+    use ValueType::{Float, Int, Vec2};
+    vec![
+        Entry::new(EntryKind::Link, "anchor.copy", "Copies the attributes the two types share.")
+            .output(TypeReq::Any),
+        Entry::new(
+            EntryKind::Link,
+            "anchor.world_from_percept",
+            "World position and velocity from a vision percept.",
+        )
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+        network_params(Entry::new(
+            EntryKind::Link,
+            "anchor.snap_to_lane",
+            "Snaps a world object to the centre of the nearest lane of the road network.",
+        ))
+        .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
+        .provides(on_road_signature()),
+        Entry::new(EntryKind::Predict, "constant_velocity", "Moves on with the velocity it last had.")
+            .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+        Entry::new(EntryKind::Predict, "stationary", "Stays where it was last seen.")
+            .output(fields(&[("pos", Vec2)])),
+        network_params(Entry::new(
+            EntryKind::Predict,
+            "along_roads",
+            "Keeps its speed along the road network, one hypothesis per branch at a crossing.",
+        ))
+        .param(Param::optional(
+            "max_hypotheses",
+            ParamType::Int,
+            Value::Int(crate::predict::DEFAULT_MAX_HYPOTHESES as i64),
+            "most hypotheses kept (straightest routes first)",
+        ))
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+    ]
+}
+
+/// `sim.uav_tracker`: the simulated UAV tracker of `kpl-sim`, with its parameters.
+pub fn tracker_entry() -> Entry {
+    use ValueType::{Float, Vec2};
+    let mut entry = Entry::new(
+        EntryKind::Source,
+        "sim.uav_tracker",
+        "Vision percepts of cars from a simulated UAV tracker.",
+    )
+    .output(fields(&[("pos", Vec2), ("vel", Vec2), ("size", Float)]));
+    for info in kpl_sim::Params::describe() {
+        let ty = match info.ty {
+            "int" => ParamType::Int,
+            "float" => ParamType::Float,
+            "bool" => ParamType::Bool,
+            _ => ParamType::Str,
+        };
+        let default = serde_json::from_str::<serde_json::Value>(&info.default)
+            .ok()
+            .and_then(|j| Value::from_json_untyped(&j).ok())
+            .unwrap_or_else(|| Value::str(""));
+        entry = entry.param(Param::optional(info.name, ty, default, info.doc));
+    }
+    entry
+}
+
+/// The formula functions of `kpl-mtl` (the signatures `kpl check` uses).
+fn formula_functions(registry: &mut Registry) {
+    use ValueType::{Any, Float, Vec2};
+    for (name, summary) in [
+        ("abs", "absolute value"),
+        ("sqrt", "square root"),
+        ("floor", "largest integer not above"),
+        ("ceil", "smallest integer not below"),
+    ] {
+        registry.add_function(Function::new(name, vec![Float], Float, summary));
+    }
+    registry.add_function(Function::new("min", vec![Float], Float, "smallest of its arguments").variadic());
+    registry.add_function(Function::new("max", vec![Float], Float, "largest of its arguments").variadic());
+    registry.add_function(Function::new("norm", vec![Vec2], Float, "length of a vector"));
+    registry.add_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
+    registry.add_function(Function::new("xydist", vec![Any, Any], Float, "distance in the x/y plane"));
+    registry.add_function(Function::new(
+        "dist",
+        vec![Any, Any],
+        Float,
+        "distance, or |a - b| of two numbers",
+    ));
+}
+
+/// A registry with the formula functions, `sim.uav_tracker` and [`entries`]: what the driver can
+/// run.
+pub fn signatures() -> Registry {
+    let mut registry = Registry::default();
+    formula_functions(&mut registry);
+    registry.add(tracker_entry());
+    for entry in entries() {
+        registry.add(entry);
+    }
+    registry
+}
+
+/// A spec's errors as text, one per line (`line:column: message`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("the spec has errors:\n{0}")]
+pub struct SpecErrors(pub String);
+
+/// Parses and checks a spec against [`signatures`].
+pub fn check_text(text: &str) -> Result<hir::Spec, SpecErrors> {
+    let parse = kpl_syntax::parse(text);
+    let index = kpl_syntax::LineIndex::new(text);
+    let render = |diagnostics: &[kpl_syntax::Diagnostic]| {
+        let mut out = String::new();
+        for d in diagnostics.iter().filter(|d| d.is_error()) {
+            let (line, column) = index.line_col(text, d.span.start);
+            let _ = writeln!(out, "{line}:{column}: {} {}", d.code, d.message);
+        }
+        out
+    };
+    if parse.has_errors() {
+        return Err(SpecErrors(render(&parse.diagnostics)));
+    }
+    let checked = kpl_semantic::check(&parse.spec, &signatures());
+    match checked.spec {
+        Some(spec) if !checked.has_errors() => Ok(spec),
+        _ => Err(SpecErrors(render(&checked.diagnostics))),
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+    use crate::Implementations;
+
+    /// Every signature has an implementation and every implementation a signature.
+    #[test]
+    fn signatures_match_implementations() {
+        let implementations = Implementations::default();
+        let mut links: Vec<String> =
+            entries().iter().filter(|e| e.kind == EntryKind::Link).map(|e| e.name.clone()).collect();
+        let mut models: Vec<String> =
+            entries().iter().filter(|e| e.kind == EntryKind::Predict).map(|e| e.name.clone()).collect();
+        links.sort();
+        models.sort();
+        assert_eq!(links, implementations.link_unit_names().map(String::from).collect::<Vec<_>>());
+        assert_eq!(models, implementations.model_names().map(String::from).collect::<Vec<_>>());
+    }
+
+    /// The formula functions are the ones `kpl-mtl` implements.
+    #[test]
+    fn formula_functions_match_the_engine() {
+        let mut registry = Registry::default();
+        formula_functions(&mut registry);
+        let mut ours: Vec<String> = registry.functions().map(|f| f.name.clone()).collect();
+        let mut engine: Vec<String> = kpl_mtl::builtins().iter().map(|f| f.name.to_string()).collect();
+        ours.sort();
+        engine.sort();
+        assert_eq!(ours, engine);
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        let err = check_text("type A { x: flot }\n").unwrap_err();
+        assert!(err.0.starts_with("1:"), "{err}");
+    }
+}

@@ -1,0 +1,219 @@
+//! Link units: the computational units of link specifications (`via UNIT(params)`), which compute
+//! the state of a linked-to object from the state of the object linked to it, and may provide
+//! predicates to their link's conditions (`anchor.snap_to_lane` provides `on_road`).
+//!
+//! Built in: `anchor.copy` (the attributes the two types share), `anchor.world_from_percept`
+//! (position and velocity of a percept in world coordinates: the simulated tracker already
+//! reports them there, so this checks and copies them) and `anchor.snap_to_lane` (the position
+//! snapped to the centre of the nearest lane of a road network, with the road and the lateral
+//! offset from the lane centre).
+
+use std::fmt;
+use std::sync::Arc;
+
+use kpl_core::{Record, RecordType, Value};
+use kpl_mtl::Function;
+use kpl_sim::RoadNetwork;
+use kpl_sim::geom;
+
+use crate::records::{fill, position, velocity};
+
+/// Computes the state of a linked-to object (type `to`) from the state of the object linked to it.
+pub trait LinkUnit: fmt::Debug + Send + Sync {
+    /// The new state of the linked-to object `symbol`. `previous` is its last state (absent for
+    /// an object being created). An `Err` is reported as a warning and the object keeps its state.
+    fn compute(
+        &self,
+        from: &Record,
+        previous: Option<&Record>,
+        to: &RecordType,
+        symbol: &Arc<str>,
+    ) -> Result<Record, String>;
+
+    /// Functions this unit adds to the conditions of its link (`on_road`).
+    fn functions(&self) -> Vec<Function> {
+        Vec::new()
+    }
+}
+
+/// `anchor.copy`: every attribute of the linked-to type that the linked-from object also has
+/// (same name, a fitting type) is copied; the others keep their last value (their default at
+/// first).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Copy;
+
+impl LinkUnit for Copy {
+    fn compute(
+        &self,
+        from: &Record,
+        previous: Option<&Record>,
+        to: &RecordType,
+        symbol: &Arc<str>,
+    ) -> Result<Record, String> {
+        Ok(fill(to, symbol, from, previous))
+    }
+}
+
+/// `anchor.world_from_percept`: the world position and velocity of a vision percept. The
+/// simulated tracker reports percepts in world coordinates, so this copies `pos` and `vel` (and
+/// any other shared attribute), and refuses a percept without them.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct WorldFromPercept;
+
+impl LinkUnit for WorldFromPercept {
+    fn compute(
+        &self,
+        from: &Record,
+        previous: Option<&Record>,
+        to: &RecordType,
+        symbol: &Arc<str>,
+    ) -> Result<Record, String> {
+        if position(from).is_none() || velocity(from).is_none() {
+            return Err("a percept needs `pos` and `vel` (vec2) to give a world position".to_string());
+        }
+        Ok(fill(to, symbol, from, previous))
+    }
+}
+
+/// Below this speed (m/s) a velocity says nothing about the direction of travel.
+pub const MIN_HEADING_SPEED_MPS: f64 = 0.5;
+
+/// `anchor.snap_to_lane`: the object on the road network. `pos` is the point on the centre of the
+/// nearest lane (preferring lanes in the direction of `vel`), `vel` the velocity along that lane,
+/// `road` the road's index (-1 inside a crossing or off the network), `lane_offset` the signed
+/// distance of the unsnapped position from the lane centre (positive to the left). Off the
+/// network (no lane within the network's snap radius) the position and velocity are copied,
+/// `road` is -1 and `lane_offset` 0. Provides `on_road(pos)`.
+#[derive(Debug, Clone)]
+pub struct SnapToLane {
+    network: Arc<RoadNetwork>,
+}
+
+impl SnapToLane {
+    pub fn new(network: Arc<RoadNetwork>) -> SnapToLane {
+        SnapToLane { network }
+    }
+}
+
+/// The heading of a velocity, when it is fast enough to have one.
+pub fn heading_of_velocity(vel: Option<[f64; 2]>) -> Option<f64> {
+    vel.filter(|v| geom::norm(*v) >= MIN_HEADING_SPEED_MPS).map(geom::heading_of)
+}
+
+impl LinkUnit for SnapToLane {
+    fn compute(
+        &self,
+        from: &Record,
+        previous: Option<&Record>,
+        to: &RecordType,
+        symbol: &Arc<str>,
+    ) -> Result<Record, String> {
+        let mut record = fill(to, symbol, from, previous);
+        let Some(pos) = position(from) else {
+            return Err("snapping to a lane needs a `pos` (vec2)".to_string());
+        };
+        let vel = velocity(from);
+        let (pos, vel, road, lane_offset) = match self.network.snap_to_lane(pos, heading_of_velocity(vel)) {
+            Some(lane) => {
+                let along = geom::unit(lane.heading);
+                let vel = vel.map(|v| geom::scale(along, geom::dot(v, along)));
+                let road = lane.road().map_or(-1, |r| i64::from(r.0));
+                (lane.point, vel, road, lane.lateral_m)
+            }
+            None => (pos, vel, -1, 0.0),
+        };
+        for (name, value) in &mut record.fields {
+            match &**name {
+                "pos" => *value = Value::Vec2(pos),
+                "vel" => {
+                    if let Some(v) = vel {
+                        *value = Value::Vec2(v);
+                    }
+                }
+                "road" if matches!(value, Value::Int(_)) => *value = Value::Int(road),
+                "lane_offset" if matches!(value, Value::Float(_)) => *value = Value::Float(lane_offset),
+                _ => {}
+            }
+        }
+        Ok(record)
+    }
+
+    fn functions(&self) -> Vec<Function> {
+        vec![on_road(self.network.clone())]
+    }
+}
+
+/// `on_road(p)`: whether a position (or an object's `pos`) is on the paved surface of the network.
+pub fn on_road(network: Arc<RoadNetwork>) -> Function {
+    Function::new("on_road", (1, Some(1)), move |args| {
+        let pos = match &args[0] {
+            Value::Vec2(p) => *p,
+            Value::Record(r) => position(r)
+                .ok_or_else(|| "on_road needs a position; the object has no vec2 `pos`".to_string())?,
+            other => return Err(format!("on_road needs a vec2 position, found {}", other.kind())),
+        };
+        Ok(Value::Bool(network.on_road(pos)))
+    })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+    use kpl_core::{FieldType, ValueType};
+
+    fn onroad_type() -> RecordType {
+        let f = |n: &str, t: ValueType| FieldType { name: n.into(), ty: t };
+        RecordType {
+            name: "OnRoadObject".into(),
+            parent: Some("WorldObject".into()),
+            symbol: "oo".into(),
+            fields: vec![
+                f("pos", ValueType::Vec2),
+                f("vel", ValueType::Vec2),
+                f("road", ValueType::Int),
+                f("lane_offset", ValueType::Float),
+            ],
+        }
+    }
+
+    fn world(pos: [f64; 2], vel: [f64; 2]) -> Record {
+        Record {
+            id: Some("wo1".into()),
+            fields: vec![("pos".into(), Value::Vec2(pos)), ("vel".into(), Value::Vec2(vel))],
+        }
+    }
+
+    #[test]
+    fn snap_to_lane_centres_the_object_on_its_lane() {
+        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let main = network.road_by_name("main").unwrap().id;
+        let unit = SnapToLane::new(network);
+        // Eastbound on `main` (lanes at y = +-1.75, driving on the right: eastbound at y = -1.75).
+        let out =
+            unit.compute(&world([-100.0, -1.0], [13.0, 0.4]), None, &onroad_type(), &"oo1".into()).unwrap();
+        let pos = out.get("pos").unwrap().as_vec2().unwrap();
+        assert!((pos[1] + 1.75).abs() < 1e-6, "{pos:?}");
+        assert_eq!(out.get("road"), Some(&Value::Int(i64::from(main.0))));
+        let offset = out.get("lane_offset").unwrap().as_f64().unwrap();
+        assert!((offset - 0.75).abs() < 1e-6, "left of the lane centre by 0.75 m: {offset}");
+        let vel = out.get("vel").unwrap().as_vec2().unwrap();
+        assert!((vel[0] - 13.0).abs() < 1e-6 && vel[1].abs() < 1e-6, "{vel:?}");
+        // Far from any road: copied, road -1.
+        let out =
+            unit.compute(&world([90.0, 90.0], [1.0, 0.0]), None, &onroad_type(), &"oo1".into()).unwrap();
+        assert_eq!(out.get("pos"), Some(&Value::vec2(90.0, 90.0)));
+        assert_eq!(out.get("road"), Some(&Value::Int(-1)));
+    }
+
+    #[test]
+    fn on_road_reads_positions_and_objects() {
+        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let f = on_road(network);
+        assert_eq!((f.body)(&[Value::vec2(-100.0, -1.0)]).unwrap(), Value::Bool(true));
+        assert_eq!((f.body)(&[Value::vec2(-100.0, -40.0)]).unwrap(), Value::Bool(false));
+        let object = Value::Record(Arc::new(world([-100.0, 1.0], [0.0, 0.0])));
+        assert_eq!((f.body)(&[object]).unwrap(), Value::Bool(true));
+        assert!((f.body)(&[Value::Int(3)]).is_err());
+    }
+}
