@@ -12,6 +12,7 @@ use clap::{Parser, Subcommand};
 mod cmd;
 mod registry;
 mod report;
+mod transport;
 
 /// KPL: stream-based knowledge processing with hierarchical anchoring.
 #[derive(Debug, Parser)]
@@ -31,6 +32,8 @@ enum Command {
     Fmt(cmd::fmt::Args),
     /// List the sources, units, sinks, prediction models and functions the runtime provides.
     List(cmd::list::Args),
+    /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
+    Run(cmd::run::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(subcommand)]
     Cater(cmd::cater::Command),
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Graph(args) => cmd::graph::run(args),
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
+        Command::Run(args) => cmd::run::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

@@ -149,6 +149,14 @@ impl SourceContext {
         self.emit_sample(Sample::new(valid, now, value)).await;
     }
 
+    /// Emits a value on output `port` (0 is the default output, then the named ones in the
+    /// order of the registry entry's ports), valid at `valid`, available now.
+    pub async fn emit_port(&mut self, port: usize, valid: Time, value: Value) {
+        let now = self.clock.now();
+        self.run_stats.observe_time(now);
+        self.outputs.send(port, Sample::new(valid, now, value)).await;
+    }
+
     /// Emits a sample on the default output as it is (replay keeps recorded times).
     pub async fn emit_sample(&mut self, sample: Sample) {
         self.run_stats.observe_time(sample.available);

@@ -48,7 +48,10 @@ pub(crate) fn build(
     for input in &process.inputs {
         if input.port == "objects" {
             let ty = match &input.stream.ty {
-                kpl_core::ValueType::Record(r) => r.name.to_string(),
+                kpl_core::ValueType::List(item) => match item.as_ref() {
+                    kpl_core::ValueType::Record(r) => r.name.to_string(),
+                    _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
+                },
                 _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
             };
             let domain = ctx.domain(&ty).unwrap_or_else(|| ctx.declare_object_type(&ty));

@@ -166,7 +166,7 @@ impl std::fmt::Debug for Registry {
 
 impl Registry {
     /// The runtime's own sources, units and sinks (`timer`, `file.jsonl`, `console`,
-    /// `kpl.merge`) and the formula functions.
+    /// `kpl.merge`) and the signatures of the formula functions.
     pub fn with_builtins() -> Registry {
         let mut registry = Registry::default();
         crate::builtins::register(&mut registry);

@@ -124,9 +124,11 @@ pub fn run(
     transport: Option<&dyn TransportFactory>,
 ) -> Result<RunReport, RunError> {
     let runtime = match config.clock {
-        ClockKind::Sim => {
-            tokio::runtime::Builder::new_current_thread().enable_time().start_paused(true).build()?
-        }
+        ClockKind::Sim => tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .enable_io()
+            .start_paused(true)
+            .build()?,
         ClockKind::Wall => {
             tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?
         }

@@ -13,7 +13,7 @@ pub fn spec(lines: usize) -> String {
         let _ = writeln!(out, "type World{g} symbol w{g}x {{ pos: vec2, vel: vec2 }}");
         let _ = writeln!(out, "type Road{g} : World{g} symbol r{g}x {{ road: int, lane_offset: float }}");
         let _ = writeln!(out, "source ticks{g} : int = timer(period: {}ms, count: 100)", 10 + g % 90);
-        let _ = writeln!(out, "source seen{g} : Percept{g} = file.jsonl(path: \"percepts{g}.jsonl\")");
+        let _ = writeln!(out, "source seen{g} : list<Percept{g}> = file.jsonl(path: \"percepts{g}.jsonl\")");
         let _ =
             writeln!(out, "stream fast{g} = ticks{g} with sample every 100ms, max delay 50ms, strict order");
         let _ = writeln!(

@@ -120,7 +120,10 @@ impl<'a> Checker<'a> {
         let mut producers: BTreeMap<String, Vec<ProcessId>> = BTreeMap::new();
         for (id, draft) in drafts.iter().enumerate() {
             let is_sink = matches!(draft.decl, Decl::Process(p) if p.kind == ast::ProcessKind::Sink);
-            if let (Some(ValueType::Record(r)), false) = (&draft.output, is_sink) {
+            // Object streams: each sample is the list of the objects present (a snapshot).
+            if let (Some(ValueType::List(item)), false) = (&draft.output, is_sink)
+                && let ValueType::Record(r) = item.as_ref()
+            {
                 producers.entry(r.name.to_string()).or_default().push(id);
             }
         }
@@ -279,9 +282,10 @@ impl<'a> Checker<'a> {
                 (Some(output), ports)
             }
             Decl::Link(l) => {
+                // A link's output is an object stream: the list of its `to` objects at each time.
                 let to =
                     self.types.get(&l.to_type.name).map_or(ValueType::Any, |t| ValueType::Record(t.clone()));
-                (Some(to), vec![("changes".to_string(), ValueType::Any)])
+                (Some(ValueType::List(Box::new(to))), vec![("changes".to_string(), ValueType::Any)])
             }
             Decl::Monitor(_) => (Some(ValueType::Bool), Vec::new()),
         }
@@ -936,7 +940,11 @@ impl Resolver<'_, '_, '_> {
             for path in explicit {
                 let Some(stream) = self.stream_ref(path) else { continue };
                 if let Some(from_ty) = &from
-                    && !assignable(&stream.ty, from_ty, &self.checker.types)
+                    && !assignable(
+                        &stream.ty,
+                        &ValueType::List(Box::new(from_ty.clone())),
+                        &self.checker.types,
+                    )
                 {
                     self.checker.diagnostics.push(diag::link_input_type(
                         path.span,
@@ -1195,6 +1203,7 @@ fn describe(t: &ValueType) -> String {
 fn req_type(req: &TypeReq) -> ValueType {
     match req {
         TypeReq::Exact(t) => t.clone(),
+        TypeReq::Objects(_) => ValueType::List(Box::new(ValueType::Any)),
         TypeReq::Any | TypeReq::Fields(_) => ValueType::Any,
     }
 }
@@ -1209,6 +1218,11 @@ pub(crate) fn satisfies(ty: &ValueType, req: &TypeReq, types: &TypeTable) -> boo
             ValueType::Record(r) => {
                 fields.iter().all(|(name, t)| r.field(name).is_some_and(|f| assignable(&f.ty, t, types)))
             }
+            _ => false,
+        },
+        TypeReq::Objects(fields) => match ty {
+            ValueType::Any => true,
+            ValueType::List(item) => satisfies(item, &TypeReq::Fields(fields.clone()), types),
             _ => false,
         },
     }

@@ -124,6 +124,8 @@ pub enum TypeReq {
     Exact(ValueType),
     /// A record with at least these fields.
     Fields(Vec<(String, ValueType)>),
+    /// An object stream: a list of records with at least these fields (one per object present).
+    Objects(Vec<(String, ValueType)>),
 }
 
 impl Serialize for TypeReq {
@@ -144,6 +146,10 @@ impl fmt::Display for TypeReq {
             TypeReq::Fields(fields) => {
                 let parts: Vec<String> = fields.iter().map(|(n, t)| format!("{n}: {t}")).collect();
                 write!(f, "{{ {} }}", parts.join(", "))
+            }
+            TypeReq::Objects(fields) => {
+                let parts: Vec<String> = fields.iter().map(|(n, t)| format!("{n}: {t}")).collect();
+                write!(f, "list<{{ {} }}>", parts.join(", "))
             }
         }
     }

@@ -29,7 +29,7 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
     if parse.has_errors() {
         return (parse.diagnostics, None);
     }
-    let checked = kpl_semantic::check(&parse.spec, &crate::registry::registry());
+    let checked = kpl_semantic::check(&parse.spec, crate::registry::registry().signatures());
     let mut diagnostics = parse.diagnostics;
     diagnostics.extend(checked.diagnostics);
     (diagnostics, checked.spec)

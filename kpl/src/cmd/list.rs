@@ -18,7 +18,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let registry = crate::registry::registry();
+    let runtime_registry = crate::registry::registry();
+    let registry = runtime_registry.signatures();
     let text = if args.json {
         let entries: Vec<_> = registry.entries().collect();
         let functions: Vec<_> = registry.functions().collect();
@@ -26,7 +27,7 @@ pub fn run(args: Args) -> ExitCode {
             .unwrap_or_default()
             + "\n"
     } else {
-        describe(&registry)
+        describe(registry)
     };
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
     ExitCode::SUCCESS

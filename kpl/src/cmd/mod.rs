@@ -8,3 +8,4 @@ pub mod fmt;
 pub mod graph;
 pub mod list;
 pub mod mtl;
+pub mod run;

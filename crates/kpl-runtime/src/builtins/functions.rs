@@ -1,6 +1,6 @@
-//! Formula functions: the signatures of `kpl-mtl`'s built-ins, and `vec2(x, y)`.
+//! Formula functions: the signatures of `kpl-mtl`'s built-ins (which implements them).
 
-use kpl_core::{Value, ValueType};
+use kpl_core::ValueType;
 use kpl_semantic::registry::Function;
 
 use crate::registry::Registry;
@@ -34,13 +34,7 @@ pub(super) fn register(registry: &mut Registry) {
         Float,
         "distance between two positions (or objects' `pos`), or |a - b| of two numbers",
     ));
-    registry.add_function(
-        Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"),
-        kpl_mtl::Function::new("vec2", (2, Some(2)), |args| match (args[0].as_f64(), args[1].as_f64()) {
-            (Some(x), Some(y)) => Ok(Value::vec2(x, y)),
-            _ => Err(format!("vec2 needs two numbers, found {} and {}", args[0].kind(), args[1].kind())),
-        }),
-    );
+    registry.add_builtin_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
 }
 
 #[cfg(test)]
