@@ -76,9 +76,19 @@ fn anchoring_signatures(r: &mut Registry) {
     );
 }
 
+/// Extra processes from a user's crate (`kpl::main_with`).
+static EXTENSION: std::sync::OnceLock<fn(&mut Registry)> = std::sync::OnceLock::new();
+
+pub(crate) fn extend_with(extend: fn(&mut Registry)) {
+    let _ = EXTENSION.set(extend);
+}
+
 pub fn registry() -> Registry {
     let mut registry = Registry::with_builtins();
     kpl_std::register(&mut registry);
     anchoring_signatures(&mut registry);
+    if let Some(extend) = EXTENSION.get() {
+        extend(&mut registry);
+    }
     registry
 }

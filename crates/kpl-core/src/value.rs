@@ -393,16 +393,12 @@ fn decode_list(
 }
 
 fn numbers<const N: usize>(json: &serde_json::Value, shape: &str, path: &str) -> Result<[f64; N], JsonError> {
-    let expected = format!("{shape} with finite numbers");
     let Some(items) = json.as_array().filter(|a| a.len() == N) else {
-        return Err(mismatch(json, &expected, path));
+        return Err(mismatch(json, &format!("{shape} with finite numbers"), path));
     };
     let mut out = [0.0; N];
-    for (slot, item) in out.iter_mut().zip(items) {
-        *slot = match item.as_f64() {
-            Some(x) if x.is_finite() => x,
-            _ => return Err(mismatch(json, &expected, path)),
-        };
+    for (i, (slot, item)) in out.iter_mut().zip(items).enumerate() {
+        *slot = finite_f64(item, &format!("{path}[{i}]"))?;
     }
     Ok(out)
 }
@@ -444,8 +440,10 @@ mod tests {
     #[test]
     fn mismatches_name_the_path() {
         let err = Value::from_json(&json!({"pos": [1, "NaN"], "size": 1}), &percept_type()).unwrap_err();
+        assert_eq!(err.path, ".pos[1]");
+        assert_eq!(err.to_string(), "at `.pos[1]`: expected a finite number, found the string \"NaN\"");
+        let err = Value::from_json(&json!({"pos": [1], "size": 1}), &percept_type()).unwrap_err();
         assert_eq!(err.path, ".pos");
-        assert!(err.to_string().contains("finite numbers"), "{err}");
         let err = Value::from_json(&json!({"pos": [1, 2]}), &percept_type()).unwrap_err();
         assert_eq!(err.path, ".size");
         let err = Value::from_json(&json!(1.5), &ValueType::Int).unwrap_err();

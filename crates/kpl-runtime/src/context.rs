@@ -134,6 +134,7 @@ impl SourceContext {
     /// run's end (the sample at `t` must then not be emitted).
     pub async fn wait_until(&self, t: Time) -> bool {
         if self.end.is_some_and(|end| t > end) {
+            self.run_stats.reached_end.store(true, Ordering::Relaxed);
             return false;
         }
         tokio::select! {
@@ -171,7 +172,7 @@ impl SourceContext {
         error: impl Into<String>,
     ) -> Result<(), ProcessError> {
         let malformed = Malformed { location: location.into(), error: error.into() };
-        tracing::warn!(process = %self.name, location = %malformed.location, "malformed input: {}", malformed.error);
+        tracing::debug!(process = %self.name, location = %malformed.location, "malformed input: {}", malformed.error);
         if self.strict {
             return Err(ProcessError::Strict { location: malformed.location, error: malformed.error });
         }

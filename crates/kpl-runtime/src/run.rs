@@ -373,7 +373,9 @@ pub async fn run_async(
             Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
         }
     }
-    let duration_reached = stop.is_stopped() && !interrupted.load(Ordering::SeqCst) && !strict_failure;
+    let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))
+        && !interrupted.load(Ordering::SeqCst)
+        && !strict_failure;
     watchers.abort();
     if let Some(progress) = progress {
         progress.finish();

@@ -132,6 +132,8 @@ pub struct RunStats {
     pub now: AtomicI64,
     /// Samples delivered to consumers, all edges.
     pub delivered: AtomicU64,
+    /// A source stopped because its next sample would be past the end of the run (`--for`).
+    pub reached_end: std::sync::atomic::AtomicBool,
 }
 
 impl RunStats {
