@@ -9,7 +9,7 @@
 //! let spec = kpl_anchor::registry::check_text(r#"
 //!     type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 //!     type WorldObject   symbol wo { pos: vec2, vel: vec2 }
-//!     source tracker : VisionPercept = sim.uav_tracker(scenario: "crossing", seed: 1, n_cars: 3)
+//!     source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "crossing", seed: 1, n_cars: 3)
 //!     link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
 //!       establish   eventually[1s, inf] true
 //!       reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
@@ -101,8 +101,13 @@ impl SimDriver {
                     let sim =
                         UavTrackerSim::new(&params, network, 0).map_err(|e| source_error(e.to_string()))?;
                     let ty = match &process.output {
-                        Some(kpl_core::ValueType::Record(r)) => r.name.to_string(),
-                        _ => return Err(source_error("its output must be an object type".to_string())),
+                        Some(kpl_core::ValueType::List(item)) => match item.as_ref() {
+                            kpl_core::ValueType::Record(r) => r.name.to_string(),
+                            _ => {
+                                return Err(source_error("its output must be a list of objects".to_string()));
+                            }
+                        },
+                        _ => return Err(source_error("its output must be a list of objects".to_string())),
                     };
                     sources.push(SimSource { name: process.name.clone(), ty, sim });
                 }

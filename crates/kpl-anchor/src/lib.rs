@@ -19,7 +19,7 @@
 //! let text = r#"
 //!     type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 //!     type WorldObject   symbol wo { pos: vec2, vel: vec2 }
-//!     source tracker : VisionPercept = sim.uav_tracker(scenario: "bridge")
+//!     source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "bridge")
 //!     link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
 //!       establish   eventually[1s, inf] true
 //!       reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0

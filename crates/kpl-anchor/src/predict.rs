@@ -87,8 +87,9 @@ impl PredictionModel for Stationary {
 /// successor lane at the end of a lane: one hypothesis per route, at most `max_hypotheses`,
 /// ordered by how little the route turns (straight on first). `pos` is the point on the lane
 /// centre, `vel` the speed along the lane there, and a `road` attribute (int) the road's index
-/// (-1 inside a crossing). An object that cannot be snapped (no lane within the snap radius) is
-/// predicted with constant velocity.
+/// (-1 inside a crossing). A route that leaves the map at a boundary continues beyond it in a
+/// straight line (road -1): the object has left the observed area. An object that cannot be
+/// snapped (no lane within the snap radius) is predicted with constant velocity.
 #[derive(Debug, Clone)]
 pub struct AlongRoads {
     network: Arc<RoadNetwork>,
@@ -121,18 +122,23 @@ impl PredictionModel for AlongRoads {
             return;
         };
         let speed = velocity(&start.state).map_or(0.0, geom::norm);
-        let mut hypotheses =
-            self.network.advance(lane, speed * seconds(start.time, time), self.max_hypotheses);
+        let distance = speed * seconds(start.time, time);
+        let mut hypotheses = self.network.advance(lane, distance, self.max_hypotheses);
         // Straightest first; `advance` gives a deterministic order, which breaks ties.
         let turn = |h: &kpl_sim::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
         hypotheses.sort_by(|a, b| turn(a).total_cmp(&turn(b)));
         for h in &hypotheses {
-            let road = h.position.road().map_or(-1, |r| i64::from(r.0));
-            let vel = geom::scale(geom::unit(h.position.heading), speed);
-            let mut record = with_fields(
-                &start.state,
-                &[("pos", Value::Vec2(h.position.point)), ("vel", Value::Vec2(vel))],
-            );
+            let direction = geom::unit(h.position.heading);
+            // A route that left the map goes on beyond its boundary, in a straight line: the
+            // object is gone, and must not wait at the edge for whatever enters there next.
+            let (pos, road) = if h.reached_end {
+                (geom::add(h.position.point, geom::scale(direction, (distance - h.travelled_m).max(0.0))), -1)
+            } else {
+                (h.position.point, h.position.road().map_or(-1, |r| i64::from(r.0)))
+            };
+            let vel = geom::scale(direction, speed);
+            let mut record =
+                with_fields(&start.state, &[("pos", Value::Vec2(pos)), ("vel", Value::Vec2(vel))]);
             for (name, value) in &mut record.fields {
                 if &**name == "road" && matches!(value, Value::Int(_)) {
                     *value = Value::Int(road);
@@ -202,6 +208,12 @@ mod tests {
             let v = h.get("vel").unwrap().as_vec2().unwrap();
             assert!((geom::norm(v) - 10.0).abs() < 1e-9);
         }
+        // Leaving the map at the east end (x = 150): it goes on beyond the boundary.
+        let out = predict(&model, state([140.0, -1.75], [10.0, 0.0]), 3.0);
+        assert_eq!(out.len(), 1);
+        let p = out[0].get("pos").unwrap().as_vec2().unwrap();
+        assert!((p[0] - 170.0).abs() < 1e-6 && (p[1] + 1.75).abs() < 1e-6, "{p:?}");
+        assert_eq!(out[0].get("road"), Some(&Value::Int(-1)));
         // Off the network: constant velocity.
         let out = predict(&model, state([60.0, 60.0], [1.0, 0.0]), 2.0);
         assert_eq!(out[0].get("pos"), Some(&Value::vec2(62.0, 60.0)));

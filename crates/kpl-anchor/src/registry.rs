@@ -1,7 +1,7 @@
 //! Signatures for the checker (`kpl check`, `kpl list`): the link units and prediction models
 //! this crate implements ([`entries`]), the `sim.uav_tracker` source its [`crate::driver`] runs
-//! ([`tracker_entry`]), and [`signatures`], a registry with those and the formula functions, so
-//! that this crate's tests, benchmarks and driver check specs exactly as the command does.
+//! ([`tracker_entry`]), and [`signatures`], a registry with those and the runtime's built-ins, so
+//! that this crate's tests, benchmarks and driver check specs as the command does.
 
 use std::fmt::Write as _;
 
@@ -85,7 +85,12 @@ pub fn tracker_entry() -> Entry {
         "sim.uav_tracker",
         "Vision percepts of cars from a simulated UAV tracker.",
     )
-    .output(fields(&[("pos", Vec2), ("vel", Vec2), ("size", Float)]));
+    .output(TypeReq::Objects(vec![("pos".into(), Vec2), ("vel".into(), Vec2), ("size".into(), Float)]))
+    .port(
+        "truth",
+        TypeReq::Any,
+        "ground truth per frame: every car, with `seen_as` the percept that sees it",
+    );
     for info in kpl_sim::Params::describe() {
         let ty = match info.ty {
             "int" => ParamType::Int,
@@ -102,35 +107,10 @@ pub fn tracker_entry() -> Entry {
     entry
 }
 
-/// The formula functions of `kpl-mtl` (the signatures `kpl check` uses).
-fn formula_functions(registry: &mut Registry) {
-    use ValueType::{Any, Float, Vec2};
-    for (name, summary) in [
-        ("abs", "absolute value"),
-        ("sqrt", "square root"),
-        ("floor", "largest integer not above"),
-        ("ceil", "smallest integer not below"),
-    ] {
-        registry.add_function(Function::new(name, vec![Float], Float, summary));
-    }
-    registry.add_function(Function::new("min", vec![Float], Float, "smallest of its arguments").variadic());
-    registry.add_function(Function::new("max", vec![Float], Float, "largest of its arguments").variadic());
-    registry.add_function(Function::new("norm", vec![Vec2], Float, "length of a vector"));
-    registry.add_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
-    registry.add_function(Function::new("xydist", vec![Any, Any], Float, "distance in the x/y plane"));
-    registry.add_function(Function::new(
-        "dist",
-        vec![Any, Any],
-        Float,
-        "distance, or |a - b| of two numbers",
-    ));
-}
-
-/// A registry with the formula functions, `sim.uav_tracker` and [`entries`]: what the driver can
-/// run.
+/// A registry with the runtime's built-ins (formula functions, `file.jsonl`, `console`, ...),
+/// `sim.uav_tracker` and [`entries`]: what a spec run by [`crate::driver`] may name.
 pub fn signatures() -> Registry {
-    let mut registry = Registry::default();
-    formula_functions(&mut registry);
+    let mut registry = kpl_runtime::Registry::with_builtins().signatures().clone();
     registry.add(tracker_entry());
     for entry in entries() {
         registry.add(entry);
@@ -183,18 +163,6 @@ mod tests {
         models.sort();
         assert_eq!(links, implementations.link_unit_names().map(String::from).collect::<Vec<_>>());
         assert_eq!(models, implementations.model_names().map(String::from).collect::<Vec<_>>());
-    }
-
-    /// The formula functions are the ones `kpl-mtl` implements.
-    #[test]
-    fn formula_functions_match_the_engine() {
-        let mut registry = Registry::default();
-        formula_functions(&mut registry);
-        let mut ours: Vec<String> = registry.functions().map(|f| f.name.clone()).collect();
-        let mut engine: Vec<String> = kpl_mtl::builtins().iter().map(|f| f.name.to_string()).collect();
-        ours.sort();
-        engine.sort();
-        assert_eq!(ours, engine);
     }
 
     #[test]

@@ -40,7 +40,7 @@ type VisionPercept symbol vp {{ pos: vec2, vel: vec2, size: float }}
 type WorldObject   symbol wo {{ pos: vec2, vel: vec2 }}
 type OnRoadObject  : WorldObject symbol oo {{ road: int, lane_offset: float }}
 
-source tracker : VisionPercept = sim.uav_tracker(scenario: "grid_town", grid_blocks_x: {bx}, grid_blocks_y: {by}, n_cars: {cars}, seed: {seed}, dropout: {dropout:?}, false_positive_rate: {fp_rate:?})
+source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "grid_town", grid_blocks_x: {bx}, grid_blocks_y: {by}, n_cars: {cars}, seed: {seed}, dropout: {dropout:?}, false_positive_rate: {fp_rate:?})
 
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {{
   establish   eventually[1s, inf] true
