@@ -86,7 +86,9 @@ impl PolicyFilter {
                 self.most_recent = Some(sample);
             }
             Change::AnyUpdate => {
-                self.most_recent = Some(sample.clone());
+                if self.policy.approximation == Approximation::UseMostRecent {
+                    self.most_recent = Some(sample.clone());
+                }
                 self.deliver(sample, out);
             }
             Change::AnyChange => {

@@ -137,6 +137,11 @@ impl Emitter {
     pub fn take(&mut self) -> Vec<(usize, Sample)> {
         std::mem::take(&mut self.out)
     }
+
+    /// Moves out what was emitted, keeping the buffer's capacity for the next call.
+    pub(crate) fn drain(&mut self) -> std::vec::Drain<'_, (usize, Sample)> {
+        self.out.drain(..)
+    }
 }
 
 /// A synchronous computational unit (or sink).
@@ -168,6 +173,12 @@ pub trait AsyncUnit: Send + 'static {
     ) -> BoxFuture<'a, Result<(), ProcessError>>;
 
     fn on_end<'a>(&'a mut self, out: &'a mut Emitter) -> BoxFuture<'a, Result<(), ProcessError>>;
+
+    /// The unit as a synchronous [`Unit`], if it is one: the runtime then calls it directly,
+    /// without a future per sample.
+    fn as_sync(&mut self) -> Option<&mut dyn Unit> {
+        None
+    }
 }
 
 /// Runs a [`Unit`] as an [`AsyncUnit`].
@@ -191,6 +202,10 @@ impl<U: Unit> AsyncUnit for SyncUnit<U> {
     fn on_end<'a>(&'a mut self, out: &'a mut Emitter) -> BoxFuture<'a, Result<(), ProcessError>> {
         let result = self.0.on_end(out);
         Box::pin(std::future::ready(result))
+    }
+
+    fn as_sync(&mut self) -> Option<&mut dyn Unit> {
+        Some(&mut self.0)
     }
 }
 

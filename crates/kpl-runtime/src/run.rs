@@ -668,18 +668,23 @@ async fn call(
     strict: bool,
 ) -> Result<(), ProcessError> {
     emitter.begin(input.now, input.valid);
-    if let Err(e) = unit.on_input(input, emitter).await {
+    let result = match unit.as_sync() {
+        Some(unit) => unit.on_input(input, emitter),
+        None => unit.on_input(input, emitter).await,
+    };
+    if let Err(e) = result {
         if strict {
             return Err(e);
         }
         stats.error(e.to_string());
     }
-    for port in std::mem::take(&mut emitter.unknown_ports) {
-        stats.error(format!("emitted on `{port}`, which is not an output of this process"));
+    if !emitter.unknown_ports.is_empty() {
+        for port in std::mem::take(&mut emitter.unknown_ports) {
+            stats.error(format!("emitted on `{port}`, which is not an output of this process"));
+        }
     }
-    let emitted = emitter.take();
-    run_stats.delivered.fetch_add(emitted.len() as u64, Ordering::Relaxed);
-    for (port, sample) in emitted {
+    run_stats.delivered.fetch_add(emitter.out.len() as u64, Ordering::Relaxed);
+    for (port, sample) in emitter.drain() {
         outputs.send(port, sample).await;
     }
     Ok(())

@@ -11,10 +11,13 @@ use crate::cmd::mtl;
 pub enum Command {
     /// The MTL engine on the ten timed properties of the Timescales benchmark, against R2U2.
     Mtl(mtl::BenchArgs),
+    /// The in-process runtime against bare tokio channels, and its memory over a long run.
+    Runtime(crate::cmd::bench_runtime::Args),
 }
 
 pub fn run(command: Command) -> ExitCode {
     match command {
         Command::Mtl(args) => mtl::bench(args),
+        Command::Runtime(args) => crate::cmd::bench_runtime::run(args),
     }
 }
