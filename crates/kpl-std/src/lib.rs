@@ -2,10 +2,13 @@
 //! workspace available to specs by name. `register` adds them to a runtime registry.
 //!
 //! - `sim.uav_tracker`: vision percepts from the simulated UAV tracker (`kpl-sim`).
+//! - `aapa.anchor`, `sim.gearbox`: action-aware perceptual anchoring (`kpl-aapa`), docs/aapa.md.
 
+mod aapa;
 mod tracker;
 
 /// Adds every process of this crate to `registry`.
 pub fn register(registry: &mut kpl_runtime::Registry) {
     tracker::register(registry);
+    aapa::register(registry);
 }
