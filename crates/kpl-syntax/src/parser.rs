@@ -139,8 +139,10 @@ fn syntax_error(source: &str, offset: usize, err: &pest::error::Error<Rule>) -> 
     };
     // A reserved word where a name was expected: pest's detailed attempts wander into the
     // `!keyword` look-ahead; the rule-level error says it better.
-    let reserved_word = positives.contains(&Rule::ident) && keyword(found_text(source, classic_pos));
-    let attempts = if reserved_word { None } else { err.parse_attempts() };
+    // A reserved word where a name or an expression could start: pest's detailed attempts
+    // wander into the `!keyword` look-ahead (past the word); the rule-level error says it better.
+    let at_keyword = keyword(found_text(source, classic_pos));
+    let attempts = err.parse_attempts().filter(|a| !(at_keyword && offset + a.max_position > classic_pos));
     let pos = offset
         + match (&attempts, &err.location) {
             (Some(a), _) => a.max_position,
@@ -271,7 +273,7 @@ fn hint_for(positives: &[Rule], expected: &[String], source: &str, pos: usize) -
     let rest = source.get(pos..).unwrap_or("");
     let word: String = rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
     let expects = |s: &str| expected.iter().any(|e| e == s);
-    if (positives.contains(&Rule::ident) || expects("a name")) && keyword(&word) {
+    if positives == [Rule::ident] && keyword(&word) {
         return Some(format!("`{word}` is a reserved word of formulas; choose another name"));
     }
     if word == "inf" {
@@ -279,7 +281,8 @@ fn hint_for(positives: &[Rule], expected: &[String], source: &str, pos: usize) -
             "`inf` is only allowed as the upper bound of an interval, as in `eventually[1s, inf]`".into(),
         );
     }
-    if positives.contains(&Rule::unit) || expects("a time unit (us, ms, s, min, h)") {
+    let after_digit = source[..pos.min(source.len())].ends_with(|c: char| c.is_ascii_digit());
+    if after_digit && (positives.contains(&Rule::unit) || expects("a time unit (us, ms, s, min, h)")) {
         return Some(
             "a duration needs a unit right after the number: `us`, `ms`, `s`, `min` or `h` (e.g. `100ms`)"
                 .into(),
