@@ -1,0 +1,191 @@
+//! Key expressions: the one module that turns KPL names into zenoh keys.
+//!
+//! A stream between hosts is published on `kpl/<spec>/<producer>` (its default output) or
+//! `kpl/<spec>/<producer>/<port>` (a named output such as a link's `changes`). Every name is one
+//! key chunk, escaped with [`escape_chunk`] so that no name can contain a separator (`/`), a
+//! wildcard (`*`, `$`), a reserved character (`#`, `?`) or start a verbatim chunk (`@`).
+//!
+//! Beside the data, liveliness tokens say who is there (docs/streams.md, "On the wire"):
+//! `<stream>/@subscriber/<host>` for each host that subscribed to the stream, so a publisher can
+//! wait for every consuming host, and `<stream>/@publisher/<host>` for the producing host, so a
+//! subscriber notices when its producer went away without ending the stream. `@` chunks are
+//! verbatim in zenoh: no wildcard matches them, so an outside program subscribing to
+//! `kpl/<spec>/**` sees the data of every stream and none of the tokens.
+
+use kpl_runtime::transport::StreamKey;
+
+/// The first chunk of every key KPL publishes on.
+pub const ROOT: &str = "kpl";
+
+/// The key expression a stream is published on.
+pub fn stream(key: &StreamKey) -> String {
+    let mut out = format!("{ROOT}/{}/{}", escape_chunk(&key.spec), escape_chunk(&key.producer));
+    if let Some(port) = &key.port {
+        out.push('/');
+        out.push_str(&escape_chunk(port));
+    }
+    out
+}
+
+/// The liveliness token a host declares when it subscribes to a stream.
+pub fn subscriber_token(key: &StreamKey, host: &str) -> String {
+    format!("{}/@subscriber/{}", stream(key), escape_chunk(host))
+}
+
+/// Matches the subscriber tokens of every host of a stream.
+pub fn subscriber_tokens(key: &StreamKey) -> String {
+    format!("{}/@subscriber/*", stream(key))
+}
+
+/// The liveliness token the producing host declares while it publishes a stream.
+pub fn publisher_token(key: &StreamKey, host: &str) -> String {
+    format!("{}/@publisher/{}", stream(key), escape_chunk(host))
+}
+
+/// Matches the publisher tokens of a stream.
+pub fn publisher_tokens(key: &StreamKey) -> String {
+    format!("{}/@publisher/*", stream(key))
+}
+
+/// The last chunk of a token's key, unescaped: the host that declared it.
+pub fn token_host(token_key: &str) -> Option<String> {
+    unescape_chunk(token_key.rsplit('/').next()?)
+}
+
+/// Escapes a name into one key chunk: ASCII letters, digits, `_`, `-` and `.` stay, every other
+/// byte of the UTF-8 text becomes `%XX` (upper-case hex), and the empty name becomes `%` (a lone
+/// `%` never results from a non-empty name). The result is never empty, never contains `/`, `*`,
+/// `$`, `#`, `?` or `@`, and different names give different chunks.
+pub fn escape_chunk(name: &str) -> String {
+    if name.is_empty() {
+        return "%".to_string();
+    }
+    let mut out = String::with_capacity(name.len());
+    for byte in name.bytes() {
+        if byte.is_ascii_alphanumeric() || matches!(byte, b'_' | b'-' | b'.') {
+            out.push(char::from(byte));
+        } else {
+            out.push('%');
+            out.push(char::from(HEX[usize::from(byte >> 4)]));
+            out.push(char::from(HEX[usize::from(byte & 0x0f)]));
+        }
+    }
+    out
+}
+
+const HEX: &[u8; 16] = b"0123456789ABCDEF";
+
+/// The name an [`escape_chunk`] result stands for; `None` if `chunk` is not one.
+pub fn unescape_chunk(chunk: &str) -> Option<String> {
+    match chunk {
+        "%" => return Some(String::new()),
+        "" => return None,
+        _ => {}
+    }
+    let bytes = chunk.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'%' => {
+                let hi = hex_value(*bytes.get(i + 1)?)?;
+                let lo = hex_value(*bytes.get(i + 2)?)?;
+                let byte = (hi << 4) | lo;
+                // Only bytes that escaping would have escaped: one name, one chunk.
+                if byte.is_ascii_alphanumeric() || matches!(byte, b'_' | b'-' | b'.') {
+                    return None;
+                }
+                out.push(byte);
+                i += 3;
+            }
+            b if b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.') => {
+                out.push(b);
+                i += 1;
+            }
+            _ => return None,
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+fn hex_value(digit: u8) -> Option<u8> {
+    match digit {
+        b'0'..=b'9' => Some(digit - b'0'),
+        b'A'..=b'F' => Some(digit - b'A' + 10),
+        _ => None,
+    }
+}
+
+/// Why a key given to `zenoh.subscribe` or `zenoh.publish` cannot be used.
+pub fn check_user_key(key: &str, wildcards_allowed: bool) -> Result<(), String> {
+    let parsed = zenoh::key_expr::KeyExpr::try_from(key.to_string())
+        .map_err(|e| format!("`{key}` is not a zenoh key expression: {e}"))?;
+    if !wildcards_allowed && parsed.is_wild() {
+        return Err(format!("`{key}` has wildcards; publish on one key (`a/b`, not `a/*` or `a/**`)"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn key(spec: &str, producer: &str, port: Option<&str>) -> StreamKey {
+        StreamKey { spec: spec.into(), producer: producer.into(), port: port.map(String::from) }
+    }
+
+    #[test]
+    fn keys_of_streams() {
+        assert_eq!(stream(&key("bridge", "tracker", None)), "kpl/bridge/tracker");
+        assert_eq!(
+            stream(&key("bridge", "vision_world", Some("changes"))),
+            "kpl/bridge/vision_world/changes"
+        );
+        assert_eq!(stream(&key("my spec*", "p", None)), "kpl/my%20spec%2A/p");
+        assert_eq!(subscriber_token(&key("s", "p", None), "ground"), "kpl/s/p/@subscriber/ground");
+        assert_eq!(token_host("kpl/s/p/@subscriber/gr%C3%B6und").as_deref(), Some("gröund"));
+    }
+
+    #[test]
+    fn escaping_is_injective_and_reversible_on_awkward_names() {
+        let names = ["", "%", "a/b", "**", "$*", "@x", "#?", "a b", "ü", "%25", ".", "..", "A-z_0.9"];
+        let mut chunks: Vec<String> = names.iter().map(|n| escape_chunk(n)).collect();
+        for (name, chunk) in names.iter().zip(&chunks) {
+            assert_eq!(unescape_chunk(chunk).as_deref(), Some(*name), "{chunk}");
+            zenoh::key_expr::KeyExpr::try_from(format!("kpl/{chunk}/x")).unwrap();
+        }
+        chunks.sort();
+        chunks.dedup();
+        assert_eq!(chunks.len(), names.len());
+    }
+
+    #[test]
+    fn non_canonical_chunks_are_refused() {
+        for chunk in ["%41", "%2a", "%2", "a/b", "", "%%"] {
+            assert_eq!(unescape_chunk(chunk), None, "{chunk}");
+        }
+    }
+
+    #[test]
+    fn user_keys() {
+        assert!(check_user_key("sensors/temp", false).is_ok());
+        assert!(check_user_key("sensors/**", true).is_ok());
+        assert!(check_user_key("sensors/**", false).unwrap_err().contains("wildcards"));
+        assert!(check_user_key("a//b", true).unwrap_err().contains("not a zenoh key expression"));
+        assert!(check_user_key("", true).is_err());
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_name_escapes_to_a_valid_chunk(name in "\\PC{0,24}", other in "\\PC{0,24}") {
+            let chunk = escape_chunk(&name);
+            proptest::prop_assert_eq!(unescape_chunk(&chunk), Some(name.clone()));
+            let ke = format!("kpl/{chunk}/p");
+            proptest::prop_assert!(zenoh::key_expr::KeyExpr::try_from(ke.clone()).is_ok(), "{}", ke);
+            if name != other {
+                proptest::prop_assert_ne!(chunk, escape_chunk(&other));
+            }
+        }
+    }
+}

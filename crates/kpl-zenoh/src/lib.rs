@@ -1,0 +1,45 @@
+//! Streams between hosts over zenoh, and zenoh streams to and from programs outside a spec. The
+//! runtime (`kpl-runtime`) knows only its `Transport` traits; this is the one crate that depends on
+//! zenoh.
+//!
+//! - [`keys`]: the key expressions of streams (`kpl/<spec>/<producer>[/<port>]`) and tokens;
+//! - [`codec`]: the wire format, one encode and one decode function (docs/streams.md);
+//! - [`config`]: each host's endpoints (the deploy section, or loopback defaults) and its session's
+//!   configuration: peer mode, multicast scouting off, explicit endpoints;
+//! - [`Sessions`]: the one zenoh session of a host process;
+//! - [`ZenohFactory`] / [`ZenohTransport`]: what `kpl run --host` sends streams through;
+//! - `zenoh.subscribe` and `zenoh.publish` ([`register`]);
+//! - [`bench`]: `kpl bench zenoh`, against bare zenoh code.
+//!
+//! zenoh needs a multi-threaded tokio runtime: `kpl run` uses one with `--clock wall`, which is
+//! what runs between hosts and with programs outside need.
+
+pub mod bench;
+pub mod codec;
+pub mod config;
+pub mod keys;
+mod outside;
+mod session;
+mod transport;
+
+use std::sync::Arc;
+
+pub use config::ZenohOptions;
+pub use session::{HostSession, Sessions};
+pub use transport::{ZenohFactory, ZenohReceiver, ZenohSender, ZenohTransport};
+
+/// Adds `zenoh.subscribe` and `zenoh.publish` to a registry; they use this process's session
+/// ([`Sessions::process`]), the same one as [`factory`].
+pub fn register(registry: &mut kpl_runtime::Registry) {
+    register_with(registry, Sessions::process());
+}
+
+/// As [`register`], with the given sessions.
+pub fn register_with(registry: &mut kpl_runtime::Registry, sessions: Arc<Sessions>) {
+    outside::register(registry, sessions);
+}
+
+/// The transport of `kpl run --host`, on this process's session ([`Sessions::process`]).
+pub fn factory() -> ZenohFactory {
+    ZenohFactory::new(Sessions::process())
+}

@@ -1,0 +1,96 @@
+//! The one zenoh session of a host process. The transport (streams between hosts) and the
+//! `zenoh.subscribe` / `zenoh.publish` processes share it: whichever needs it first opens it with
+//! the host's endpoints ([`crate::config`]), the others get the same one, and it closes when the
+//! run closes its transport or the last user lets go of it.
+
+use std::sync::{Arc, OnceLock, Weak};
+
+use kpl_runtime::transport::TransportError;
+use kpl_semantic::hir;
+
+use crate::config::{self, Endpoints, ZenohOptions};
+
+/// Opens (once) the zenoh session of this process.
+#[derive(Debug)]
+pub struct Sessions {
+    options: Result<ZenohOptions, TransportError>,
+    current: tokio::sync::Mutex<Weak<HostSession>>,
+}
+
+/// An open session and what it was opened with.
+#[derive(Debug)]
+pub struct HostSession {
+    pub session: zenoh::Session,
+    /// The host this process runs (`None`: a run without `--host`).
+    pub host: Option<String>,
+    pub endpoints: Endpoints,
+    pub options: ZenohOptions,
+}
+
+impl HostSession {
+    /// How logs and errors name this process: `host `ground``, or `this run`.
+    pub fn describe(&self) -> String {
+        match &self.host {
+            Some(host) => format!("host `{host}`"),
+            None => "this run".to_string(),
+        }
+    }
+}
+
+impl Sessions {
+    pub fn new(options: ZenohOptions) -> Arc<Sessions> {
+        Arc::new(Sessions { options: Ok(options), current: tokio::sync::Mutex::new(Weak::new()) })
+    }
+
+    /// The sessions of this process, with options from the environment
+    /// ([`ZenohOptions::from_env`]); a bad variable is reported when a session is opened.
+    pub fn process() -> Arc<Sessions> {
+        static PROCESS: OnceLock<Arc<Sessions>> = OnceLock::new();
+        PROCESS
+            .get_or_init(|| {
+                Arc::new(Sessions {
+                    options: ZenohOptions::from_env(),
+                    current: tokio::sync::Mutex::new(Weak::new()),
+                })
+            })
+            .clone()
+    }
+
+    pub fn options(&self) -> Result<&ZenohOptions, TransportError> {
+        self.options.as_ref().map_err(Clone::clone)
+    }
+
+    /// The open session, or a new one for `host` of `deploy` (a run without `--host`: `None`).
+    /// Must be called on a multi-threaded tokio runtime (zenoh needs one).
+    pub async fn open(
+        &self,
+        deploy: Option<&hir::Deploy>,
+        host: Option<&str>,
+    ) -> Result<Arc<HostSession>, TransportError> {
+        let options = self.options()?.clone();
+        let mut current = self.current.lock().await;
+        if let Some(open) = current.upgrade() {
+            if open.host.as_deref() != host {
+                tracing::debug!(
+                    wanted = ?host,
+                    "the zenoh session of {} is already open; using it",
+                    open.describe()
+                );
+            }
+            return Ok(open);
+        }
+        let endpoints = config::endpoints(deploy, host, options.port_base)?;
+        let zenoh_config = config::session_config(&endpoints, &options)?;
+        let who = host.map_or_else(|| "this run".to_string(), |h| format!("host `{h}`"));
+        let session = zenoh::open(zenoh_config).await.map_err(|e| {
+            TransportError(format!(
+                "cannot open the zenoh session of {who} (listen {:?}, connect {:?}): {e}",
+                endpoints.listen, endpoints.connect
+            ))
+        })?;
+        tracing::info!(listen = ?endpoints.listen, connect = ?endpoints.connect, "zenoh session of {who} open");
+        let open = Arc::new(HostSession { session, host: host.map(String::from), endpoints, options });
+        *current = Arc::downgrade(&open);
+        Ok(open)
+    }
+}
