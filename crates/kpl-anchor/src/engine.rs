@@ -257,6 +257,14 @@ impl Anchoring {
             types[ty as usize].model = Some(model);
         }
 
+        // A percept type is forgotten only when the spec says so for that type (`forget
+        // VisionPercept after 600ms`): the default forget time is about derived objects.
+        for ty in &mut types {
+            if ty.links_into.is_empty() {
+                ty.forget = spec.forget.per_type.get(&*ty.name).copied();
+            }
+        }
+
         let mut notes = Vec::new();
         for link in &links {
             if link.conditions.gate.is_none() {
@@ -537,6 +545,8 @@ impl Anchoring {
                     object.state_time = time;
                     object.measured_at = Some(time);
                     object.seen_step = step;
+                    object.present = true;
+                    object.last_seen = time;
                     listed.push(key);
                 }
                 None => {
@@ -563,12 +573,22 @@ impl Anchoring {
                 }
             }
         }
-        let previous = std::mem::replace(&mut self.source_percepts[source_id as usize], listed);
+        // Percepts not listed: absent until the type's forget time has passed, then removed.
+        let grace = self.types[ty as usize].forget.unwrap_or(0);
+        let previous = std::mem::take(&mut self.source_percepts[source_id as usize]);
         for key in previous {
-            if self.store.get(key).is_some_and(|o| o.seen_step != self.step) {
+            let Some(object) = self.store.get_mut(key) else { continue };
+            if object.seen_step == self.step {
+                continue;
+            }
+            if time.saturating_sub(object.last_seen) >= grace {
                 self.remove_object(key, Cause::Lost, time, out);
+            } else {
+                object.present = false;
+                listed.push(key);
             }
         }
+        self.source_percepts[source_id as usize] = listed;
     }
 
     /// Removes an object with its links; the link instances involved go back to unlinked (a
@@ -660,7 +680,8 @@ impl Anchoring {
                 if object.origin != Origin::Derived {
                     continue;
                 }
-                if !object.incoming.is_empty() {
+                let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
+                if fed {
                     if object.prediction.is_some()
                         && let Some(o) = self.store.get_mut(root)
                     {

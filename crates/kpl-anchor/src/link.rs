@@ -27,7 +27,7 @@ use crate::change::{Cause, Change, ChangeKind};
 use crate::conditions::{LinkConditions, LinkState};
 use crate::engine::{Identification, StepCtx};
 use crate::gate::GateGrid;
-use crate::records::value_position;
+use crate::records::{position, value_position, velocity};
 use crate::store::{LinkId, ObjectKey, Origin, TypeId};
 use crate::units::LinkUnit;
 
@@ -49,6 +49,87 @@ impl Condition {
             Condition::Pending(_) => None,
             Condition::Decided(v) => Some(*v),
         }
+    }
+}
+
+/// Most progressors kept for reuse per condition of a link.
+const POOL_MAX: usize = 1024;
+
+/// Progressors of the link's three conditions that are no longer needed, kept for reuse: an
+/// object that reappears every few frames would otherwise allocate and free the arenas of two or
+/// three progressors each time. A reused progressor is [`Progressor::reset`], so it behaves as
+/// a new one.
+#[derive(Debug)]
+struct Pools {
+    /// establish, reestablish, maintain
+    formulas: [Arc<Formula>; 3],
+    #[allow(clippy::vec_box)] // the boxes move in and out of `Condition::Pending` as they are
+    free: [Vec<Box<Progressor>>; 3],
+}
+
+const ESTABLISH: usize = 0;
+const REESTABLISH: usize = 1;
+const MAINTAIN: usize = 2;
+
+impl Pools {
+    fn new(conditions: &LinkConditions) -> Pools {
+        Pools {
+            formulas: [
+                conditions.establish.clone(),
+                conditions.reestablish.clone(),
+                conditions.maintain.clone(),
+            ],
+            free: [Vec::new(), Vec::new(), Vec::new()],
+        }
+    }
+
+    fn take(&mut self, kind: usize) -> Condition {
+        match self.free[kind].pop() {
+            Some(mut progressor) => {
+                progressor.reset();
+                Condition::Pending(progressor)
+            }
+            None => Condition::new(&self.formulas[kind]),
+        }
+    }
+
+    fn give(&mut self, condition: Condition) {
+        let Condition::Pending(progressor) = condition else { return };
+        if let Some(kind) = self.formulas.iter().position(|f| Arc::ptr_eq(f, progressor.formula()))
+            && self.free[kind].len() < POOL_MAX
+        {
+            self.free[kind].push(progressor);
+        }
+    }
+
+    /// Settles a condition with its verdict, keeping its progressor for reuse.
+    fn decide(&mut self, condition: &mut Condition, verdict: bool) {
+        let old = std::mem::replace(condition, Condition::Decided(verdict));
+        self.give(old);
+    }
+
+    fn give_state(&mut self, state: InstanceState) {
+        match state {
+            InstanceState::Unlinked(u) => {
+                self.give(u.establish);
+                for candidate in u.candidates {
+                    self.give(candidate.condition);
+                }
+            }
+            InstanceState::Linked { maintain, .. } => self.give(maintain),
+        }
+    }
+
+    fn unlinked(&mut self) -> InstanceState {
+        InstanceState::Unlinked(Unlinked {
+            establish: self.take(ESTABLISH),
+            candidates: Vec::new(),
+            identifications: Vec::new(),
+        })
+    }
+
+    fn linked(&mut self, to: ObjectKey) -> InstanceState {
+        InstanceState::Linked { to, maintain: self.take(MAINTAIN) }
     }
 }
 
@@ -87,16 +168,6 @@ pub struct Instance {
     pub state: InstanceState,
 }
 
-impl InstanceState {
-    fn unlinked(conditions: &LinkConditions) -> InstanceState {
-        InstanceState::Unlinked(Unlinked {
-            establish: Condition::new(&conditions.establish),
-            candidates: Vec::new(),
-            identifications: Vec::new(),
-        })
-    }
-}
-
 /// Counts for benchmarks and reports.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LinkStats {
@@ -118,6 +189,7 @@ pub struct LinkProcess {
     pub conditions: LinkConditions,
     pub identifications: Vec<LinkIdentification>,
     pub(crate) instances: Vec<Option<Instance>>,
+    pools: Pools,
     grid: GateGrid<ObjectKey>,
     pub stats: LinkStats,
 }
@@ -142,18 +214,31 @@ struct Decisions {
     establish: Vec<ObjectKey>,
 }
 
-/// The hypothesis of `value`/`hypotheses` closest to `pos`: (index, value, distance).
-fn closest<'v>(value: &'v Value, hypotheses: &'v [Value], pos: Option<[f64; 2]>) -> (u32, &'v Value, f64) {
-    let distance = |v: &Value| match (pos, value_position(v)) {
-        (Some(a), Some(b)) => (a[0] - b[0]).hypot(a[1] - b[1]),
-        _ => f64::INFINITY,
-    };
-    if hypotheses.len() <= 1 {
-        return (0, value, distance(value));
+/// How far apart two object states are for pairing them: the distance of their positions plus
+/// the difference of their velocities times this (metres per m/s), when both have a `vel`.
+pub const VELOCITY_WEIGHT_S: f64 = 1.0;
+
+/// The distance used to pair `p` with a candidate state (`INFINITY` without positions).
+fn state_distance(p: &Value, o: &Value) -> f64 {
+    let (Some(a), Some(b)) = (p.as_record(), o.as_record()) else { return f64::INFINITY };
+    let (Some(pa), Some(pb)) = (position(a), position(b)) else { return f64::INFINITY };
+    let mut d = (pa[0] - pb[0]).hypot(pa[1] - pb[1]);
+    if let (Some(va), Some(vb)) = (velocity(a), velocity(b)) {
+        d += VELOCITY_WEIGHT_S * (va[0] - vb[0]).hypot(va[1] - vb[1]);
     }
-    let mut best = (0u32, &hypotheses[0], distance(&hypotheses[0]));
+    d
+}
+
+/// The hypothesis of `value`/`hypotheses` closest to the object `p` (position, and velocity when
+/// both have one: at a crossing the branches start at one place but head different ways):
+/// (index, value, distance).
+fn closest<'v>(value: &'v Value, hypotheses: &'v [Value], p: &Value) -> (u32, &'v Value, f64) {
+    if hypotheses.len() <= 1 {
+        return (0, value, state_distance(p, value));
+    }
+    let mut best = (0u32, &hypotheses[0], state_distance(p, &hypotheses[0]));
     for (i, h) in hypotheses.iter().enumerate().skip(1) {
-        let d = distance(h);
+        let d = state_distance(p, h);
         if d < best.2 {
             best = (i as u32, h, d);
         }
@@ -171,6 +256,7 @@ impl LinkProcess {
         conditions: LinkConditions,
     ) -> LinkProcess {
         let grid = GateGrid::new(conditions.gate.unwrap_or(1.0));
+        let pools = Pools::new(&conditions);
         LinkProcess {
             name,
             from_ty,
@@ -180,6 +266,7 @@ impl LinkProcess {
             conditions,
             identifications: Vec::new(),
             instances: Vec::new(),
+            pools,
             grid,
             stats: LinkStats::default(),
         }
@@ -193,8 +280,9 @@ impl LinkProcess {
     pub(crate) fn drop_instance(&mut self, from: ObjectKey) {
         if let Some(slot) = self.instances.get_mut(from.index())
             && slot.as_ref().is_some_and(|i| i.from == from)
+            && let Some(instance) = slot.take()
         {
-            *slot = None;
+            self.pools.give_state(instance.state);
         }
     }
 
@@ -203,7 +291,9 @@ impl LinkProcess {
         if let Some(Some(instance)) = self.instances.get_mut(from.index())
             && instance.from == from
         {
-            instance.state = InstanceState::unlinked(&self.conditions);
+            let fresh = self.pools.unlinked();
+            let old = std::mem::replace(&mut instance.state, fresh);
+            self.pools.give_state(old);
         }
     }
 
@@ -212,7 +302,19 @@ impl LinkProcess {
         if self.instances.len() <= i {
             self.instances.resize_with(i + 1, || None);
         }
-        self.instances[i] = Some(Instance { from, state });
+        if let Some(old) = self.instances[i].replace(Instance { from, state }) {
+            self.pools.give_state(old.state);
+        }
+    }
+
+    fn set_unlinked(&mut self, from: ObjectKey) {
+        let state = self.pools.unlinked();
+        self.set_state(from, state);
+    }
+
+    fn set_linked(&mut self, from: ObjectKey, to: ObjectKey) {
+        let state = self.pools.linked(to);
+        self.set_state(from, state);
     }
 
     /// Builds the gate grid over the objects of type B not linked by this link.
@@ -252,9 +354,14 @@ impl LinkProcess {
         let mut decisions = Decisions::default();
         let mut grid_ready = false;
         let mut near: Vec<ObjectKey> = Vec::new();
+        // Maintain conditions are progressed after the loop, all together: stepping them between
+        // link-unit computations made each step miss the caches the other left.
+        let mut maintains: Vec<(usize, ObjectKey, ObjectKey, Value, Value)> = Vec::new();
         for &p in keys.iter() {
             let Some(p_obj) = cx.store.get(p) else { continue };
-            if p_obj.is_partial() {
+            // A partial object has no state yet; an absent percept has none at this time (its
+            // conditions resume when it is listed again).
+            if p_obj.is_partial() || !p_obj.present {
                 continue;
             }
             let p_value = p_obj.value.clone();
@@ -267,12 +374,8 @@ impl LinkProcess {
             if self.instances.len() <= i {
                 self.instances.resize_with(i + 1, || None);
             }
-            if self.instances[i].as_ref().is_some_and(|inst| inst.from != p) {
-                self.instances[i] = None;
-            }
-            if self.instances[i].is_none() {
-                self.instances[i] =
-                    Some(Instance { from: p, state: InstanceState::unlinked(&self.conditions) });
+            if self.instances[i].as_ref().is_none_or(|inst| inst.from != p) {
+                self.set_unlinked(p);
             }
             let linked_to = match &self.instances[i] {
                 Some(Instance { state: InstanceState::Linked { to, .. }, .. }) => Some(*to),
@@ -282,7 +385,7 @@ impl LinkProcess {
             if let Some(to) = linked_to {
                 // Linked: the unit computes B's state, then maintain.
                 let Some(o) = cx.store.get_mut(to) else {
-                    self.set_state(p, InstanceState::unlinked(&self.conditions));
+                    self.set_unlinked(p);
                     continue;
                 };
                 let fresher = match o.computed {
@@ -306,30 +409,14 @@ impl LinkProcess {
                     }
                 }
                 let o_value = o.value.clone();
-                let o_symbol = o.symbol.clone();
-                if let Some(Instance { state: InstanceState::Linked { maintain, .. }, .. }) =
-                    &mut self.instances[i]
-                    && let Condition::Pending(progressor) = maintain
-                {
-                    self.stats.condition_steps += 1;
-                    let state = LinkState { from: &p_value, to: Some(&o_value), this: None };
-                    match progressor.step(cx.time, &state) {
-                        Ok(Some(verdict)) => {
-                            *maintain = Condition::Decided(verdict);
-                            if !verdict {
-                                decisions.unlink.push((p, to));
-                            }
-                        }
-                        Ok(None) => {}
-                        Err(e) => cx.out.warn(
-                            cx.time,
-                            format!(
-                                "link `{}`: maintain({}, {o_symbol}): {e}; the state was skipped",
-                                self.name,
-                                p_value_symbol(&p_value)
-                            ),
-                        ),
-                    }
+                if matches!(
+                    &self.instances[i],
+                    Some(Instance {
+                        state: InstanceState::Linked { maintain: Condition::Pending(_), .. },
+                        ..
+                    })
+                ) {
+                    maintains.push((i, p, to, p_value, o_value));
                 }
                 continue;
             }
@@ -348,7 +435,7 @@ impl LinkProcess {
                 let state = LinkState { from: &p_value, to: None, this: None };
                 match progressor.step(cx.time, &state) {
                     Ok(Some(verdict)) => {
-                        u.establish = Condition::Decided(verdict);
+                        self.pools.decide(&mut u.establish, verdict);
                         if verdict {
                             decisions.establish.push(p);
                         }
@@ -365,26 +452,34 @@ impl LinkProcess {
                 }
             }
             let store = &*cx.store;
-            u.candidates.retain(|c| {
-                store.get(c.to).is_some_and(|o| o.incoming_via(id).is_none())
-                    && (matches!(c.condition, Condition::Pending(_)) || near.contains(&c.to))
-            });
+            let mut k = 0;
+            while k < u.candidates.len() {
+                let c = &u.candidates[k];
+                let keep = store.get(c.to).is_some_and(|o| o.incoming_via(id).is_none())
+                    && (matches!(c.condition, Condition::Pending(_)) || near.contains(&c.to));
+                if keep {
+                    k += 1;
+                } else {
+                    let dropped = u.candidates.swap_remove(k);
+                    self.pools.give(dropped.condition);
+                }
+            }
+            u.candidates.sort_by_key(|c| c.to);
             for &o in &near {
                 if !u.candidates.iter().any(|c| c.to == o) {
-                    u.candidates
-                        .push(Candidate { to: o, condition: Condition::new(&self.conditions.reestablish) });
+                    u.candidates.push(Candidate { to: o, condition: self.pools.take(REESTABLISH) });
                 }
             }
             for candidate in &mut u.candidates {
                 let Condition::Pending(progressor) = &mut candidate.condition else { continue };
                 let Some(o) = store.get(candidate.to) else { continue };
-                let (hypothesis, to_value, distance) = closest(&o.value, &o.hypotheses, p_pos);
+                let (hypothesis, to_value, distance) = closest(&o.value, &o.hypotheses, &p_value);
                 self.stats.condition_steps += 1;
                 self.stats.candidate_steps += 1;
                 let state = LinkState { from: &p_value, to: Some(to_value), this: None };
                 match progressor.step(cx.time, &state) {
                     Ok(Some(verdict)) => {
-                        candidate.condition = Condition::Decided(verdict);
+                        self.pools.decide(&mut candidate.condition, verdict);
                         if verdict {
                             decisions.reestablish.push(Match {
                                 distance,
@@ -455,6 +550,33 @@ impl LinkProcess {
                 }
             }
         }
+        for (i, p, to, p_value, o_value) in maintains {
+            let Some(Instance { state: InstanceState::Linked { maintain, .. }, .. }) = &mut self.instances[i]
+            else {
+                continue;
+            };
+            let Condition::Pending(progressor) = maintain else { continue };
+            self.stats.condition_steps += 1;
+            let state = LinkState { from: &p_value, to: Some(&o_value), this: None };
+            match progressor.step(cx.time, &state) {
+                Ok(Some(verdict)) => {
+                    self.pools.decide(maintain, verdict);
+                    if !verdict {
+                        decisions.unlink.push((p, to));
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => cx.out.warn(
+                    cx.time,
+                    format!(
+                        "link `{}`: maintain({}, {}): {e}; the state was skipped",
+                        self.name,
+                        p_value_symbol(&p_value),
+                        p_value_symbol(&o_value)
+                    ),
+                ),
+            }
+        }
         self.apply(id, cx, decisions, &to_type);
     }
 
@@ -473,7 +595,7 @@ impl LinkProcess {
         // Maintain conditions that became false.
         for (p, o) in decisions.unlink {
             if cx.store.unlink(id, p, o) {
-                self.set_state(p, InstanceState::unlinked(&self.conditions));
+                self.set_unlinked(p);
                 if let (Some(po), Some(oo)) = (cx.store.get(p), cx.store.get(o)) {
                     let change = Change::new(
                         cx.time,
@@ -566,7 +688,7 @@ impl LinkProcess {
                         ),
                     );
                     // Try again from the next state on.
-                    self.set_state(p, InstanceState::unlinked(&self.conditions));
+                    self.set_unlinked(p);
                     continue;
                 }
             };
@@ -577,10 +699,7 @@ impl LinkProcess {
                 o.computed = Some((cx.step, p_measured));
             }
             cx.store.link(id, p, key);
-            self.set_state(
-                p,
-                InstanceState::Linked { to: key, maintain: Condition::new(&self.conditions.maintain) },
-            );
+            self.set_linked(p, key);
             cx.out.changes.push(
                 Change::new(cx.time, ChangeKind::Created, symbol.clone(), b_name.clone(), Cause::Establish)
                     .link(&self.name)
@@ -604,10 +723,7 @@ impl LinkProcess {
         to_type: &Arc<RecordType>,
     ) {
         cx.store.link(id, p, o);
-        self.set_state(
-            p,
-            InstanceState::Linked { to: o, maintain: Condition::new(&self.conditions.maintain) },
-        );
+        self.set_linked(p, o);
         let Some(po) = cx.store.get(p) else { return };
         let (p_measured, p_predicted) = (po.measured_at, po.predicted);
         let p_record: Option<Arc<Record>> = po.record().cloned();

@@ -44,7 +44,7 @@ source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "grid_town", gr
 
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {{
   establish   eventually[1s, inf] true
-  reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
+  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0 and norm(from.vel - to.vel) < 5.0)
   maintain    true
 }}
 link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario: "grid_town") {{
@@ -55,6 +55,7 @@ link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario
 predict WorldObject  = constant_velocity
 predict OnRoadObject = along_roads(scenario: "grid_town")
 forget after {forget}s
+forget VisionPercept after 600ms
 "#,
         cars = setup.cars,
         bx = town.blocks_x,

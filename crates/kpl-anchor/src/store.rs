@@ -90,6 +90,11 @@ pub struct Object {
     pub(crate) prediction: Option<PredictionRun>,
     /// Step at which a source last listed this percept.
     pub(crate) seen_step: u64,
+    /// A percept listed by the last snapshot of its source (always true for other objects). An
+    /// absent percept keeps its identity and links until its type's forget time has passed.
+    pub present: bool,
+    /// When a source last listed this percept (its creation time for other objects).
+    pub last_seen: Time,
     /// Step and measurement time of the last link-unit computation (several links into one object).
     pub(crate) computed: Option<(u64, Option<Time>)>,
 }
@@ -259,6 +264,8 @@ impl Store {
             names: Vec::new(),
             prediction: None,
             seen_step: 0,
+            present: true,
+            last_seen: time,
             computed: None,
         });
         self.by_type[ty as usize].insert(seq, key);

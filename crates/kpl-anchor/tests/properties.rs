@@ -7,7 +7,9 @@
 //! - an object is anchored exactly when it is grounded: a percept, or reachable by links from one
 //!   (computed here by a search of the structures);
 //! - an object is removed as forgotten only once it has not been anchored for its type's forget
-//!   time, and every object that has not been anchored for that long is gone;
+//!   time, and every object that has not been anchored for that long is gone; a percept its
+//!   source stops listing is removed exactly when it has not been listed for its type's forget
+//!   time (0 for radar percepts, 300 ms for vision percepts);
 //! - the same trace gives the same structures (determinism).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
@@ -46,6 +48,7 @@ predict WorldObject  = constant_velocity
 predict OnRoadObject = along_roads(scenario: "crossing")
 forget WorldObject after 1s
 forget OnRoadObject after 1500ms
+forget VisionPercept after 300ms
 "#;
 
 const PERCEPT_TYPES: [&str; 2] = ["VisionPercept", "RadarPercept"];
@@ -55,6 +58,14 @@ fn forget_after(ty: &str) -> Option<Time> {
         "WorldObject" => Some(1_000_000),
         "OnRoadObject" => Some(1_500_000),
         _ => None,
+    }
+}
+
+/// How long a percept its source stops listing is kept (absent) before it is removed.
+fn percept_grace(ty: &str) -> Time {
+    match ty {
+        "VisionPercept" => 300_000,
+        _ => 0,
     }
 }
 
@@ -116,6 +127,7 @@ fn engine() -> Anchoring {
 fn run(tracks: &[Track], steps: usize) -> Result<Vec<String>, TestCaseError> {
     let mut anchoring = engine();
     let mut last_anchored: BTreeMap<(String, String), Time> = BTreeMap::new();
+    let mut last_listed: BTreeMap<String, Time> = BTreeMap::new();
     let mut structures = Vec::new();
     let (mut forgotten, mut linked) = (0, 0);
     for step in 0..steps {
@@ -132,6 +144,12 @@ fn run(tracks: &[Track], steps: usize) -> Result<Vec<String>, TestCaseError> {
             .unwrap();
         prop_assert!(output.warnings.is_empty(), "{:?}", output.warnings);
         let views = anchoring.objects();
+        for list in [&camera, &radar] {
+            let Value::List(items) = list else { unreachable!() };
+            for item in items.iter() {
+                last_listed.insert(item.as_record().unwrap().id.as_deref().unwrap().to_string(), time);
+            }
+        }
 
         // Removal only after the forget time.
         for change in &output.changes {
@@ -148,6 +166,14 @@ fn run(tracks: &[Track], steps: usize) -> Result<Vec<String>, TestCaseError> {
             }
             if change.kind == ChangeKind::Linked {
                 linked += 1;
+            }
+            if change.kind == ChangeKind::Removed && change.cause == Cause::Lost {
+                let absent = time - last_listed[&*change.symbol];
+                prop_assert!(
+                    absent >= percept_grace(&change.ty).max(1),
+                    "{} removed after {absent} us",
+                    change.symbol
+                );
             }
         }
 
@@ -191,6 +217,15 @@ fn run(tracks: &[Track], steps: usize) -> Result<Vec<String>, TestCaseError> {
             let last = last_anchored.entry(key).or_insert(time);
             if view.anchored {
                 *last = time;
+            }
+            if PERCEPT_TYPES.contains(&&*view.ty) {
+                let absent = time - last_listed[&*view.symbol];
+                prop_assert!(
+                    absent < percept_grace(&view.ty).max(1),
+                    "{} absent for {absent} us, still there",
+                    view.symbol
+                );
+                prop_assert_eq!(view.measured, absent == 0);
             }
             if let Some(after) = forget_after(&view.ty) {
                 prop_assert!(

@@ -11,6 +11,8 @@ use crate::cmd::mtl;
 pub enum Command {
     /// The MTL engine on the ten timed properties of the Timescales benchmark, against R2U2.
     Mtl(mtl::BenchArgs),
+    /// Hierarchical anchoring of 100 to 10,000 cars at 10 Hz through two link levels.
+    Anchor(crate::cmd::bench_anchor::Args),
     /// The in-process runtime against bare tokio channels, and its memory over a long run.
     Runtime(crate::cmd::bench_runtime::Args),
 }
@@ -20,4 +22,5 @@ pub fn run(command: Command) -> ExitCode {
         Command::Mtl(args) => mtl::bench(args),
         Command::Runtime(args) => crate::cmd::bench_runtime::run(args),
     }
+        Command::Anchor(args) => crate::cmd::bench_anchor::run(args),
 }
