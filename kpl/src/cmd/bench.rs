@@ -20,7 +20,7 @@ pub enum Command {
 pub fn run(command: Command) -> ExitCode {
     match command {
         Command::Mtl(args) => mtl::bench(args),
+        Command::Anchor(args) => crate::cmd::bench_anchor::run(args),
         Command::Runtime(args) => crate::cmd::bench_runtime::run(args),
     }
-        Command::Anchor(args) => crate::cmd::bench_anchor::run(args),
 }
