@@ -70,17 +70,24 @@ impl Outputs {
     pub async fn send(&mut self, port: usize, sample: Sample) {
         let Some(p) = self.ports.get_mut(port) else { return };
         let mut gone = Vec::new();
+        let last = p.local.len().wrapping_sub(1);
+        let mut sample = Some(sample);
         for (i, sender) in p.local.iter().enumerate() {
-            // Cloning a sample shares its payload.
-            if sender.send(sample.clone()).await == Err(Closed) {
+            // The last local consumer takes the sample itself unless remote hosts need it too;
+            // the others get clones (which share the payload).
+            let s = if i == last && p.remote.is_empty() { sample.take() } else { sample.clone() };
+            let Some(s) = s else { break };
+            if sender.send(s).await == Err(Closed) {
                 gone.push(i);
             }
         }
         for i in gone.into_iter().rev() {
             p.local.remove(i);
         }
-        for remote in &mut p.remote {
-            remote.send(&sample).await;
+        if let Some(sample) = &sample {
+            for remote in &mut p.remote {
+                remote.send(sample).await;
+            }
         }
     }
 

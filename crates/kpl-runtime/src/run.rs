@@ -555,8 +555,10 @@ async fn run_unit(
         match event {
             Event::Samples(port) => {
                 next = (port + 1) % inputs.len();
+                if let Some(last) = batch.last() {
+                    run_stats.observe_time(last.available);
+                }
                 for sample in batch.drain(..) {
-                    run_stats.observe_time(sample.available);
                     inputs[port].filter.on_sample(sample, now, &mut delivered);
                 }
                 for sample in delivered.drain(..) {
