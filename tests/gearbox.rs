@@ -325,3 +325,43 @@ fn misdeclared_specs_are_refused_with_what_to_fix() {
         assert!(stderr.contains(expected), "case {k}: expected `{expected}` in:\n{stderr}");
     }
 }
+
+#[test]
+fn an_action_rules_file_replaces_the_built_in_table() {
+    // Only `pick_up` has an effect: the parts stay in the gripper (no `release` rule) and nothing
+    // is inserted, screwed or mounted.
+    let dir = temp_dir("rules");
+    let rules = r#"[{"action": "pick_up", "phase": "completed", "effects": [{"effect": "attach", "child": 1,
+        "parent": 0, "relation": {"name": "holding", "args": [0, 1]}}]}]"#;
+    std::fs::write(dir.join("rules.json"), rules).unwrap();
+    let spec = std::fs::read_to_string(root().join("specs/gearbox/assembly.kpl")).unwrap();
+    let spec = spec.replace("surface_z: 0.6)", "surface_z: 0.6, action_rules: \"rules.json\")");
+    assert!(spec.contains("rules.json"), "the spec's text changed");
+    std::fs::write(dir.join("assembly.kpl"), spec).unwrap();
+    let out = dir.join("out");
+    let result =
+        kpl(&["run", "--quiet", dir.join("assembly.kpl").to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let text = std::fs::read_to_string(out.join("world.jsonl")).unwrap();
+    let last_world: Value = text
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap())
+        .filter(|r| r["stream"] == "world")
+        .last()
+        .unwrap()["value"]
+        .clone();
+    let names: BTreeSet<&str> =
+        items(&last_world, "relations").iter().map(|r| r["name"].as_str().unwrap()).collect();
+    assert!(names.contains("holding"), "{names:?}");
+    for absent in ["inserted", "screwed", "mounted"] {
+        assert!(!names.contains(absent), "{absent} without a rule for it: {names:?}");
+    }
+    // A file that is not a list of rules is refused before the run, naming the file.
+    std::fs::write(dir.join("rules.json"), r#"[{"action": "pick_up", "effects": [{"effect": "glue"}]}]"#)
+        .unwrap();
+    let result =
+        kpl(&["run", "--quiet", dir.join("assembly.kpl").to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("rules.json: not a list of action rules"), "{stderr}");
+}

@@ -7,15 +7,19 @@
 //!   it sees states whose inputs share a valid time.
 //! - `source g : list<D> = sim.gearbox()`: the paper's gearbox assembly (`kpl_aapa::gearbox`) as a
 //!   simulated scenario, with `actions`, `camera` and `truth` ports.
+//! - `source v : list<D> = cater.video(data: DIR, video: NAME)`: one video of a `kpl cater
+//!   generate` directory replayed as percepts, actions and a fixed camera pose.
 //!
 //! Every AAPA parameter is a named parameter of `aapa.anchor` with the paper's LA-CATER value as
 //! its default ([`kpl_aapa::Params::default`]); `kpl list aapa.anchor` prints them.
 
+mod cater;
 mod gearbox;
 mod values;
 
 use kpl_aapa::{
-    Aapa, Action, ActionRule, CameraModel, Extensions, ImageSize, MotionProfile, Params, WorldState,
+    Aapa, Action, ActionRule, CameraModel, CameraPose, Extensions, ImageSize, MotionProfile, Params,
+    WorldState,
 };
 use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
@@ -46,6 +50,8 @@ struct AnchorUnit {
     actions_up_to: Option<Time>,
     /// The world this unit emitted last.
     last_world: WorldState,
+    /// Without a camera model the camera must stay still: the first pose seen.
+    fixed_pose: Option<CameraPose>,
 }
 
 fn sample<'a>(input: &'a Input<'_>, port: usize) -> Option<&'a Sample> {
@@ -59,7 +65,29 @@ impl AnchorUnit {
             pending_actions: Vec::new(),
             actions_up_to: None,
             last_world: WorldState::default(),
+            fixed_pose: None,
         }
+    }
+
+    /// The pose to compensate with: the pose itself with a camera model; without one, none, after
+    /// checking that the camera has not moved (a move cannot be compensated without a model).
+    fn camera(&mut self, pose: Option<CameraPose>) -> Result<Option<CameraPose>, String> {
+        if self.aapa.params().camera.is_some() {
+            return Ok(pose);
+        }
+        if let Some(pose) = pose {
+            match self.fixed_pose {
+                None => self.fixed_pose = Some(pose),
+                Some(first) if first == pose => {}
+                Some(first) => {
+                    return Err(format!(
+                        "the camera moved from {first:?} to {pose:?}, but aapa.anchor has no camera model \
+                         to compensate with (set `focal_px`, `surface_z` and `image`)"
+                    ));
+                }
+            }
+        }
+        Ok(None)
     }
 
     /// The world of the previous cycle: the fed-back one if it is at least as recent as the last
@@ -112,19 +140,16 @@ impl Unit for AnchorUnit {
         let at = |e: String| ProcessError::failed(format!("t={time}: {e}"));
         let percepts = percepts_from_value(&frame.value).map_err(at)?;
         let actions = std::mem::take(&mut self.pending_actions);
-        let camera = sample(input, POSES).map(|s| pose_from_value(&s.value)).transpose().map_err(at)?;
+        let pose = sample(input, POSES).map(|s| pose_from_value(&s.value)).transpose().map_err(at)?;
+        let camera = self.camera(pose).map_err(at)?;
         let (previous, note) = self.previous_world(sample(input, PREVIOUS))?;
         if note.is_some() {
             tracing::debug!(time, "aapa.anchor: the previous world had not come back yet");
         }
-        let mut world =
-            self.aapa.step(time, &percepts, &actions, camera.as_ref(), &previous).map_err(|e| {
-                let hint = match e {
-                    kpl_aapa::AapaError::NoCameraModel => " (set `focal_px`, `surface_z` and `image`)",
-                    _ => "",
-                };
-                at(format!("{e}{hint}"))
-            })?;
+        let mut world = self
+            .aapa
+            .step(time, &percepts, &actions, camera.as_ref(), &previous)
+            .map_err(|e| at(e.to_string()))?;
         world.notes.extend(note);
         out.emit(world_to_value(&world).map_err(at)?);
         self.last_world = world;
@@ -395,7 +420,7 @@ fn anchor_entry() -> Entry {
         Value::List(Vec::new().into()),
         "[width, height] of the image in pixels: unseen anchors outside it are out of view; [] for no field of view",
     ))
-    .param(f("focal_px", 0.0, "camera model for camera movement alignment: focal length in pixels; 0 for no camera model (then poses are an error)"))
+    .param(f("focal_px", 0.0, "camera model for camera movement alignment: focal length in pixels; 0 for none (the camera must then stay still: a pose that changes is an error)"))
     .param(Param::optional(
         "principal",
         floats,
@@ -429,6 +454,7 @@ fn anchor_entry() -> Entry {
 pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
     registry.add_unit(anchor_entry(), build);
     gearbox::register(registry);
+    cater::register(registry);
 }
 
 #[cfg(test)]

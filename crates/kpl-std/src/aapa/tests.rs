@@ -158,11 +158,6 @@ fn a_bad_input_fails_one_cycle_and_the_next_goes_on() {
     assert!(err.to_string().contains("t=0: the percepts: expected a list"), "{err}");
     let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&c.camera)), None];
     assert_eq!(state(&mut unit, c.time, &values).len(), 1);
-    // A pose without a camera model names the parameters to set.
-    let mut plain = AnchorUnit::new(Aapa::new(Params::default()).unwrap());
-    let input = Input { now: 0, valid: c.time, trigger: Trigger::State, values: &values, names: &names };
-    let err = plain.on_input(&input, &mut out).unwrap_err();
-    assert!(err.to_string().contains("set `focal_px`"), "{err}");
 }
 
 fn record_type(name: &str, fields: &[(&str, ValueType)]) -> ValueType {
@@ -238,4 +233,31 @@ fn the_entry_documents_every_parameter_with_the_papers_defaults() {
     assert_eq!(default("conf_plus"), Some(0.1));
     assert_eq!(default("conf_minus"), Some(0.1));
     assert!(default("type_mismatch").is_some() && default("theta_inf").is_some());
+}
+
+#[test]
+fn without_a_camera_model_the_camera_must_stay_still() {
+    // A fixed camera (CATER) needs no model: the same pose every cycle runs the library without one.
+    let cycles = gearbox::scenario();
+    let aapa = Aapa::new(Params::default()).unwrap();
+    let mut unit = AnchorUnit::new(aapa.clone());
+    let still = CameraPose { x: 0.1, y: 0.2, z: 0.0 };
+    let mut expected = WorldState::default();
+    let mut fed_back = None;
+    for c in &cycles[..3] {
+        expected = aapa.step(c.time, &c.percepts, &[], None, &expected).unwrap();
+        let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&still)), fed_back];
+        let out = state(&mut unit, c.time, &values);
+        assert_eq!(world_from_value(&out[0]).unwrap(), expected);
+        fed_back = s(c.time, out[0].clone());
+    }
+    // A pose that moves cannot be compensated: the cycle fails and says what to set.
+    let c = &cycles[3];
+    let moved = CameraPose { x: 0.15, ..still };
+    let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&moved)), fed_back];
+    let names = names();
+    let input = Input { now: c.time, valid: c.time, trigger: Trigger::State, values: &values, names: &names };
+    let mut out = Emitter::new(Arc::from(Vec::<String>::new()));
+    let err = unit.on_input(&input, &mut out).unwrap_err().to_string();
+    assert!(err.contains("the camera moved") && err.contains("set `focal_px`"), "{err}");
 }

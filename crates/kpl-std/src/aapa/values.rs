@@ -340,8 +340,8 @@ mod tests {
                 aapa.step(cycle.time, &cycle.percepts, &cycle.actions, Some(&cycle.camera), &world).unwrap();
             let value = world_to_value(&world).unwrap();
             assert_eq!(world_from_value(&value).unwrap(), world);
-            // serde_json's default float parsing may be off by an ulp (its `float_roundtrip` feature
-            // is not enabled in this workspace), so the text path is compared to 1e-12.
+            // Without serde_json's `float_roundtrip` feature, parsing may be off by an ulp, so the
+            // text path is compared to 1e-12.
             let text = value.to_json().to_string();
             let reread = Value::from_json_untyped(&serde_json::from_str(&text).unwrap()).unwrap();
             let reread = serde_json::to_value(world_from_value(&reread).unwrap()).unwrap();
