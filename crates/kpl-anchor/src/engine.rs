@@ -160,6 +160,17 @@ impl Anchoring {
     /// Builds the engine of a checked spec: its types, links (with their units and compiled
     /// conditions), prediction models, forget times and identifications.
     pub fn from_spec(spec: &hir::Spec, config: AnchorConfig) -> Result<Anchoring, BuildError> {
+        Anchoring::from_spec_links(spec, config, None)
+    }
+
+    /// The engine of some of a spec's links only (those one host runs; `None`: all). A type no
+    /// chosen link leads into is fed by snapshots, as percepts are (its objects come from another
+    /// host); identifications of such types are left to that host.
+    pub fn from_spec_links(
+        spec: &hir::Spec,
+        config: AnchorConfig,
+        only: Option<&[String]>,
+    ) -> Result<Anchoring, BuildError> {
         let AnchorConfig { implementations, mut networks } = config;
         let mut types: Vec<TypeInfo> = spec
             .types
@@ -182,6 +193,9 @@ impl Anchoring {
         let mut links = Vec::new();
         for process in &spec.processes {
             let hir::ProcessKind::Link(link) = &process.kind else { continue };
+            if only.is_some_and(|names| !names.contains(&process.name)) {
+                continue;
+            }
             let unknown =
                 |ty: &str| BuildError::UnknownType { link: process.name.clone(), ty: ty.to_string() };
             let from_ty = type_id(&link.from_type, &types).ok_or_else(|| unknown(&link.from_type))?;
@@ -294,6 +308,9 @@ impl Anchoring {
             hypotheses: Vec::new(),
         };
         for ident in &spec.identifications {
+            if engine.type_id(&ident.ty).is_some_and(|t| engine.types[t as usize].links_into.is_empty()) {
+                continue;
+            }
             engine.identify(&ident.name, &ident.ty, &ident.description).map_err(|e| {
                 BuildError::Identification { name: ident.name.clone(), message: e.to_string() }
             })?;
@@ -313,6 +330,28 @@ impl Anchoring {
 
     pub(crate) fn type_id(&self, name: &str) -> Option<TypeId> {
         self.types.iter().position(|t| &*t.name == name).map(|i| i as TypeId)
+    }
+
+    /// Whether objects of a type come from snapshots (percepts, or objects made on another host)
+    /// rather than from links of this engine.
+    pub fn is_fed_by_snapshots(&self, ty: &str) -> bool {
+        self.type_id(ty).is_some_and(|t| self.types[t as usize].links_into.is_empty())
+    }
+
+    /// The link of this engine that reports a change: its own `link`, else for an object of a
+    /// type made by links the first link into it, else (a percept type) the first link from it.
+    pub fn link_of_change(&self, change: &Change) -> Option<&str> {
+        if let Some(link) = &change.link {
+            return self.links.iter().find(|l| l.name == *link).map(|l| &*l.name);
+        }
+        let ty = self.type_id(&change.ty)?;
+        let into = self.types[ty as usize].links_into.first().map(|l| &*self.links[*l as usize].name);
+        into.or_else(|| self.links.iter().find(|l| l.from_ty == ty).map(|l| &*l.name))
+    }
+
+    /// The type a link leads to.
+    pub fn link_to_type(&self, link: &str) -> Option<&str> {
+        self.links.iter().find(|l| &*l.name == link).map(|l| &*self.types[l.to_ty as usize].name)
     }
 
     /// The declared object types, in the order of the hierarchy.

@@ -52,8 +52,8 @@
 //! [`gate`] (the spatial index of gating), [`units`] (link units), [`predict`] (prediction
 //! models), [`implementations`] (both by name), [`networks`] (road networks), [`change`] (change
 //! records), [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
-//! checker), [`driver`] (runs a spec's simulated tracker straight into the engine), [`scale`] (the
-//! scale benchmark's workload).
+//! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
+//! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
 
 pub mod change;
 pub mod conditions;
@@ -67,6 +67,7 @@ pub mod networks;
 pub mod predict;
 pub mod records;
 pub mod registry;
+pub mod runtime;
 pub mod scale;
 pub mod store;
 pub mod units;

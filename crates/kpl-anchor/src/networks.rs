@@ -4,6 +4,7 @@
 //! used for those parameters instead of loading.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kpl_core::Value;
@@ -13,6 +14,8 @@ use kpl_sim::{Params, RoadNetwork};
 #[derive(Debug, Default, Clone)]
 pub struct Networks {
     loaded: BTreeMap<(String, String), Arc<RoadNetwork>>,
+    /// Relative `network_file` paths are read from here (the spec's directory in a run).
+    base_dir: Option<PathBuf>,
 }
 
 /// The `scenario` and `network_file` parameters of a call (`network_file` empty when not set).
@@ -26,6 +29,12 @@ pub fn network_key(params: &BTreeMap<String, Value>) -> (String, String) {
 }
 
 impl Networks {
+    /// Reads relative `network_file` paths from `dir` (by default: the working directory).
+    pub fn with_base_dir(mut self, dir: &Path) -> Networks {
+        self.base_dir = Some(dir.to_path_buf());
+        self
+    }
+
     /// Uses `network` wherever a call names `scenario` (and no network file).
     pub fn insert(&mut self, scenario: &str, network: Arc<RoadNetwork>) {
         self.loaded.insert((scenario.to_string(), String::new()), network);
@@ -38,11 +47,11 @@ impl Networks {
         if let Some(network) = self.loaded.get(&key) {
             return Ok(network.clone());
         }
-        let sim_params = Params {
-            scenario: key.0.clone(),
-            network_file: (!key.1.is_empty()).then(|| key.1.clone()),
-            ..Params::default()
-        };
+        let file = (!key.1.is_empty()).then(|| match &self.base_dir {
+            Some(dir) => dir.join(&key.1).to_string_lossy().into_owned(),
+            None => key.1.clone(),
+        });
+        let sim_params = Params { scenario: key.0.clone(), network_file: file, ..Params::default() };
         let network = sim_params.load_network().map_err(|e| match &sim_params.network_file {
             Some(file) => format!("cannot load road network `{file}`: {e}"),
             None => format!("cannot build road network `{}`: {e}", key.0),
