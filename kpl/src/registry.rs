@@ -86,6 +86,7 @@ pub(crate) fn extend_with(extend: fn(&mut Registry)) {
 pub fn registry() -> Registry {
     let mut registry = Registry::with_builtins();
     kpl_std::register(&mut registry);
+    kpl_zenoh::register(&mut registry);
     anchoring_signatures(&mut registry);
     if let Some(extend) = EXTENSION.get() {
         extend(&mut registry);

@@ -281,6 +281,8 @@ fn throughput(
     let (child, reader) = start_peer(peer, &task)?;
     let sent = runtime.block_on(async {
         let session = open(port, "main").await?;
+        // Producer tokens outlive the session's last samples (see `ZenohSender::token`).
+        let mut tokens = Vec::new();
         let stream = key("throughput");
         match implementation {
             Implementation::Bare => {
@@ -310,9 +312,11 @@ fn throughput(
                     sender.send(&Sample::new(t, t, value.clone())).await;
                 }
                 sender.end().await;
+                tokens.extend(sender.token.take());
             }
         }
         session.session.close().await.map_err(failed)?;
+        drop(tokens);
         Ok::<usize, BenchError>(messages)
     })?;
     let report = finish_peer(child, reader)?;
@@ -334,6 +338,7 @@ fn latency(
     let (child, reader) = start_peer(peer, &task)?;
     let times = runtime.block_on(async {
         let session = open(port, "main").await?;
+        let mut tokens = Vec::new();
         let mut times = Vec::with_capacity(round_trips);
         match implementation {
             Implementation::Bare => {
@@ -394,9 +399,11 @@ fn latency(
                     }
                 }
                 ping.end().await;
+                tokens.extend(ping.token.take());
             }
         }
         session.session.close().await.map_err(failed)?;
+        drop(tokens);
         Ok::<Vec<f64>, BenchError>(times)
     })?;
     finish_peer(child, reader)?;
@@ -419,6 +426,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
     let runtime = runtime()?;
     runtime.block_on(async {
         let session = open(task.port, "peer").await?;
+        let mut tokens = Vec::new();
         let report = match (task.role, task.implementation) {
             (Role::Sub, Implementation::Bare) => {
                 let sub = session
@@ -502,10 +510,12 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                     report.received += 1;
                 }
                 pong.end().await;
+                tokens.extend(pong.token.take());
                 report
             }
         };
         session.session.close().await.map_err(failed)?;
+        drop(tokens);
         Ok(report)
     })
 }

@@ -74,6 +74,10 @@ pub struct ZenohTransport {
     inbound: Vec<Stream>,
     /// Receivers declared ahead of the runtime asking for them, by key.
     declared: tokio::sync::Mutex<Option<BTreeMap<StreamKey, ZenohReceiver>>>,
+    /// The producer tokens of this host's publishers, kept until the session closes: zenoh sends
+    /// an undeclaration ahead of data still queued, so a token dropped with its publisher could
+    /// reach a subscriber before the stream's last samples and end it early.
+    tokens: std::sync::Mutex<Vec<LivelinessToken>>,
 }
 
 impl std::fmt::Debug for ZenohTransport {
@@ -123,6 +127,7 @@ impl ZenohTransport {
             consumers,
             inbound: inbound.into_iter().collect(),
             declared: tokio::sync::Mutex::new(None),
+            tokens: std::sync::Mutex::new(Vec::new()),
         }
     }
 
@@ -161,7 +166,12 @@ impl Transport for ZenohTransport {
             self.declare_inbound(&key.spec).await?;
             let hosts =
                 self.consumers.get(&(key.producer.clone(), key.port.clone())).cloned().unwrap_or_default();
-            let sender = ZenohSender::declare(&self.session, key, &self.host, hosts).await?;
+            let mut sender = ZenohSender::declare(&self.session, key, &self.host, hosts).await?;
+            if let Some(token) = sender.token.take()
+                && let Ok(mut tokens) = self.tokens.lock()
+            {
+                tokens.push(token);
+            }
             Ok(Box::new(sender) as Box<dyn RemoteSender>)
         })
     }
@@ -184,6 +194,9 @@ impl Transport for ZenohTransport {
     fn close(self: Arc<Self>) -> BoxFuture<'static, ()> {
         Box::pin(async move {
             self.declared.lock().await.take();
+            if let Ok(mut tokens) = self.tokens.lock() {
+                tokens.clear();
+            }
             if let Err(e) = self.session.session.close().await {
                 tracing::warn!("closing the zenoh session of {}: {e}", self.session.describe());
             }
@@ -204,7 +217,11 @@ pub struct ZenohSender {
     /// Encoded size of the last sample, to size the next buffer.
     last_len: usize,
     failures: u64,
-    _token: LivelinessToken,
+    /// The producer's liveliness token. Dropping it (with the sender) right after [`end`] can
+    /// overtake the end: keep it until the session closes, as [`ZenohTransport`] does.
+    ///
+    /// [`end`]: RemoteSender::end
+    pub token: Option<LivelinessToken>,
 }
 
 impl std::fmt::Debug for ZenohSender {
@@ -248,7 +265,7 @@ impl ZenohSender {
             published: 0,
             last_len: 64,
             failures: 0,
-            _token: token,
+            token: Some(token),
         })
     }
 
