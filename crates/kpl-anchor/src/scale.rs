@@ -1,9 +1,12 @@
 //! The workload of the scale benchmark (`kpl bench anchor`, `cargo bench -p kpl-anchor`): N cars
 //! in a grid town (about 11 per 100 m block) seen by the simulated tracker at 10 Hz with 10 %
 //! dropouts, noise and false positives, anchored through two link levels, vision percept ->
-//! world object -> on-road object, with the paper's conditions (section V). This module builds
-//! the spec and the driver and says what a step emits; the callers time it (nothing here reads a
-//! clock).
+//! world object -> on-road object, with the paper's conditions (section V), the reestablish
+//! condition of the first level also asking for similar velocities (as `specs/traffic/bridge.kpl`
+//! does: in a town, crossing traffic and oncoming lanes come within 10 m), and vision percepts
+//! kept for 600 ms after a missed detection (the tracker keeps their ids over 5 missed frames).
+//! This module builds the spec and the driver and says what a step emits; the callers time it
+//! (nothing here reads a clock).
 
 use kpl_core::Value;
 use kpl_sim::scenarios::GridTownSize;

@@ -3,7 +3,7 @@
 //! For each number of cars N, the workload of `kpl_anchor::scale`: N cars in a grid town seen by
 //! the simulated tracker at 10 Hz (10 % missed detections, noise, false positives), anchored
 //! through two link levels (vision percept -> world object -> on-road object) with the DyKnow
-//! paper's conditions, on one thread. After a warm-up, each frame is timed twice: producing it
+//! paper's conditions (the first level's reestablish also compares velocities), on one thread. After a warm-up, each frame is timed twice: producing it
 //! (the simulator and the snapshot value, the baseline) and anchoring it (one engine step plus
 //! the link processes' outputs: the snapshots of both object types and the change records).
 //! Reported: anchoring time per frame, per object-update (per car per frame) and its ratio to the
@@ -97,7 +97,7 @@ fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
 
 pub fn run(args: Args) -> ExitCode {
     println!(
-        "Anchoring at scale: two link levels (paper conditions), 10 Hz, {:.0} % missed detections, {:.0} s warm-up, {:.0} s timed, one thread.\n",
+        "Anchoring at scale: two link levels (the paper's conditions, kpl_anchor::scale), 10 Hz, {:.0} % missed detections, {:.0} s warm-up, {:.0} s timed, one thread.\n",
         args.dropout * 100.0,
         args.warmup,
         args.seconds
