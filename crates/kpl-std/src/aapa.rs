@@ -21,6 +21,8 @@ use kpl_aapa::{
     Aapa, Action, ActionRule, CameraModel, CameraPose, Extensions, ImageSize, MotionProfile, Params,
     WorldState,
 };
+use std::sync::Arc;
+
 use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::{BuildContext, BuildError};
@@ -48,8 +50,9 @@ struct AnchorUnit {
     /// The valid time of the last actions sample taken (a synchronized state repeats the most
     /// recent sample of an input that has none at its time; those are not taken again).
     actions_up_to: Option<Time>,
-    /// The world this unit emitted last.
+    /// The world this unit emitted last, and the value it emitted for it.
     last_world: WorldState,
+    last_value: Option<Value>,
     /// Without a camera model the camera must stay still: the first pose seen.
     fixed_pose: Option<CameraPose>,
 }
@@ -65,6 +68,7 @@ impl AnchorUnit {
             pending_actions: Vec::new(),
             actions_up_to: None,
             last_world: WorldState::default(),
+            last_value: None,
             fixed_pose: None,
         }
     }
@@ -98,6 +102,13 @@ impl AnchorUnit {
     ) -> Result<(WorldState, Option<String>), ProcessError> {
         let expected = self.last_world.time;
         if let Some(sample) = fed_back {
+            // The very value this unit emitted (values travel shared, not copied): no need to
+            // decode it again.
+            if let (Value::Record(back), Some(Value::Record(sent))) = (&sample.value, &self.last_value)
+                && Arc::ptr_eq(back, sent)
+            {
+                return Ok((self.last_world.clone(), None));
+            }
             let world = world_from_value(&sample.value).map_err(ProcessError::failed)?;
             if world.time >= expected {
                 return Ok((world, None));
@@ -151,8 +162,10 @@ impl Unit for AnchorUnit {
             .step(time, &percepts, &actions, camera.as_ref(), &previous)
             .map_err(|e| at(e.to_string()))?;
         world.notes.extend(note);
-        out.emit(world_to_value(&world).map_err(at)?);
+        let value = world_to_value(&world);
+        out.emit(value.clone());
         self.last_world = world;
+        self.last_value = Some(value);
         Ok(())
     }
 }

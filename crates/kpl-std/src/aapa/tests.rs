@@ -138,7 +138,7 @@ fn a_world_that_has_not_come_back_is_replaced_by_the_units_copy_with_a_note() {
     assert_eq!(got.notes.len(), w1.notes.len() + 1);
     assert!(got.notes.last().unwrap().contains("had not come back"), "{:?}", got.notes);
     // A stale world (cycle 0's, when cycle 1 was the last) is not used either.
-    let stale = s(c0.time, world_to_value(&w0).unwrap());
+    let stale = s(c0.time, world_to_value(&w0));
     let w2 = aapa.step(c2.time, &c2.percepts, &[], Some(&c2.camera), &got).unwrap();
     let got2 = run(&mut unit, c2, stale);
     assert_eq!(got2.anchors, w2.anchors);
@@ -260,4 +260,43 @@ fn without_a_camera_model_the_camera_must_stay_still() {
     let mut out = Emitter::new(Arc::from(Vec::<String>::new()));
     let err = unit.on_input(&input, &mut out).unwrap_err().to_string();
     assert!(err.contains("the camera moved") && err.contains("set `focal_px`"), "{err}");
+}
+
+#[test]
+fn a_world_edited_on_its_way_back_is_the_one_used() {
+    // The feedback may pass through another process (a world model editor): the unit continues
+    // from the world that comes back, not from the one it sent.
+    let cycles = gearbox::scenario();
+    let aapa = Aapa::new(gearbox::params()).unwrap();
+    let mut unit = gearbox_unit();
+    let run = |unit: &mut AnchorUnit, c: &gearbox::Cycle, fed_back: Option<Sample>| {
+        let values =
+            [s(c.time, frame(c)), s(c.time, actions(&c.actions)), s(c.time, pose_value(&c.camera)), fed_back];
+        state(unit, c.time, &values).remove(0)
+    };
+    let mut fed_back = None;
+    for c in &cycles[..30] {
+        fed_back = s(c.time, run(&mut unit, c, fed_back));
+    }
+    let sent = world_from_value(&fed_back.as_ref().unwrap().value).unwrap();
+    let mut edited = sent.clone();
+    edited.anchors.retain(|a| &*a.symbol != "plug0");
+    assert_eq!(edited.anchors.len() + 1, sent.anchors.len());
+    let c = &cycles[30];
+    let got = world_from_value(&run(&mut unit, c, s(cycles[29].time, world_to_value(&edited)))).unwrap();
+    let want = aapa.step(c.time, &c.percepts, &c.actions, Some(&c.camera), &edited).unwrap();
+    assert_eq!(got, want);
+    // The edit shows: the anchor `plug0` had been there for 30 cycles, and is not any more.
+    let unedited = aapa.step(c.time, &c.percepts, &c.actions, Some(&c.camera), &sent).unwrap();
+    assert!(unedited.anchor("plug0").is_some_and(|a| a.first_seen == 0));
+    assert!(got.anchor("plug0").is_none_or(|a| a.first_seen == c.time), "{:?}", got.anchor("plug0"));
+    // An equal copy (decoded, not the very value sent) gives what the value sent gives.
+    let copy = s(cycles[29].time, world_to_value(&sent));
+    let mut other = gearbox_unit();
+    let mut fed = None;
+    for c in &cycles[..30] {
+        fed = s(c.time, run(&mut other, c, fed));
+    }
+    let from_copy = world_from_value(&run(&mut other, c, copy)).unwrap();
+    assert_eq!(from_copy, unedited);
 }

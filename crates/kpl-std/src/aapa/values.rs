@@ -231,11 +231,8 @@ pub(crate) fn pose_value(pose: &CameraPose) -> Value {
     record(vec![("x", Value::Float(pose.x)), ("y", Value::Float(pose.y)), ("z", Value::Float(pose.z))])
 }
 
-fn relation_value(r: &Relation) -> Value {
-    record(vec![("name", Value::Str(r.name.clone())), ("args", strings(&r.args))])
-}
-
-/// The fields [`anchor_value`] writes itself; everything else comes from the library's serde.
+/// The fields every anchor record starts with, in order.
+#[cfg(test)]
 const ANCHOR_OWN_FIELDS: [&str; 10] = [
     "symbol",
     "type",
@@ -249,51 +246,133 @@ const ANCHOR_OWN_FIELDS: [&str; 10] = [
     "moving",
 ];
 
-fn anchor_value(a: &Anchor) -> Result<Value, String> {
-    let mut fields = vec![
-        ("symbol", Value::Str(a.symbol.clone())),
-        ("type", Value::Str(a.object_type.clone())),
-        ("box", Value::BBox(a.bbox)),
-        ("confidence", Value::Float(a.confidence)),
-        ("status", Value::str(status_name(a.status))),
-        ("for_inference", Value::Bool(a.for_inference)),
-        ("first_seen", Value::Int(a.first_seen)),
-        ("last_seen", Value::Int(a.last_seen)),
-        ("velocity", Value::Vec2(a.velocity)),
-        ("moving", Value::Bool(a.moving)),
-    ];
-    debug_assert_eq!(fields.len(), ANCHOR_OWN_FIELDS.len());
-    let json = serde_json::to_value(a).map_err(|e| format!("anchor `{}`: {e}", a.symbol))?;
-    let serde_json::Value::Object(map) = json else {
-        return Err(format!("anchor `{}` does not serialize as an object", a.symbol));
-    };
-    let mut memory = Vec::new();
-    for (name, json) in &map {
-        if ANCHOR_OWN_FIELDS.contains(&name.as_str()) {
-            continue;
+macro_rules! field_names {
+    ($($field:ident = $text:literal),* $(,)?) => {
+        /// Field names of world states, allocated once and shared by every record built here.
+        struct Names { $($field: Arc<str>),* }
+        impl Names {
+            fn new() -> Names {
+                Names { $($field: Arc::from($text)),* }
+            }
         }
-        let value =
-            Value::from_json_untyped(json).map_err(|e| format!("anchor `{}`: `{name}` {e}", a.symbol))?;
-        memory.push((name.as_str(), value));
+    };
+}
+
+field_names! {
+    symbol = "symbol", object_type = "type", bbox = "box", confidence = "confidence", status = "status",
+    for_inference = "for_inference", first_seen = "first_seen", last_seen = "last_seen",
+    velocity = "velocity", moving = "moving", colour = "colour", moving_until = "moving_until",
+    moving_since = "moving_since", full_size = "full_size", last_percept_box = "last_percept_box",
+    partial = "partial", attachment = "attachment", parent = "parent", relation = "relation",
+    offset = "offset", size = "size", parent_scale = "parent_scale", type_votes = "type_votes",
+    name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
+    relations = "relations", notes = "notes",
+}
+
+static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
+
+fn named(fields: Vec<(Arc<str>, Value)>) -> Value {
+    Value::Record(Arc::new(Record { id: None, fields }))
+}
+
+fn floats(values: &[f64]) -> Value {
+    Value::List(values.iter().map(|x| Value::Float(*x)).collect())
+}
+
+fn relation_value(r: &Relation) -> Value {
+    let n = &*NAMES;
+    named(vec![(n.name.clone(), Value::Str(r.name.clone())), (n.args.clone(), strings(&r.args))])
+}
+
+/// An anchor: the fields users declare, then its memory where set, named as the library's serde
+/// names them (so [`world_from_value`] reads it back with serde).
+fn anchor_value(a: &Anchor) -> Value {
+    let n = &*NAMES;
+    // Every field, so that a field added to the library's anchor is a compile error here.
+    let Anchor {
+        symbol,
+        object_type,
+        bbox,
+        confidence,
+        status,
+        colour,
+        first_seen,
+        last_seen,
+        velocity,
+        moving,
+        moving_until,
+        full_size,
+        last_percept_box,
+        partial,
+        moving_since,
+        attachment,
+        for_inference,
+        type_votes,
+    } = a;
+    let mut fields = vec![
+        (n.symbol.clone(), Value::Str(symbol.clone())),
+        (n.object_type.clone(), Value::Str(object_type.clone())),
+        (n.bbox.clone(), Value::BBox(*bbox)),
+        (n.confidence.clone(), Value::Float(*confidence)),
+        (n.status.clone(), Value::str(status_name(*status))),
+        (n.for_inference.clone(), Value::Bool(*for_inference)),
+        (n.first_seen.clone(), Value::Int(*first_seen)),
+        (n.last_seen.clone(), Value::Int(*last_seen)),
+        (n.velocity.clone(), Value::Vec2(*velocity)),
+        (n.moving.clone(), Value::Bool(*moving)),
+    ];
+    if let Some(rgb) = colour {
+        fields.push((n.colour.clone(), floats(rgb)));
     }
-    fields.extend(memory);
-    Ok(record(fields))
+    if let Some(t) = moving_until {
+        fields.push((n.moving_until.clone(), Value::Int(*t)));
+    }
+    if let Some(t) = moving_since {
+        fields.push((n.moving_since.clone(), Value::Int(*t)));
+    }
+    if let Some(wh) = full_size {
+        fields.push((n.full_size.clone(), floats(wh)));
+    }
+    if let Some(b) = last_percept_box {
+        fields.push((n.last_percept_box.clone(), floats(b)));
+    }
+    if *partial {
+        fields.push((n.partial.clone(), Value::Bool(true)));
+    }
+    if let Some(att) = attachment {
+        let mut geometry = vec![(n.parent.clone(), Value::Str(att.parent.clone()))];
+        if let Some(r) = &att.relation {
+            geometry.push((n.relation.clone(), relation_value(r)));
+        }
+        geometry.push((n.offset.clone(), floats(&att.offset)));
+        geometry.push((n.size.clone(), floats(&att.size)));
+        geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
+        fields.push((n.attachment.clone(), named(geometry)));
+    }
+    if !type_votes.is_empty() {
+        let votes = type_votes
+            .iter()
+            .map(|(t, count)| Value::List(vec![Value::Str(t.clone()), Value::Int(i64::from(*count))].into()))
+            .collect();
+        fields.push((n.type_votes.clone(), Value::List(votes)));
+    }
+    named(fields)
 }
 
 /// A world state as a record value.
-pub(crate) fn world_to_value(w: &WorldState) -> Result<Value, String> {
+pub(crate) fn world_to_value(w: &WorldState) -> Value {
+    let n = &*NAMES;
     let mut fields = Vec::with_capacity(5);
     if let Some(time) = w.time {
-        fields.push(("time", Value::Int(time)));
+        fields.push((n.time.clone(), Value::Int(time)));
     }
     if let Some(camera) = &w.camera {
-        fields.push(("camera", pose_value(camera)));
+        fields.push((n.camera.clone(), pose_value(camera)));
     }
-    let anchors: Result<Vec<Value>, String> = w.anchors.iter().map(anchor_value).collect();
-    fields.push(("anchors", Value::List(anchors?.into())));
-    fields.push(("relations", Value::List(w.relations.iter().map(relation_value).collect())));
-    fields.push(("notes", Value::List(w.notes.iter().map(|n| Value::str(n)).collect())));
-    Ok(record(fields))
+    fields.push((n.anchors.clone(), Value::List(w.anchors.iter().map(anchor_value).collect())));
+    fields.push((n.relations.clone(), Value::List(w.relations.iter().map(relation_value).collect())));
+    fields.push((n.notes.clone(), Value::List(w.notes.iter().map(|note| Value::str(note)).collect())));
+    named(fields)
 }
 
 /// A world state from a record value (the fed-back world of the previous cycle).
@@ -338,7 +417,7 @@ mod tests {
         for cycle in gearbox::scenario() {
             world =
                 aapa.step(cycle.time, &cycle.percepts, &cycle.actions, Some(&cycle.camera), &world).unwrap();
-            let value = world_to_value(&world).unwrap();
+            let value = world_to_value(&world);
             assert_eq!(world_from_value(&value).unwrap(), world);
             // Without serde_json's `float_roundtrip` feature, parsing may be off by an ulp, so the
             // text path is compared to 1e-12.
@@ -356,7 +435,7 @@ mod tests {
         let aapa = Aapa::new(gearbox::params()).unwrap();
         let cycle = &gearbox::scenario()[0];
         let world = aapa.step(cycle.time, &cycle.percepts, &[], None, &WorldState::default()).unwrap();
-        let value = world_to_value(&world).unwrap();
+        let value = world_to_value(&world);
         let anchors = value.field("anchors").unwrap();
         let first = list(&anchors, "anchors").unwrap()[0].as_record().unwrap().clone();
         let names: Vec<&str> = first.fields.iter().map(|(n, _)| &**n).take(10).collect();
