@@ -53,6 +53,16 @@ fn recorded() -> &'static BTreeMap<i64, Cycle> {
         let out = temp_dir("assembly");
         let result = kpl(&["run", "--quiet", "specs/gearbox/assembly.kpl", "--out", out.to_str().unwrap()]);
         assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        // No process failed, counted an error or a malformed input, and nothing was dropped.
+        let summary: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["failures"], serde_json::json!([]));
+        for process in summary["summary"]["processes"].as_array().unwrap() {
+            assert!(process["errors"] == 0 && process["malformed"] == 0, "{process}");
+        }
+        for stream in summary["summary"]["streams"].as_array().unwrap() {
+            assert!(stream["produced"] == stream["delivered"] && stream["produced"] == 206, "{stream}");
+        }
         let text = std::fs::read_to_string(out.join("world.jsonl")).unwrap();
         let mut cycles: BTreeMap<i64, Cycle> = BTreeMap::new();
         for line in text.lines() {

@@ -12,9 +12,10 @@
 //!
 //! A world state's anchors carry the fields users declare (`symbol`, `type`, `box`, `confidence`,
 //! `status`, ...) first, then the rest of the anchor's memory (attachment geometry, motion state,
-//! type votes) as the library serializes it, so the world fed back into the next cycle is the
-//! complete model (paper Fig. 2), and [`world_from_value`] restores exactly what
-//! [`world_to_value`] wrote.
+//! type votes) where set, under the names the library's serde uses, so the world fed back into the
+//! next cycle is the complete model (paper Fig. 2). [`world_to_value`] is written by hand (it runs
+//! every cycle); [`world_from_value`] reads back through the library's serde, and the tests check
+//! that it restores exactly what was written.
 
 use std::sync::Arc;
 
