@@ -391,8 +391,8 @@ fn anchor_entry() -> Entry {
     Entry::new(
         EntryKind::Compute,
         "aapa.anchor",
-        "Action-aware perceptual anchoring (AAPA): anchors detections as a world state of symbols, \
-         using actions, camera poses and its own previous world (docs/aapa.md).",
+        "Action-aware perceptual anchoring (AAPA): a world state of anchored objects from detections, \
+         actions, camera poses and its previous world (docs/aapa.md).",
     )
     .input("percepts", percepts_req(), "the detections of each frame (an AAPA cycle per frame); `colour` optional")
     .input(
