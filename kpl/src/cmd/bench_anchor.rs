@@ -48,6 +48,18 @@ struct Row {
     changes: usize,
     switches: usize,
     coverage: f64,
+    /// Condition progressions and, of these, candidate pairs, over the timed frames.
+    condition_steps: u64,
+    candidate_steps: u64,
+}
+
+/// Condition progressions and candidate-pair progressions of all links so far.
+fn work(engine: &kpl_anchor::Anchoring) -> (u64, u64) {
+    engine
+        .link_names()
+        .iter()
+        .filter_map(|l| engine.link_stats(l))
+        .fold((0, 0), |(c, k), s| (c + s.condition_steps, k + s.candidate_steps))
 }
 
 fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
@@ -57,6 +69,7 @@ fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
     let end = warmup + (args.seconds * 1e6) as i64;
     let (mut anchor_s, mut source_s, mut frames, mut changes) = (0.0, 0.0, 0, 0);
     let mut score = IdentityScore::default();
+    let mut work_at_warmup = None;
     loop {
         let t0 = Instant::now();
         let Some(batch) = driver.next_frames(end) else { break };
@@ -66,6 +79,7 @@ fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
         let t2 = Instant::now();
         std::hint::black_box(emitted);
         if batch.time >= warmup {
+            work_at_warmup.get_or_insert_with(|| work(&driver.engine));
             source_s += (t1 - t0).as_secs_f64();
             anchor_s += (t2 - t1).as_secs_f64();
             frames += 1;
@@ -83,7 +97,11 @@ fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
     let detected: u64 = score.detected.values().sum();
     let with_both: u64 =
         score.anchored.iter().filter(|((_, ty), _)| ty == "OnRoadObject").map(|(_, n)| *n).sum();
+    let (c0, k0) = work_at_warmup.unwrap_or_default();
+    let (c1, k1) = work(&driver.engine);
     Ok(Row {
+        condition_steps: c1 - c0,
+        candidate_steps: k1 - k0,
         cars,
         frames,
         anchor_s,
@@ -103,9 +121,9 @@ pub fn run(args: Args) -> ExitCode {
         args.seconds
     );
     println!(
-        "| cars | frames | anchoring per frame | per object-update | per update / smallest N | real-time factor | simulator per frame (baseline) | anchoring / baseline | objects | changes per frame | world-object switches | anchored through both levels |"
+        "| cars | frames | anchoring per frame | per object-update | per update / smallest N | real-time factor | simulator per frame (baseline) | anchoring / baseline | objects | conditions per update | candidate pairs per update | changes per frame | world-object switches | anchored through both levels |"
     );
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut first_per_update = None;
     let mut largest_real_time = None;
     for &cars in &args.cars {
@@ -125,7 +143,7 @@ pub fn run(args: Args) -> ExitCode {
             largest_real_time = Some(row.cars);
         }
         println!(
-            "| {} | {} | {:.2} ms | {:.2} µs | {:.2} | {:.1} x | {:.2} ms | {:.1} | {} | {:.0} | {} | {:.1} % |",
+            "| {} | {} | {:.2} ms | {:.2} µs | {:.2} | {:.1} x | {:.2} ms | {:.1} | {} | {:.2} | {:.3} | {:.0} | {} | {:.1} % |",
             row.cars,
             row.frames,
             per_frame * 1e3,
@@ -135,6 +153,8 @@ pub fn run(args: Args) -> ExitCode {
             row.source_s / frames * 1e3,
             row.anchor_s / row.source_s.max(1e-12),
             row.objects,
+            row.condition_steps as f64 / (frames * f64::from(row.cars.max(1))),
+            row.candidate_steps as f64 / (frames * f64::from(row.cars.max(1))),
             row.changes as f64 / frames,
             row.switches,
             row.coverage * 100.0,
