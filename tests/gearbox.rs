@@ -346,7 +346,7 @@ fn an_action_rules_file_replaces_the_built_in_table() {
         "parent": 0, "relation": {"name": "holding", "args": [0, 1]}}]}]"#;
     std::fs::write(dir.join("rules.json"), rules).unwrap();
     let spec = std::fs::read_to_string(root().join("specs/gearbox/assembly.kpl")).unwrap();
-    let spec = spec.replace("surface_z: 0.6)", "surface_z: 0.6, action_rules: \"rules.json\")");
+    let spec = spec.replace("surface_z: 0.6,\n", "surface_z: 0.6,\n  action_rules: \"rules.json\",\n");
     assert!(spec.contains("rules.json"), "the spec's text changed");
     std::fs::write(dir.join("assembly.kpl"), spec).unwrap();
     let out = dir.join("out");

@@ -213,6 +213,20 @@ impl EdgeReceiver {
         Poll::Ready(Received::Samples)
     }
 
+    /// Moves up to `max` queued samples into `buf` without waiting (and without registering to
+    /// be woken); returns how many.
+    pub fn try_recv_many(&mut self, buf: &mut Vec<Sample>, max: usize) -> usize {
+        let mut inner = lock(&self.shared);
+        let n = inner.queue.len().min(max);
+        buf.extend(inner.queue.drain(..n));
+        let blocked = if n > 0 { std::mem::take(&mut inner.blocked) } else { Vec::new() };
+        drop(inner);
+        for waker in blocked {
+            waker.wake();
+        }
+        n
+    }
+
     /// Waits for samples; `None` when the stream has ended.
     pub async fn recv(&mut self) -> Option<Sample> {
         let mut buf = Vec::with_capacity(1);

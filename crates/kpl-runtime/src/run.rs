@@ -311,7 +311,7 @@ pub async fn run_async(
             stop.stop();
         })
     };
-    let progress = config.progress.then(|| Progress::start(stats.clone(), clock.kind()));
+    let progress = config.progress.then(|| Progress::start(stats.clone(), clock.kind(), clock.start()));
 
     for (id, task) in tasks {
         let name = spec.processes[id].name.clone();
@@ -621,7 +621,10 @@ async fn run_unit(
                 }
             }
         }
-        for state in std::mem::take(&mut states) {
+        for mut state in std::mem::take(&mut states) {
+            if let Some(sync) = &mut sync {
+                refresh_feedback(sync, &mut inputs, &mut state, now);
+            }
             let input = Input {
                 now,
                 valid: state.valid,
@@ -635,7 +638,8 @@ async fn run_unit(
     if let Some(sync) = &mut sync {
         sync.finish(&mut states);
         let now = clock.now();
-        for state in std::mem::take(&mut states) {
+        for mut state in std::mem::take(&mut states) {
+            refresh_feedback(sync, &mut inputs, &mut state, now);
             let input = Input {
                 now,
                 valid: state.valid,
@@ -656,6 +660,27 @@ async fn run_unit(
     }
     outputs.close().await;
     Ok(())
+}
+
+/// Before a synchronized unit runs on a state, takes in what its `feedback` inputs have
+/// received meanwhile, so the state carries the unit's latest previous output (AAPA's world model
+/// of the previous cycle), even when several states were released at once.
+fn refresh_feedback(sync: &mut StateSync, inputs: &mut [InputEdge], state: &mut SyncState, now: Time) {
+    let mut fresh = Vec::new();
+    let mut passed = Vec::new();
+    for (port, input) in inputs.iter_mut().enumerate() {
+        if !input.feedback {
+            continue;
+        }
+        input.rx.try_recv_many(&mut fresh, usize::MAX);
+        for sample in fresh.drain(..) {
+            input.filter.on_sample(sample, now, &mut passed);
+        }
+        for sample in passed.drain(..) {
+            sync.record_feedback(port, sample);
+        }
+        state.values[port] = sync.feedback_value(port, state.valid);
+    }
 }
 
 /// Runs the unit once and sends what it emitted. A unit's error is counted and the run goes on
@@ -700,13 +725,12 @@ struct Progress {
 }
 
 impl Progress {
-    fn start(stats: Arc<RunStats>, kind: ClockKind) -> Progress {
+    fn start(stats: Arc<RunStats>, kind: ClockKind, clock_start: Time) -> Progress {
         let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = done.clone();
         let thread = std::thread::spawn(move || {
             use std::io::Write;
             let start = Instant::now();
-            let first = stats.now.load(Ordering::Relaxed);
             let mut last_count = 0u64;
             let mut last_tick = Instant::now();
             while !flag.load(Ordering::Relaxed) {
@@ -718,7 +742,7 @@ impl Progress {
                 let rate = (count - last_count) as f64 / last_tick.elapsed().as_secs_f64();
                 last_count = count;
                 last_tick = Instant::now();
-                let clock = (stats.now.load(Ordering::Relaxed) - first).max(0) as f64 / 1e6;
+                let clock = (stats.now.load(Ordering::Relaxed) - clock_start).max(0) as f64 / 1e6;
                 let label = if kind == ClockKind::Sim { "sim" } else { "clock" };
                 let mut stderr = std::io::stderr().lock();
                 let _ = writeln!(

@@ -63,10 +63,7 @@ impl StateSync {
     /// Adds a sample of input `port`; states that became ready are pushed to `out`.
     pub fn push(&mut self, port: usize, sample: Sample, now: Time, out: &mut Vec<SyncState>) {
         let valid = sample.valid;
-        let history = &mut self.history[port];
-        let at = history.partition_point(|h| h.valid <= valid);
-        history.insert(at, sample.clone());
-        self.seen_up_to[port] = Some(self.seen_up_to[port].map_or(valid, |s| s.max(valid)));
+        self.record_feedback(port, sample.clone());
         if self.inputs[port].feedback {
             self.flush(now, out);
             return;
@@ -107,6 +104,28 @@ impl StateSync {
         while let Some((t, values)) = self.pending.pop_first() {
             self.emit(t, values, out);
         }
+    }
+
+    /// Records a sample of a feedback input without releasing any state.
+    pub fn record_feedback(&mut self, port: usize, sample: Sample) {
+        let valid = sample.valid;
+        let history = &mut self.history[port];
+        let at = history.partition_point(|h| h.valid <= valid);
+        history.insert(at, sample);
+        self.seen_up_to[port] = Some(self.seen_up_to[port].map_or(valid, |s| s.max(valid)));
+    }
+
+    /// Whether input `port` is a feedback input.
+    pub fn is_feedback(&self, port: usize) -> bool {
+        self.inputs[port].feedback
+    }
+
+    /// The value a feedback input contributes to the state at `t`: its latest sample before `t`
+    /// (the consumer's own output for `t` cannot exist yet).
+    pub fn feedback_value(&self, port: usize, t: Time) -> Option<Sample> {
+        let history = &self.history[port];
+        let before = history.partition_point(|h| h.valid < t);
+        before.checked_sub(1).and_then(|i| history.get(i)).cloned()
     }
 
     fn ready(&self, t: Time, values: &[Option<Sample>], now: Time) -> bool {

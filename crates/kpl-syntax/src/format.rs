@@ -120,14 +120,29 @@ impl Formatter<'_> {
         match item {
             ast::Item::Type(decl) => self.type_decl(decl),
             ast::Item::Process(decl) => {
-                self.begin_line(decl.span, "", false);
-                let _ = write!(self.out, "{} {}", decl.kind.keyword(), decl.name.name);
+                let mut head = format!("{} {}", decl.kind.keyword(), decl.name.name);
                 if let Some(output) = &decl.output {
-                    self.out.push_str(" : ");
-                    type_expr(&mut self.out, output);
+                    head.push_str(" : ");
+                    type_expr(&mut head, output);
                 }
-                self.out.push_str(" = ");
-                call(&mut self.out, &decl.call);
+                head.push_str(" = ");
+                let mut one_line = head.clone();
+                call(&mut one_line, &decl.call);
+                self.begin_line(decl.span, "", false);
+                if one_line.len() <= MAX_WIDTH || decl.call.args.is_empty() {
+                    self.out.push_str(&one_line);
+                } else {
+                    // One argument per line, each followed by a comma.
+                    self.out.push_str(&head);
+                    self.out.push_str(&decl.call.callee.dotted());
+                    self.out.push_str("(\n");
+                    for arg in &decl.call.args {
+                        self.out.push_str(INDENT);
+                        argument(&mut self.out, arg);
+                        self.out.push_str(",\n");
+                    }
+                    self.out.push(')');
+                }
                 self.end_line(decl.span.end);
             }
             ast::Item::Stream(decl) => {
@@ -364,15 +379,19 @@ fn call(out: &mut String, call: &ast::Call) {
         if i > 0 {
             out.push_str(", ");
         }
-        match arg {
-            ast::Arg::Input(path) => out.push_str(&path.dotted()),
-            ast::Arg::Param { name, value } => {
-                let _ = write!(out, "{}: ", name.name);
-                literal(out, value);
-            }
-        }
+        argument(out, arg);
     }
     out.push(')');
+}
+
+fn argument(out: &mut String, arg: &ast::Arg) {
+    match arg {
+        ast::Arg::Input(path) => out.push_str(&path.dotted()),
+        ast::Arg::Param { name, value } => {
+            let _ = write!(out, "{}: ", name.name);
+            literal(out, value);
+        }
+    }
 }
 
 fn literal(out: &mut String, lit: &ast::Literal) {

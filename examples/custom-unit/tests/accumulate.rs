@@ -30,6 +30,23 @@ fn the_running_sum_reads_its_own_previous_output() {
 }
 
 #[test]
+fn feedback_is_read_back_even_when_states_come_in_a_burst() {
+    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("burst.kpl");
+    let out = std::env::temp_dir().join(format!("kpl-custom-unit-burst-{}", std::process::id()));
+    let status = Command::new(env!("CARGO_BIN_EXE_custom-unit"))
+        .args(["run", "--quiet", "--out"])
+        .arg(&out)
+        .arg(&spec)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let text = std::fs::read_to_string(out.join("sum.jsonl")).unwrap();
+    let sums: Vec<f64> = text.lines().map(|l| serde_json_value(l, "value")).collect();
+    assert_eq!(sums, [0.0, 1.0, 3.0, 6.0, 10.0, 15.0, 21.0, 28.0, 36.0, 45.0]);
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
 fn the_units_are_listed_with_their_parameters() {
     let out = Command::new(env!("CARGO_BIN_EXE_custom-unit")).arg("list").output().unwrap();
     let text = String::from_utf8(out.stdout).unwrap();
