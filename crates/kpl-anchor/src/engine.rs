@@ -540,8 +540,8 @@ impl Anchoring {
             out.warn(
                 time,
                 format!(
-                    "snapshot from `{source}` is a {}, expected a list of objects; ignored",
-                    objects.kind()
+                    "snapshot from `{source}` is {}, expected a list of objects; ignored",
+                    with_article(objects.kind())
                 ),
             );
             return;
@@ -553,7 +553,10 @@ impl Anchoring {
             let Value::Record(record) = item else {
                 out.warn(
                     time,
-                    format!("snapshot from `{source}`: an item is a {}, not an object; skipped", item.kind()),
+                    format!(
+                        "snapshot from `{source}`: an item is {}, not an object; skipped",
+                        with_article(item.kind())
+                    ),
                 );
                 continue;
             };
@@ -908,4 +911,10 @@ impl Anchoring {
             self.remove_object(key, Cause::Forgotten, time, out);
         }
     }
+}
+
+/// `an int`, `a list`.
+fn with_article(kind: &str) -> String {
+    let vowel = kind.starts_with(['a', 'e', 'i', 'o', 'u']);
+    format!("{} {kind}", if vowel { "an" } else { "a" })
 }
