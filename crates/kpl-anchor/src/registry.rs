@@ -1,7 +1,7 @@
 //! Signatures for the checker (`kpl check`, `kpl list`): the link units and prediction models
-//! this crate implements ([`entries`]), the `sim.uav_tracker` source its [`crate::driver`] runs
-//! ([`tracker_entry`]), and [`signatures`], a registry with those and the runtime's built-ins, so
-//! that this crate's tests, benchmarks and driver check specs as the command does.
+//! this crate implements ([`entries`]), and the registry `kpl` runs with ([`runtime_registry`],
+//! [`signatures`]), so that this crate's tests, benchmarks and driver check specs as the command
+//! does.
 
 use std::fmt::Write as _;
 
@@ -77,45 +77,18 @@ pub fn entries() -> Vec<Entry> {
     ]
 }
 
-/// `sim.uav_tracker`: the simulated UAV tracker of `kpl-sim`, with its parameters.
-pub fn tracker_entry() -> Entry {
-    use ValueType::{Float, Vec2};
-    let mut entry = Entry::new(
-        EntryKind::Source,
-        "sim.uav_tracker",
-        "Vision percepts of cars from a simulated UAV tracker.",
-    )
-    .output(TypeReq::Objects(vec![("pos".into(), Vec2), ("vel".into(), Vec2), ("size".into(), Float)]))
-    .port(
-        "truth",
-        TypeReq::Any,
-        "ground truth per frame: every car, with `seen_as` the percept that sees it",
-    );
-    for info in kpl_sim::Params::describe() {
-        let ty = match info.ty {
-            "int" => ParamType::Int,
-            "float" => ParamType::Float,
-            "bool" => ParamType::Bool,
-            _ => ParamType::Str,
-        };
-        let default = serde_json::from_str::<serde_json::Value>(&info.default)
-            .ok()
-            .and_then(|j| Value::from_json_untyped(&j).ok())
-            .unwrap_or_else(|| Value::str(""));
-        entry = entry.param(Param::optional(info.name, ty, default, info.doc));
-    }
-    entry
+/// The registry `kpl` runs with: the runtime's built-ins, the standard processes (`kpl-std`:
+/// `sim.uav_tracker`, ...) and anchoring ([`crate::runtime::register`]).
+pub fn runtime_registry() -> kpl_runtime::Registry {
+    let mut registry = kpl_runtime::Registry::with_builtins();
+    kpl_std::register(&mut registry);
+    crate::runtime::register(&mut registry);
+    registry
 }
 
-/// A registry with the runtime's built-ins (formula functions, `file.jsonl`, `console`, ...),
-/// `sim.uav_tracker` and [`entries`]: what a spec run by [`crate::driver`] may name.
+/// The signatures of [`runtime_registry`]: what specs are checked against.
 pub fn signatures() -> Registry {
-    let mut registry = kpl_runtime::Registry::with_builtins().signatures().clone();
-    registry.add(tracker_entry());
-    for entry in entries() {
-        registry.add(entry);
-    }
-    registry
+    runtime_registry().signatures().clone()
 }
 
 /// A spec's errors as text, one per line (`line:column: message`).

@@ -12,10 +12,8 @@ use kpl_core::{Time, Value};
 use kpl_runtime::{Ending, RunConfig};
 
 fn registry() -> kpl_runtime::Registry {
-    let mut registry = kpl_runtime::Registry::with_builtins();
-    kpl_std::register(&mut registry);
-    kpl_anchor::runtime::register(&mut registry);
-    registry
+    // Built-ins, kpl-std and kpl_anchor::runtime::register, as the `kpl` command builds it.
+    kpl_anchor::registry::runtime_registry()
 }
 
 fn specs_dir() -> PathBuf {
