@@ -114,11 +114,6 @@ pub fn check_fields(record: &Record, ty: &RecordType) -> Result<(), String> {
     Ok(())
 }
 
-/// A record with the same fields and another id.
-pub fn renamed(record: &Record, symbol: &Arc<str>) -> Record {
-    Record { id: Some(symbol.clone()), fields: record.fields.clone() }
-}
-
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests
 mod tests {

@@ -193,10 +193,6 @@ impl Store {
         self.by_type.get(ty as usize).into_iter().flat_map(|m| m.values().copied())
     }
 
-    pub fn count_of(&self, ty: TypeId) -> usize {
-        self.by_type.get(ty as usize).map_or(0, BTreeMap::len)
-    }
-
     /// Every object, by type then creation order.
     pub fn all(&self) -> impl Iterator<Item = &Object> + '_ {
         self.by_type.iter().flat_map(|m| m.values()).filter_map(|k| self.get(*k))
@@ -327,11 +323,6 @@ impl Store {
             t.incoming.retain(|(l, k)| !(*l == link && *k == from));
         }
         existed
-    }
-
-    /// The last number used for a generated symbol of a type.
-    pub fn symbol_counter(&self, ty: TypeId) -> u64 {
-        self.counters[ty as usize]
     }
 }
 

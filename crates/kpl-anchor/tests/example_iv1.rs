@@ -161,6 +161,12 @@ fn assert_near(p: [f64; 2], q: [f64; 2], what: &str) {
 #[test]
 fn example_iv1_step_by_step() {
     let mut anchoring = engine();
+    assert_eq!(anchoring.type_names(), vec!["VisionPercept", "WorldObject", "OnRoadObject"]);
+    assert_eq!(anchoring.link_names(), vec!["vision_world", "world_onroad"]);
+    // Both reestablish conditions bound the distance: candidates are gated at 10 m.
+    assert_eq!(anchoring.link_gate("vision_world"), Some(10.0));
+    assert_eq!(anchoring.link_gate("world_onroad"), Some(10.0));
+    assert!(anchoring.notes().is_empty());
     for i in 0..=90 {
         let objects = snapshot(i);
         let output = anchoring
