@@ -7,10 +7,12 @@
 //! One step at time t:
 //!
 //! 1. **Percepts.** Each source's snapshot lists the percepts it tracks at t. A new id is a new
-//!    percept object (`created`, cause `source`); a percept its source no longer lists is removed
-//!    (`removed`, cause `lost`) together with its links (`unlinked`, cause `from_removed`).
-//! 2. **Prediction.** Every object (not a percept) with no incoming link is the root of a
-//!    structure that is not grounded: its state is predicted. The model is that of the most
+//!    percept object (`created`, cause `source`); a percept its source no longer lists is absent
+//!    (no state now, links kept) until it has not been listed for its type's forget time (0 when
+//!    the spec gives none for the percept type), then removed (`removed`, cause `lost`) together
+//!    with its links (`unlinked`, cause `from_removed`).
+//! 2. **Prediction.** Every object (not a percept) with no incoming link from a present object is
+//!    the root of a structure that is not fed: its state is predicted. The model is that of the most
 //!    specific object of the structure that has one, following the links out of the root while
 //!    each next object is a subtype of the root's type and has no other incoming link (the
 //!    paper: "since wo1 is linked to an on-road object it is also possible to use this hypothesis
