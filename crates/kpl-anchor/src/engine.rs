@@ -751,15 +751,16 @@ impl Anchoring {
         let owner = path[owner_index];
         let Some(owner_obj) = self.store.get(owner) else { return };
         let Some(model) = self.types[owner_obj.ty as usize].model.clone() else { return };
-        let Some(root_obj) = self.store.get(root) else { return };
+        let (owner_state, owner_time) = (owner_obj.record().cloned(), owner_obj.state_time);
+        let Some(root_obj) = self.store.get_mut(root) else { return };
         let (root_symbol, root_type) =
             (root_obj.symbol.clone(), self.types[root_obj.ty as usize].name.clone());
-        let mut run = match &root_obj.prediction {
-            Some(run) if run.owner == owner && run.path == path => run.clone(),
+        let mut run = match root_obj.prediction.take() {
+            Some(run) if run.owner == owner && run.path == path => run,
             _ => {
-                let Some(state) = owner_obj.record().cloned() else { return };
-                let start = model.start(state, owner_obj.state_time);
-                PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0 }
+                let Some(state) = owner_state else { return };
+                let start = model.start(state, owner_time);
+                Box::new(PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0 })
             }
         };
         let mut hypotheses = std::mem::take(&mut self.hypotheses);

@@ -87,7 +87,7 @@ pub struct Object {
     pub last_anchored: Time,
     /// Names given by identifications.
     pub names: Vec<Arc<str>>,
-    pub(crate) prediction: Option<PredictionRun>,
+    pub(crate) prediction: Option<Box<PredictionRun>>,
     /// Step at which a source last listed this percept.
     pub(crate) seen_step: u64,
     /// A percept listed by the last snapshot of its source (always true for other objects). An
