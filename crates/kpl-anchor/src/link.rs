@@ -177,6 +177,10 @@ pub struct LinkStats {
     pub candidate_steps: u64,
     /// Link unit computations.
     pub unit_computations: u64,
+    /// Per-object instances created (one per A object, when it is first seen) and removed (with
+    /// their object).
+    pub instances_created: u64,
+    pub instances_removed: u64,
 }
 
 #[derive(Debug)]
@@ -282,6 +286,7 @@ impl LinkProcess {
             && slot.as_ref().is_some_and(|i| i.from == from)
             && let Some(instance) = slot.take()
         {
+            self.stats.instances_removed += 1;
             self.pools.give_state(instance.state);
         }
     }
@@ -375,6 +380,7 @@ impl LinkProcess {
                 self.instances.resize_with(i + 1, || None);
             }
             if self.instances[i].as_ref().is_none_or(|inst| inst.from != p) {
+                self.stats.instances_created += 1;
                 self.set_unlinked(p);
             }
             let linked_to = match &self.instances[i] {

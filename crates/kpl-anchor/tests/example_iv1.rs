@@ -228,6 +228,11 @@ fn example_iv1_step_by_step() {
             _ => {}
         }
     }
+    // One instance per percept (vp1 removed with its percept), one for wo1.
+    let vision = anchoring.link_stats("vision_world").unwrap();
+    assert_eq!((vision.instances_created, vision.instances_removed), (2, 1));
+    let onroad = anchoring.link_stats("world_onroad").unwrap();
+    assert_eq!((onroad.instances_created, onroad.instances_removed), (1, 0));
 }
 
 #[test]
