@@ -1,0 +1,118 @@
+//! Prediction along the road network through a crossing: a car is lost before a four-way
+//! crossing, its on-road object (and the world object with it) is predicted along the road and
+//! splits into three hypotheses past the crossing (left, straight on, right); the car comes back
+//! after turning left, the new percept is linked to the waiting world object through the left
+//! hypothesis, and that branch is the one kept: the on-road object is on the north road again.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
+
+use std::sync::Arc;
+
+use kpl_anchor::{AnchorConfig, Anchoring, ChangeKind, Snapshot, Status};
+use kpl_core::{Record, Time, Value};
+
+const SPEC: &str = r#"
+type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
+type WorldObject   symbol wo { pos: vec2, vel: vec2 }
+type OnRoadObject  : WorldObject symbol oo { road: int, lane_offset: float }
+source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "crossing")
+link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
+  establish   eventually[1s, inf] true
+  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0 and norm(from.vel - to.vel) < 5.0)
+  maintain    true
+}
+link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario: "crossing") {
+  establish   eventually[1s, inf] always[0, 1s] on_road(from.pos)
+  reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
+  maintain    always eventually[0, 10s] always[0, 1s] on_road(from.pos)
+}
+predict WorldObject  = constant_velocity
+predict OnRoadObject = along_roads(scenario: "crossing")
+forget after 30s
+"#;
+
+fn percept(id: &str, pos: [f64; 2], vel: [f64; 2]) -> Value {
+    Value::Record(Arc::new(Record {
+        id: Some(id.into()),
+        fields: vec![
+            ("pos".into(), Value::Vec2(pos)),
+            ("vel".into(), Value::Vec2(vel)),
+            ("size".into(), Value::Float(4.5)),
+        ],
+    }))
+}
+
+fn step(engine: &mut Anchoring, i: i64, items: Vec<Value>) -> kpl_anchor::StepOutput {
+    let objects = Value::List(items.into());
+    let output = engine
+        .step(i * 100_000 as Time, &[Snapshot { source: "tracker", ty: "VisionPercept", objects: &objects }])
+        .unwrap();
+    assert!(output.warnings.is_empty(), "{:?}", output.warnings);
+    output
+}
+
+fn record_field(value: &Value, name: &str) -> Value {
+    value.as_record().unwrap().get(name).unwrap().clone()
+}
+
+#[test]
+fn the_reacquired_branch_is_kept() {
+    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
+    let mut engine = Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap();
+    let network = kpl_sim::RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap();
+    let north = i64::from(network.road_by_name("north").unwrap().id.0);
+    let west = i64::from(network.road_by_name("west").unwrap().id.0);
+
+    // Eastbound on `west` (lane at y = -1.75) at 10 m/s from x = -90; seen until 4.9 s (x = -41).
+    for i in 0..50 {
+        step(&mut engine, i, vec![percept("vp1", [-90.0 + i as f64, -1.75], [10.0, 0.0])]);
+    }
+    assert_eq!(engine.chain("vp1").len(), 2, "vp1 -> wo1 -> oo1");
+    assert_eq!(record_field(&engine.object("OnRoadObject", "oo1").unwrap().state, "road"), Value::Int(west));
+
+    // Unseen for 5 s: 50 m along the road, through the crossing onto three roads.
+    let mut splits = Vec::new();
+    for i in 50..100 {
+        let output = step(&mut engine, i, vec![]);
+        for c in &output.changes {
+            if c.kind == ChangeKind::Predicted {
+                splits.push((i, c.to_string()));
+            }
+        }
+    }
+    assert_eq!(splits[0], (50, "predicted wo1 (no_incoming_link, along_roads)".to_string()));
+    assert_eq!(splits.last().unwrap().1, "predicted wo1 (branch, along_roads, 3 hypotheses)");
+    let wo1 = engine.object("WorldObject", "wo1").unwrap();
+    assert_eq!(wo1.status, Status::Predicted);
+    assert_eq!(wo1.hypotheses.len(), 3);
+    // The first hypothesis is straight on (east); the left turn heads north.
+    assert!(record_field(&wo1.hypotheses[0], "vel").as_vec2().unwrap()[0] > 9.0);
+    let (left, left_state) = wo1
+        .hypotheses
+        .iter()
+        .enumerate()
+        .find(|(_, h)| record_field(h, "vel").as_vec2().unwrap()[1] > 9.0)
+        .unwrap();
+    let left_pos = record_field(left_state, "pos").as_vec2().unwrap();
+    assert!(left_pos[1] > 5.0, "{left_pos:?}");
+
+    // The car comes back on the north road, heading north, 3 m ahead of the left hypothesis.
+    let output = step(&mut engine, 100, vec![percept("vp2", [left_pos[0], left_pos[1] + 3.0], [0.0, 10.0])]);
+    let text: Vec<String> = output.changes.iter().map(ToString::to_string).collect();
+    assert!(
+        text.contains(&format!(
+            "linked wo1 <- vp2 (reestablish, vision_world, hypothesis {} of 3)",
+            left + 1
+        )),
+        "{text:?}"
+    );
+    let wo1 = engine.object("WorldObject", "wo1").unwrap();
+    assert_eq!(wo1.status, Status::Anchored);
+    assert!(wo1.hypotheses.is_empty());
+    let oo1 = engine.object("OnRoadObject", "oo1").unwrap();
+    assert_eq!(oo1.status, Status::Anchored);
+    assert_eq!(record_field(&oo1.state, "road"), Value::Int(north));
+    assert_eq!(
+        engine.chain("vp2"),
+        vec![(Arc::from("WorldObject"), Arc::from("wo1")), (Arc::from("OnRoadObject"), Arc::from("oo1")),]
+    );
+}
