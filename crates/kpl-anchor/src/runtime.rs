@@ -179,9 +179,21 @@ struct LinkProcess {
     /// For each input port: the stream's name if it carries `from` objects.
     from_ports: Vec<Option<String>>,
     shared: SharedHandle,
+    /// The run's counters for this process: the per-object instances the link process created
+    /// and removed are reported there.
+    stats: Arc<kpl_runtime::stats::ProcessStats>,
 }
 
 impl LinkProcess {
+    /// Copies the engine's count of per-object instances into the run's statistics.
+    fn count_instances(&self, shared: &Shared) {
+        use std::sync::atomic::Ordering;
+        if let Some(stats) = shared.engine.as_ref().and_then(|e| e.link_stats(&self.name)) {
+            self.stats.instances_created.store(stats.instances_created, Ordering::Relaxed);
+            self.stats.instances_removed.store(stats.instances_removed, Ordering::Relaxed);
+        }
+    }
+
     fn emit_queue(&self, shared: &mut Shared, out: &mut Emitter) {
         let Some(queue) = shared.queues.get_mut(&self.name) else { return };
         for output in queue.drain(..) {
@@ -202,6 +214,7 @@ impl Unit for LinkProcess {
         let fed = shared.engine()?.is_fed_by_snapshots(&self.from_type);
         let result = if fed { shared.step(stream, &self.from_type, input.valid, objects) } else { Ok(()) };
         self.emit_queue(&mut shared, out);
+        self.count_instances(&shared);
         result
     }
 
@@ -233,7 +246,8 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
         }
         Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
     }
-    Ok(Box::new(SyncUnit(LinkProcess { name, from_type, from_ports, shared })))
+    let stats = ctx.stats.clone();
+    Ok(Box::new(SyncUnit(LinkProcess { name, from_type, from_ports, shared, stats })))
 }
 
 /// `anchor.world_model`: emits the world models the engine left for it when its trigger arrives.

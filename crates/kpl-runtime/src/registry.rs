@@ -91,6 +91,8 @@ pub struct BuildContext<'a> {
     pub run_seed: u64,
     pub clock: ClockKind,
     pub shared: &'a mut Extensions,
+    /// The process's counters (malformed input, errors, instances created at run time).
+    pub stats: std::sync::Arc<crate::stats::ProcessStats>,
 }
 
 impl std::fmt::Debug for BuildContext<'_> {

@@ -198,6 +198,7 @@ pub async fn run_async(
             run_seed: config.seed,
             clock: config.clock,
             shared: &mut shared,
+            stats: process_stats.clone(),
         };
         let built = match &process.kind {
             hir::ProcessKind::Source(call) => {
