@@ -89,34 +89,26 @@ impl EdgeSender {
     }
 
     fn poll_send(&self, cx: &mut Context<'_>, sample: &mut Option<Sample>) -> Poll<Result<(), Closed>> {
-        let mut inner = lock(&self.shared);
-        if !inner.receiver_alive {
-            return Poll::Ready(Err(Closed));
-        }
-        if inner.queue.len() >= self.shared.capacity {
-            match self.shared.overflow {
-                Overflow::DropOldest => {
-                    inner.queue.pop_front();
-                    self.shared.stats.count_drop(DropReason::QueueFull);
-                }
-                Overflow::Block => {
-                    if !inner.blocked.iter().any(|w| w.will_wake(cx.waker())) {
-                        inner.blocked.push(cx.waker().clone());
-                    }
+        let Some(s) = sample.take() else { return Poll::Ready(Ok(())) };
+        match self.try_send(s) {
+            Ok(()) => Poll::Ready(Ok(())),
+            Err(TrySendError::Closed) => Poll::Ready(Err(Closed)),
+            Err(TrySendError::Full(s)) => {
+                let mut inner = lock(&self.shared);
+                if inner.queue.len() < self.shared.capacity || !inner.receiver_alive {
+                    // Room was made (or the consumer left) since `try_send` looked: try again.
+                    drop(inner);
+                    *sample = Some(s);
+                    cx.waker().wake_by_ref();
                     return Poll::Pending;
                 }
+                if !inner.blocked.iter().any(|w| w.will_wake(cx.waker())) {
+                    inner.blocked.push(cx.waker().clone());
+                }
+                *sample = Some(s);
+                Poll::Pending
             }
         }
-        if let Some(sample) = sample.take() {
-            inner.queue.push_back(sample);
-            self.shared.stats.produced.fetch_add(1, Ordering::Relaxed);
-        }
-        let waker = inner.receiver.take();
-        drop(inner);
-        if let Some(waker) = waker {
-            waker.wake();
-        }
-        Poll::Ready(Ok(()))
     }
 
     /// Queues a sample without waiting: with a full blocking edge the sample is handed back.

@@ -553,6 +553,9 @@ async fn run_unit(
         })
         .await;
         let now = clock.now();
+        // What the policies let through, by input port, in arrival order.
+        let mut arrived: Vec<(usize, Sample)> = Vec::new();
+        let timer = matches!(event, Event::Timer);
         match event {
             Event::Samples(port) => {
                 next = (port + 1) % inputs.len();
@@ -562,24 +565,7 @@ async fn run_unit(
                 for sample in batch.drain(..) {
                     inputs[port].filter.on_sample(sample, now, &mut delivered);
                 }
-                for sample in delivered.drain(..) {
-                    match &mut sync {
-                        Some(sync) => sync.push(port, sample, now, &mut states),
-                        None => {
-                            let valid = sample.valid;
-                            latest[port] = Some(sample);
-                            let input = Input {
-                                now,
-                                valid,
-                                trigger: Trigger::Sample(port),
-                                values: &latest,
-                                names: &names,
-                            };
-                            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict)
-                                .await?;
-                        }
-                    }
-                }
+                arrived.extend(delivered.drain(..).map(|s| (port, s)));
             }
             Event::Ended(port) => {
                 ended[port] = true;
@@ -590,37 +576,24 @@ async fn run_unit(
             Event::Timer => {
                 for (port, input) in inputs.iter_mut().enumerate() {
                     input.filter.on_timer(now, &mut delivered);
-                    for sample in delivered.drain(..) {
-                        match &mut sync {
-                            Some(sync) => sync.push(port, sample, now, &mut states),
-                            None => {
-                                let valid = sample.valid;
-                                latest[port] = Some(sample);
-                                let input = Input {
-                                    now,
-                                    valid,
-                                    trigger: Trigger::Sample(port),
-                                    values: &latest,
-                                    names: &names,
-                                };
-                                call(
-                                    &mut unit,
-                                    &input,
-                                    &mut emitter,
-                                    &mut outputs,
-                                    &stats,
-                                    &run_stats,
-                                    strict,
-                                )
-                                .await?;
-                            }
-                        }
-                    }
-                }
-                if let Some(sync) = &mut sync {
-                    sync.on_timer(now, &mut states);
+                    arrived.extend(delivered.drain(..).map(|s| (port, s)));
                 }
             }
+        }
+        for (port, sample) in arrived {
+            match &mut sync {
+                Some(sync) => sync.push(port, sample, now, &mut states),
+                None => {
+                    let valid = sample.valid;
+                    latest[port] = Some(sample);
+                    let input =
+                        Input { now, valid, trigger: Trigger::Sample(port), values: &latest, names: &names };
+                    call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
+                }
+            }
+        }
+        if let (true, Some(sync)) = (timer, &mut sync) {
+            sync.on_timer(now, &mut states);
         }
         for mut state in std::mem::take(&mut states) {
             if let Some(sync) = &mut sync {

@@ -35,6 +35,20 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
     (diagnostics, checked.spec)
 }
 
+/// Reads and checks one spec, printing its diagnostics; the checked spec, or the exit code to
+/// stop with (1: the spec has errors, 2: it cannot be read).
+pub fn load_checked(path: &std::path::Path) -> Result<kpl_semantic::hir::Spec, ExitCode> {
+    let file = SourceFile::read(path).map_err(|err| {
+        report::io_error(path, &err);
+        ExitCode::from(2)
+    })?;
+    let (diagnostics, spec) = check_file(&file);
+    let mut reporter = Reporter::new(DiagnosticFormat::Text);
+    reporter.report(&file, &diagnostics);
+    reporter.finish();
+    spec.ok_or(ExitCode::from(1))
+}
+
 pub fn run(args: Args) -> ExitCode {
     let files = match report::expand(&args.files) {
         Ok(files) => files,

@@ -6,8 +6,6 @@ use std::process::ExitCode;
 use clap::Args as ClapArgs;
 use kpl_semantic::render;
 
-use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum GraphFormat {
     /// Graphviz dot (`| dot -Tsvg > graph.svg`).
@@ -31,18 +29,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let file = match SourceFile::read(&args.file) {
-        Ok(file) => file,
-        Err(err) => {
-            report::io_error(&args.file, &err);
-            return ExitCode::from(2);
-        }
+    let spec = match super::check::load_checked(&args.file) {
+        Ok(spec) => spec,
+        Err(code) => return code,
     };
-    let (diagnostics, spec) = super::check::check_file(&file);
-    let mut reporter = Reporter::new(DiagnosticFormat::Text);
-    reporter.report(&file, &diagnostics);
-    reporter.finish();
-    let Some(spec) = spec else { return ExitCode::from(1) };
     let format = match args.format {
         GraphFormat::Dot => render::Format::Dot,
         GraphFormat::Mermaid => render::Format::Mermaid,

@@ -9,7 +9,7 @@ use clap::Args as ClapArgs;
 use kpl_core::{Time, TimeUnit};
 use kpl_runtime::{ClockKind, Ending, RunConfig, RunReport};
 
-use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
+use crate::report;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ClockArg {
@@ -62,18 +62,10 @@ fn parse_duration(text: &str) -> Result<Time, String> {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let file = match SourceFile::read(&args.spec) {
-        Ok(file) => file,
-        Err(err) => {
-            report::io_error(&args.spec, &err);
-            return ExitCode::from(2);
-        }
+    let spec = match super::check::load_checked(&args.spec) {
+        Ok(spec) => spec,
+        Err(code) => return code,
     };
-    let (diagnostics, spec) = super::check::check_file(&file);
-    let mut reporter = Reporter::new(DiagnosticFormat::Text);
-    reporter.report(&file, &diagnostics);
-    reporter.finish();
-    let Some(spec) = spec else { return ExitCode::from(1) };
 
     let stem = args.spec.file_stem().map_or_else(|| "spec".to_string(), |s| s.to_string_lossy().into_owned());
     let out_dir = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(&stem));
