@@ -133,8 +133,25 @@ fn exit_codes() {
 
 #[test]
 fn every_command_has_help_with_an_example() {
-    for command in ["check", "graph", "fmt", "list"] {
-        let out = kpl(&[command, "--help"]);
+    for command in [
+        "check",
+        "graph",
+        "fmt",
+        "list",
+        "run",
+        "mtl",
+        "mtl eval",
+        "cater",
+        "cater generate",
+        "cater eval",
+        "bench",
+        "bench mtl",
+        "bench runtime",
+        "bench anchor",
+    ] {
+        let mut args: Vec<&str> = command.split(' ').collect();
+        args.push("--help");
+        let out = kpl(&args);
         assert_eq!(out.status.code(), Some(0), "{command}");
         assert!(
             String::from_utf8_lossy(&out.stdout).contains("Examples:"),

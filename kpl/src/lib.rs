@@ -47,13 +47,22 @@ enum Command {
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  kpl cater eval --data /tmp/cater --model aapa --perception detector"
+    )]
     Cater(cmd::cater::Command),
     /// Metric temporal logic: evaluate formulas over traces.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:\n  kpl mtl eval --formula 'always[0, 10] (p -> eventually[0, 3] q)' --trace trace.jsonl\n  kpl mtl eval --formula 'p until[0, 5s] q' --trace trace.jsonl --every"
+    )]
     Mtl(cmd::mtl::Command),
     /// Benchmarks whose figures go to docs/performance.md.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:\n  kpl bench runtime\n  kpl bench anchor\n  kpl bench mtl --states 1000000"
+    )]
     Bench(cmd::bench::Command),
 }
 

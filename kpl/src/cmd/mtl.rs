@@ -282,6 +282,7 @@ impl<'a, R: BufRead> TraceReader<'a, R> {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = "Examples:\n  kpl bench mtl\n  kpl bench mtl --states 100000 --bounds 10,1000")]
 pub struct BenchArgs {
     /// States per trace.
     #[arg(long, default_value_t = 1_000_000)]
