@@ -8,7 +8,7 @@
 
 use std::process::ExitCode;
 
-use kpl_zenoh::bench::{self, BenchOptions, Implementation, PeerTask};
+use kpl_zenoh::bench::{self, BenchOptions, Implementation, Payload, PeerTask};
 
 /// The transport `kpl run --host` uses. It opens a zenoh session only when a host sends or
 /// receives streams; a run without `--host` never does.
@@ -16,16 +16,23 @@ pub fn factory() -> Option<Box<dyn kpl_runtime::run::TransportFactory>> {
     Some(Box::new(kpl_zenoh::factory()))
 }
 
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum ValueArg {
+    String,
+    Floats,
+}
+
 #[derive(Debug, clap::Args)]
 #[command(
-    after_help = "Two processes on 127.0.0.1: this one and a copy of it it starts. For each size, bare zenoh\npublisher/subscriber code and KPL's transport (typed samples, encoded and decoded) send the same\npayloads, interleaved; figures are medians over --repeat runs. Throughput: samples/s at the\nreceiver. Latency: ping-pong round trips, p50 and p99.\n\nExample:\n  cargo run --release -p kpl -- bench zenoh\n  cargo run --release -p kpl -- bench zenoh --sizes 64 --messages 50000 --repeat 1"
+    after_help = "Two processes on 127.0.0.1: this one and a copy of it it starts. For each size, bare zenoh\npublisher/subscriber code and KPL's transport (typed samples, encoded and decoded) send the same\npayloads, interleaved; figures are medians over --repeat runs. Throughput: samples/s at the\nreceiver. Latency: ping-pong round trips, p50 and p99.\n\nExample:\n  cargo run --release -p kpl -- bench zenoh\n  cargo run --release -p kpl -- bench zenoh --sizes 64 --messages 50000 --repeat 1\n  cargo run --release -p kpl -- bench zenoh --value floats"
 )]
 pub struct BenchArgs {
     /// Payload sizes in bytes (a KPL sample carries a string of this size).
     #[arg(long, value_delimiter = ',', default_values_t = [64usize, 4096])]
     sizes: Vec<usize>,
-    /// Samples per throughput run.
-    #[arg(long, default_value_t = 200_000)]
+    /// Samples per throughput run of 64-byte payloads (larger ones send proportionally fewer,
+    /// at least an eighth as many).
+    #[arg(long, default_value_t = 1_000_000)]
     messages: usize,
     /// Round trips per latency run (after a tenth as many to warm up).
     #[arg(long, default_value_t = 5_000)]
@@ -33,6 +40,9 @@ pub struct BenchArgs {
     /// Runs of each case; the figures are medians.
     #[arg(long, default_value_t = 3)]
     repeat: usize,
+    /// What a KPL sample carries: a string of SIZE bytes, or a list of SIZE/8 floats.
+    #[arg(long, value_enum, default_value = "string")]
+    value: ValueArg,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -57,6 +67,10 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         messages: args.messages.max(2),
         round_trips: args.round_trips.max(1),
         repeat: args.repeat.max(1),
+        payload: match args.value {
+            ValueArg::String => Payload::String,
+            ValueArg::Floats => Payload::Floats,
+        },
     };
     let make_peer = |task: &str| {
         let mut command = std::process::Command::new(&exe);
@@ -78,8 +92,14 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         return ExitCode::SUCCESS;
     }
     println!(
-        "zenoh, two processes on 127.0.0.1: {} samples per throughput run, {} round trips, median of {} run(s)",
-        report.messages, report.round_trips, report.repeat
+        "zenoh, two processes on 127.0.0.1, KPL samples carrying {}: {} samples per throughput run of 64 B, {} round trips, median of {} run(s)",
+        match report.payload {
+            Payload::String => "a string of SIZE bytes",
+            Payload::Floats => "a list of SIZE/8 floats",
+        },
+        report.messages,
+        report.round_trips,
+        report.repeat
     );
     println!(
         "{:>7}  {:<5} {:>12} {:>10} {:>16} {:>16} {:>6}",
@@ -101,12 +121,16 @@ pub fn bench(args: BenchArgs) -> ExitCode {
             case.lost
         );
     }
-    for &size in &options.sizes {
-        if let Some((throughput, p50, p99)) = report.ratios(size) {
-            println!(
-                "{size} B, kpl / bare: throughput {throughput:.2} (target >= 0.7), round trip p50 {p50:.2}x (target <= 1.5), p99 {p99:.2}x"
-            );
-        }
+    println!("kpl / bare, median [min - max] over the runs:");
+    for r in &report.ratios {
+        let spread = |s: &bench::Spread| format!("{:.2} [{:.2} - {:.2}]", s.median, s.min, s.max);
+        println!(
+            "{:>5} B  throughput {} (target >= 0.7)   round trip p50 {} (target <= 1.5)   p99 {}",
+            r.size,
+            spread(&r.throughput),
+            spread(&r.round_trip_p50),
+            spread(&r.round_trip_p99)
+        );
     }
     ExitCode::SUCCESS
 }

@@ -2,7 +2,8 @@
 //! ([`ZenohSender`] / [`ZenohReceiver`]: encoding, zenoh, decoding into a typed sample) against
 //! bare zenoh publisher/subscriber code sending the same payloads, in the same run.
 //!
-//! For each payload size, interleaved and repeated:
+//! For each payload size, repeated, bare and KPL one after the other (each ratio is taken between
+//! two such neighbouring runs, then summarized as median and range over the repeats):
 //! - **throughput**: one process publishes `messages` samples as fast as zenoh takes them (both
 //!   with `Block` congestion control, so none is dropped), the other receives and counts; samples/s
 //!   are measured at the receiver from the first sample to the last;
@@ -11,7 +12,8 @@
 //!   round-trip times give p50 and p99.
 //!
 //! A KPL sample carries a string value of `size` bytes (the wire message adds a 21-byte header and
-//! the JSON quotes); the bare payload is `size` bytes. Both use the same session configuration
+//! the JSON quotes), or with [`Payload::Floats`] a list of `size / 8` floats; the bare payload is
+//! `size` bytes. Both use the same session configuration
 //! (peer mode, no multicast, TCP on 127.0.0.1).
 //!
 //! The process that measures runs [`run`]; it starts the other one, which runs [`run_peer`], with
@@ -39,17 +41,56 @@ use crate::transport::{ZenohReceiver, ZenohSender};
 pub struct BenchOptions {
     /// Payload sizes in bytes.
     pub sizes: Vec<usize>,
-    /// Samples per throughput run.
+    /// Samples per throughput run of 64-byte payloads; larger payloads send proportionally fewer
+    /// (at least an eighth as many), so that each run moves a similar amount of time.
     pub messages: usize,
     /// Round trips per latency run (after `round_trips / 10` warm-up ones).
     pub round_trips: usize,
     /// Runs of each case; figures are medians over them.
     pub repeat: usize,
+    /// What a KPL sample carries.
+    pub payload: Payload,
 }
 
 impl Default for BenchOptions {
     fn default() -> BenchOptions {
-        BenchOptions { sizes: vec![64, 4096], messages: 200_000, round_trips: 5_000, repeat: 3 }
+        BenchOptions {
+            sizes: vec![64, 4096],
+            messages: 1_000_000,
+            round_trips: 5_000,
+            repeat: 3,
+            payload: Payload::String,
+        }
+    }
+}
+
+/// The value of a KPL sample of `size` bytes (bare zenoh sends `size` raw bytes either way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Payload {
+    /// A string of `size` bytes: on the wire, the JSON string (`size + 2` bytes).
+    #[default]
+    String,
+    /// A `list<float>` of `size / 8` numbers (what `size` bytes hold in binary); their JSON text
+    /// is about twice as long, and each number is printed and parsed.
+    Floats,
+}
+
+impl Payload {
+    fn value(self, size: usize) -> Value {
+        match self {
+            Payload::String => Value::str(&String::from_utf8_lossy(&payload(size))),
+            Payload::Floats => {
+                Value::List((0..size / 8).map(|i| Value::Float(i as f64 * 0.37 - 41.3)).collect())
+            }
+        }
+    }
+
+    fn ty(self) -> ValueType {
+        match self {
+            Payload::String => ValueType::Str,
+            Payload::Floats => ValueType::List(Box::new(ValueType::Float)),
+        }
     }
 }
 
@@ -78,6 +119,7 @@ pub enum Role {
 pub struct PeerTask {
     pub role: Role,
     pub implementation: Implementation,
+    pub payload: Payload,
     pub size: usize,
     pub count: usize,
     /// The port it listens on (127.0.0.1).
@@ -104,27 +146,46 @@ pub struct CaseResult {
     pub lost: usize,
 }
 
-/// Everything measured, with the ratios KPL / bare per size.
+/// A ratio over the repeats: its median and range.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Spread {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(mut values: Vec<f64>) -> Spread {
+        values.sort_by(f64::total_cmp);
+        Spread {
+            median: percentile(&values, 0.5),
+            min: values.first().copied().unwrap_or(f64::NAN),
+            max: values.last().copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// KPL against bare zenoh for one size, each ratio taken between the two runs of one repeat
+/// (measured one after the other), then summarized over the repeats.
+#[derive(Debug, Clone, Serialize)]
+pub struct Ratios {
+    pub size: usize,
+    /// KPL's samples/s as a fraction of bare zenoh's (target: at least 0.7).
+    pub throughput: Spread,
+    /// KPL's round-trip p50 as a multiple of bare zenoh's (target: at most 1.5).
+    pub round_trip_p50: Spread,
+    pub round_trip_p99: Spread,
+}
+
+/// Everything measured: the figures of each case (medians over the repeats) and the ratios.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
+    pub payload: Payload,
     pub messages: usize,
     pub round_trips: usize,
     pub repeat: usize,
     pub cases: Vec<CaseResult>,
-}
-
-impl BenchReport {
-    /// KPL's throughput as a fraction of bare zenoh's, and its p50 and p99 latency as multiples
-    /// of bare zenoh's, for `size`.
-    pub fn ratios(&self, size: usize) -> Option<(f64, f64, f64)> {
-        let find = |i| self.cases.iter().find(|c| c.size == size && c.implementation == i);
-        let (kpl, bare) = (find(Implementation::Kpl)?, find(Implementation::Bare)?);
-        Some((
-            kpl.samples_per_s / bare.samples_per_s,
-            kpl.round_trip_p50_us / bare.round_trip_p50_us,
-            kpl.round_trip_p99_us / bare.round_trip_p99_us,
-        ))
-    }
+    pub ratios: Vec<Ratios>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -178,10 +239,6 @@ fn payload(size: usize) -> Vec<u8> {
     (0..size).map(|i| b'a' + (i % 26) as u8).collect()
 }
 
-fn value(size: usize) -> Value {
-    Value::str(&String::from_utf8_lossy(&payload(size)))
-}
-
 fn free_port() -> Result<u16, BenchError> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
 }
@@ -190,40 +247,68 @@ fn free_port() -> Result<u16, BenchError> {
 /// JSON.
 pub fn run(options: &BenchOptions, peer: &dyn Fn(&str) -> Command) -> Result<BenchReport, BenchError> {
     let runtime = runtime()?;
+    let repeat = options.repeat.max(1);
     let mut cases = Vec::new();
+    let mut ratios = Vec::new();
     for &size in &options.sizes {
-        for implementation in [Implementation::Bare, Implementation::Kpl] {
-            cases.push((size, implementation, Vec::new(), Vec::new(), Vec::new(), 0usize));
+        // [bare, kpl]: per repeat, samples/s, round-trip p50 and p99; samples lost.
+        let mut rates = [Vec::new(), Vec::new()];
+        let mut p50s = [Vec::new(), Vec::new()];
+        let mut p99s = [Vec::new(), Vec::new()];
+        let mut lost = [0usize; 2];
+        for _ in 0..repeat {
+            for (k, implementation) in [Implementation::Bare, Implementation::Kpl].into_iter().enumerate() {
+                let (rate, missing) = throughput(
+                    &runtime,
+                    peer,
+                    implementation,
+                    options.payload,
+                    size,
+                    messages_for(options.messages, size),
+                )?;
+                rates[k].push(rate);
+                lost[k] += missing;
+            }
+            for (k, implementation) in [Implementation::Bare, Implementation::Kpl].into_iter().enumerate() {
+                let mut round_trips =
+                    latency(&runtime, peer, implementation, options.payload, size, options.round_trips)?;
+                round_trips.sort_by(f64::total_cmp);
+                p50s[k].push(percentile(&round_trips, 0.50));
+                p99s[k].push(percentile(&round_trips, 0.99));
+            }
         }
-    }
-    for _ in 0..options.repeat.max(1) {
-        for (size, implementation, rates, p50s, p99s, lost) in &mut cases {
-            let (rate, missing) = throughput(&runtime, peer, *implementation, *size, options.messages)?;
-            rates.push(rate);
-            *lost += missing;
-            let mut round_trips = latency(&runtime, peer, *implementation, *size, options.round_trips)?;
-            round_trips.sort_by(f64::total_cmp);
-            p50s.push(percentile(&round_trips, 0.50));
-            p99s.push(percentile(&round_trips, 0.99));
-        }
-    }
-    let cases = cases
-        .into_iter()
-        .map(|(size, implementation, rates, p50s, p99s, lost)| CaseResult {
+        let per_repeat =
+            |of: &[Vec<f64>; 2]| -> Vec<f64> { of[1].iter().zip(&of[0]).map(|(k, b)| k / b).collect() };
+        ratios.push(Ratios {
             size,
-            implementation,
-            samples_per_s: median(rates),
-            round_trip_p50_us: median(p50s),
-            round_trip_p99_us: median(p99s),
-            lost,
-        })
-        .collect();
+            throughput: Spread::of(per_repeat(&rates)),
+            round_trip_p50: Spread::of(per_repeat(&p50s)),
+            round_trip_p99: Spread::of(per_repeat(&p99s)),
+        });
+        for (k, implementation) in [Implementation::Bare, Implementation::Kpl].into_iter().enumerate() {
+            cases.push(CaseResult {
+                size,
+                implementation,
+                samples_per_s: median(rates[k].clone()),
+                round_trip_p50_us: median(p50s[k].clone()),
+                round_trip_p99_us: median(p99s[k].clone()),
+                lost: lost[k],
+            });
+        }
+    }
     Ok(BenchReport {
+        payload: options.payload,
         messages: options.messages,
         round_trips: options.round_trips,
-        repeat: options.repeat.max(1),
+        repeat,
         cases,
+        ratios,
     })
+}
+
+/// Samples per throughput run for a payload size.
+pub fn messages_for(messages: usize, size: usize) -> usize {
+    (messages.saturating_mul(64) / size.max(64)).max(messages / 8).max(2)
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -273,11 +358,13 @@ fn throughput(
     runtime: &tokio::runtime::Runtime,
     peer: &dyn Fn(&str) -> Command,
     implementation: Implementation,
+    payload_kind: Payload,
     size: usize,
     messages: usize,
 ) -> Result<(f64, usize), BenchError> {
     let port = free_port()?;
-    let task = PeerTask { role: Role::Sub, implementation, size, count: messages, port };
+    let task =
+        PeerTask { role: Role::Sub, implementation, payload: payload_kind, size, count: messages, port };
     let (child, reader) = start_peer(peer, &task)?;
     let sent = runtime.block_on(async {
         let session = open(port, "main").await?;
@@ -306,7 +393,7 @@ fn throughput(
                 if sender.wait_for_subscribers(1).await < 1 {
                     return Err(BenchError::Peer("did not subscribe".into()));
                 }
-                let value = value(size);
+                let value = payload_kind.value(size);
                 for i in 0..messages {
                     let t = i as i64;
                     sender.send(&Sample::new(t, t, value.clone())).await;
@@ -329,12 +416,20 @@ fn latency(
     runtime: &tokio::runtime::Runtime,
     peer: &dyn Fn(&str) -> Command,
     implementation: Implementation,
+    payload_kind: Payload,
     size: usize,
     round_trips: usize,
 ) -> Result<Vec<f64>, BenchError> {
     let warmup = round_trips / 10;
     let port = free_port()?;
-    let task = PeerTask { role: Role::Pong, implementation, size, count: warmup + round_trips, port };
+    let task = PeerTask {
+        role: Role::Pong,
+        implementation,
+        payload: payload_kind,
+        size,
+        count: warmup + round_trips,
+        port,
+    };
     let (child, reader) = start_peer(peer, &task)?;
     let times = runtime.block_on(async {
         let session = open(port, "main").await?;
@@ -369,7 +464,7 @@ fn latency(
                 }
             }
             Implementation::Kpl => {
-                let mut pong = ZenohReceiver::declare(&session, &key("pong"), ValueType::Str, "main")
+                let mut pong = ZenohReceiver::declare(&session, &key("pong"), payload_kind.ty(), "main")
                     .await
                     .map_err(failed)?;
                 let mut ping = ZenohSender::declare(
@@ -383,7 +478,7 @@ fn latency(
                 if ping.wait_for_subscribers(1).await < 1 {
                     return Err(BenchError::Peer("did not subscribe".into()));
                 }
-                let value = value(size);
+                let value = payload_kind.value(size);
                 for i in 0..warmup + round_trips {
                     let t = i as i64;
                     let start = Instant::now();
@@ -398,6 +493,9 @@ fn latency(
                         times.push(start.elapsed().as_secs_f64() * 1e6);
                     }
                 }
+                // As the runtime does: a receiver goes when its stream is done, so that the
+                // other side's `end` sees this host has everything.
+                drop(pong);
                 ping.end().await;
                 tokens.extend(ping.token.take());
             }
@@ -448,7 +546,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
             }
             (Role::Sub, Implementation::Kpl) => {
                 let mut receiver =
-                    ZenohReceiver::declare(&session, &key("throughput"), ValueType::Str, "peer")
+                    ZenohReceiver::declare(&session, &key("throughput"), task.payload.ty(), "peer")
                         .await
                         .map_err(failed)?;
                 let mut report = PeerReport::default();
@@ -470,6 +568,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                 if report.received < task.count {
                     report.elapsed_us = first.map_or(0, |f| f.elapsed().as_micros() as u64);
                 }
+                drop(receiver);
                 report
             }
             (Role::Pong, Implementation::Bare) => {
@@ -501,7 +600,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                 )
                 .await
                 .map_err(failed)?;
-                let mut ping = ZenohReceiver::declare(&session, &key("ping"), ValueType::Str, "peer")
+                let mut ping = ZenohReceiver::declare(&session, &key("ping"), task.payload.ty(), "peer")
                     .await
                     .map_err(failed)?;
                 let mut report = PeerReport::default();
@@ -509,6 +608,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                     pong.send(&sample).await;
                     report.received += 1;
                 }
+                drop(ping);
                 pong.end().await;
                 tokens.extend(pong.token.take());
                 report

@@ -1,7 +1,7 @@
 //! The wire format of samples between hosts: [`encode_sample`], [`encode_end`] and [`decode`]
 //! are the only functions that write or read it (docs/streams.md, "On the wire").
 //!
-//! Every message starts with a 5-byte header, then the body of its kind; integers are
+//! Every message starts with a 5-byte header, then the body of its kind; numbers are
 //! little-endian:
 //!
 //! | bytes | field |
@@ -10,20 +10,36 @@
 //! | 3 | format version, 1 |
 //! | 4 | kind: `S` (0x53) a sample, `E` (0x45) the end of the stream |
 //!
-//! A sample (`S`) goes on with its valid time (i64, bytes 5..13) and available time (i64, bytes
-//! 13..21), integer microseconds, and then the value as UTF-8 JSON, encoded by its type exactly as
-//! in the JSON-lines files (bytes 21..). The end (`E`) goes on with the number of samples the
-//! producer published on the stream (u64, bytes 5..13), so a subscriber can tell whether it
-//! missed any. In Python: `struct.unpack_from("<3sBcqq", payload)` and
-//! `json.loads(payload[21:])`.
+//! A sample (`S`) goes on with its valid time (i64, bytes 5..13), its available time (i64, bytes
+//! 13..21), integer microseconds, and its value (bytes 21..). The end (`E`) goes on with the
+//! number of samples the producer published on the stream (u64, bytes 5..13), so a subscriber can
+//! tell whether it missed any.
 //!
-//! The value is typed on decoding with the stream's declared type, so a `vec2` comes back as a
-//! `vec2`, and a value that does not fit (or NaN where a number is needed) is an error, not a
-//! panic.
+//! A value is self-describing: one tag byte, then its body.
+//!
+//! | tag | value | body |
+//! |---|---|---|
+//! | `t`, `f` | true, false | nothing |
+//! | `i` | int | i64 |
+//! | `d` | duration | i64 microseconds |
+//! | `r` | float | f64 |
+//! | `s` | string | u32 length, UTF-8 bytes |
+//! | `v` | vec2 | 2 f64: x, y |
+//! | `b` | box | 4 f64: x1, y1, x2, y2 |
+//! | `l` | list | u32 count, the values |
+//! | `o` | record (object) | u32 count, then per attribute its name (u32 length, UTF-8) and value; an object's identity is the attribute `id`, a string, first |
+//!
+//! Numbers travel as their bits, so a float arrives exactly as it left and costs no printing or
+//! parsing. On decoding, the value is checked against the stream's declared type as the JSON-lines
+//! files are ([`kpl_core::Value::from_json`]): ints widen to floats and durations, a list of two
+//! (four) numbers is a `vec2` (`box`) where one is declared, attributes a record type does not
+//! have are dropped, and a value that does not fit (NaN where a number is needed, a missing
+//! attribute, bytes cut short, nesting deeper than [`MAX_DEPTH`]) is an error, never a panic.
 
-use kpl_core::{Time, Value, ValueType};
+use std::sync::Arc;
+
+use kpl_core::{BBox, Record, RecordType, Time, Value, ValueType};
 use kpl_runtime::Sample;
-use serde::ser::{SerializeMap, SerializeSeq};
 
 /// The first bytes of every message.
 pub const MAGIC: &[u8; 3] = b"KPL";
@@ -33,10 +49,12 @@ pub const VERSION: u8 = 1;
 pub const KIND_SAMPLE: u8 = b'S';
 /// The kind byte of an end of stream.
 pub const KIND_END: u8 = b'E';
-/// Bytes before a sample's JSON value.
+/// Bytes before a sample's value.
 pub const SAMPLE_HEADER_LEN: usize = 21;
 /// The length of an end-of-stream message.
 pub const END_LEN: usize = 13;
+/// How deep lists and records may nest in a value.
+pub const MAX_DEPTH: usize = 128;
 
 /// A decoded message.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,15 +79,17 @@ pub enum DecodeError {
     Kind(u8),
     #[error("an end-of-stream message is {END_LEN} bytes, this one is {0}")]
     EndLength(usize),
-    #[error("the value is not JSON: {0}")]
-    Json(String),
+    /// The value's bytes are not a value.
+    #[error("the value {0}")]
+    Value(String),
+    /// The value does not fit the stream's type.
     #[error("the value {0}")]
     Type(String),
 }
 
-/// Why a value cannot be encoded (it cannot happen for values built by KPL; kept for honesty).
+/// Why a value cannot be encoded: a string or list longer than 4 GiB.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("cannot encode the value as JSON: {0}")]
+#[error("cannot encode the value: {0}")]
 pub struct EncodeError(String);
 
 /// Encodes a sample into `out` (cleared first).
@@ -78,7 +98,7 @@ pub fn encode_sample(sample: &Sample, out: &mut Vec<u8>) -> Result<(), EncodeErr
     header(out, KIND_SAMPLE);
     out.extend_from_slice(&sample.valid.to_le_bytes());
     out.extend_from_slice(&sample.available.to_le_bytes());
-    serde_json::to_writer(&mut *out, &JsonValue(&sample.value)).map_err(|e| EncodeError(e.to_string()))
+    write_value(&sample.value, out)
 }
 
 /// Encodes the end of a stream on which `published` samples were sent.
@@ -95,7 +115,7 @@ fn header(out: &mut Vec<u8>, kind: u8) {
     out.push(kind);
 }
 
-/// Decodes one message; the value is decoded following `ty` (`ValueType::Any`: by its JSON shape).
+/// Decodes one message; the value is checked against `ty` (`ValueType::Any`: taken as it is).
 pub fn decode(bytes: &[u8], ty: &ValueType) -> Result<Message, DecodeError> {
     if bytes.len() < 5 {
         return Err(DecodeError::TooShort(bytes.len()));
@@ -111,12 +131,17 @@ pub fn decode(bytes: &[u8], ty: &ValueType) -> Result<Message, DecodeError> {
             if bytes.len() < SAMPLE_HEADER_LEN {
                 return Err(DecodeError::TooShort(bytes.len()));
             }
-            let valid = read_i64(bytes, 5);
-            let available = read_i64(bytes, 13);
-            let json: serde_json::Value = serde_json::from_slice(&bytes[SAMPLE_HEADER_LEN..])
-                .map_err(|e| DecodeError::Json(e.to_string()))?;
-            let value = Value::from_json(&json, ty).map_err(|e| DecodeError::Type(e.to_string()))?;
-            Ok(Message::Sample(Sample::new(valid, available, value)))
+            let mut reader = Reader { bytes, at: SAMPLE_HEADER_LEN };
+            let value = reader.value(0).map_err(DecodeError::Value)?;
+            if reader.at != bytes.len() {
+                return Err(DecodeError::Value(format!(
+                    "ends at byte {}, but the message has {}",
+                    reader.at,
+                    bytes.len()
+                )));
+            }
+            let value = conform(value, ty).map_err(|e| DecodeError::Type(e.to_string()))?;
+            Ok(Message::Sample(Sample::new(read_i64(bytes, 5), read_i64(bytes, 13), value)))
         }
         KIND_END => {
             if bytes.len() != END_LEN {
@@ -134,70 +159,325 @@ fn read_i64(bytes: &[u8], at: usize) -> Time {
     i64::from_le_bytes(word)
 }
 
-/// Serializes a value as `Value::to_json` does, without building a `serde_json::Value` first.
-struct JsonValue<'a>(&'a Value);
-
-impl serde::Serialize for JsonValue<'_> {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        match self.0 {
-            Value::Bool(b) => s.serialize_bool(*b),
-            Value::Int(i) | Value::Duration(i) => s.serialize_i64(*i),
-            Value::Float(x) => finite(*x, s),
-            Value::Str(text) => s.serialize_str(text),
-            Value::Vec2(xy) => {
-                let mut seq = s.serialize_seq(Some(2))?;
-                for x in xy {
-                    seq.serialize_element(&Finite(*x))?;
-                }
-                seq.end()
+fn write_value(value: &Value, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+    match value {
+        Value::Bool(true) => out.push(b't'),
+        Value::Bool(false) => out.push(b'f'),
+        Value::Int(i) => {
+            out.push(b'i');
+            out.extend_from_slice(&i.to_le_bytes());
+        }
+        Value::Duration(us) => {
+            out.push(b'd');
+            out.extend_from_slice(&us.to_le_bytes());
+        }
+        Value::Float(x) => {
+            out.push(b'r');
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        Value::Str(text) => {
+            out.push(b's');
+            write_text(text, out)?;
+        }
+        Value::Vec2([x, y]) => {
+            out.push(b'v');
+            for z in [x, y] {
+                out.extend_from_slice(&z.to_le_bytes());
             }
-            Value::BBox(b) => {
-                let mut seq = s.serialize_seq(Some(4))?;
-                for x in [b.x1, b.y1, b.x2, b.y2] {
-                    seq.serialize_element(&Finite(x))?;
-                }
-                seq.end()
+        }
+        Value::BBox(b) => {
+            out.push(b'b');
+            for z in [b.x1, b.y1, b.x2, b.y2] {
+                out.extend_from_slice(&z.to_le_bytes());
             }
-            Value::List(items) => {
-                let mut seq = s.serialize_seq(Some(items.len()))?;
-                for item in items.iter() {
-                    seq.serialize_element(&JsonValue(item))?;
-                }
-                seq.end()
+        }
+        Value::List(items) => {
+            out.push(b'l');
+            write_count(items.len(), out)?;
+            for item in items.iter() {
+                write_value(item, out)?;
             }
-            Value::Record(record) => {
-                let mut map = s.serialize_map(None)?;
-                if let Some(id) = &record.id {
-                    map.serialize_entry("id", &**id)?;
-                }
-                for (name, value) in &record.fields {
-                    map.serialize_entry(&**name, &JsonValue(value))?;
-                }
-                map.end()
+        }
+        Value::Record(record) => {
+            out.push(b'o');
+            write_count(record.fields.len() + usize::from(record.id.is_some()), out)?;
+            if let Some(id) = &record.id {
+                write_text("id", out)?;
+                out.push(b's');
+                write_text(id, out)?;
+            }
+            for (name, value) in &record.fields {
+                write_text(name, out)?;
+                write_value(value, out)?;
             }
         }
     }
+    Ok(())
 }
 
-/// A float as `Value::to_json` writes it: `null` when it is not finite.
-struct Finite(f64);
+fn write_count(n: usize, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+    let n = u32::try_from(n).map_err(|_| EncodeError(format!("{n} items do not fit a u32 count")))?;
+    out.extend_from_slice(&n.to_le_bytes());
+    Ok(())
+}
 
-impl serde::Serialize for Finite {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        finite(self.0, s)
+fn write_text(text: &str, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+    write_count(text.len(), out)?;
+    out.extend_from_slice(text.as_bytes());
+    Ok(())
+}
+
+/// Reads a value as it was written: no type yet, numbers as their bits.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+        match self.at.checked_add(n) {
+            Some(end) if end <= self.bytes.len() => {
+                let slice = &self.bytes[self.at..end];
+                self.at = end;
+                Ok(slice)
+            }
+            _ => Err(format!("is cut short: {n} more byte(s) needed at byte {}", self.at)),
+        }
+    }
+
+    fn word(&mut self) -> Result<[u8; 8], String> {
+        let mut word = [0u8; 8];
+        word.copy_from_slice(self.take(8)?);
+        Ok(word)
+    }
+
+    fn float(&mut self) -> Result<f64, String> {
+        let at = self.at;
+        let x = f64::from_le_bytes(self.word()?);
+        if x.is_finite() { Ok(x) } else { Err(format!("has a float that is not finite ({x}) at byte {at}")) }
+    }
+
+    fn count(&mut self) -> Result<usize, String> {
+        let mut word = [0u8; 4];
+        word.copy_from_slice(self.take(4)?);
+        Ok(u32::from_le_bytes(word) as usize)
+    }
+
+    fn text(&mut self) -> Result<&'a str, String> {
+        let n = self.count()?;
+        let at = self.at;
+        std::str::from_utf8(self.take(n)?).map_err(|_| format!("has text that is not UTF-8 at byte {at}"))
+    }
+
+    fn value(&mut self, depth: usize) -> Result<Value, String> {
+        if depth > MAX_DEPTH {
+            return Err(format!("nests deeper than {MAX_DEPTH} lists or records"));
+        }
+        let at = self.at;
+        let tag = self.take(1)?[0];
+        Ok(match tag {
+            b't' => Value::Bool(true),
+            b'f' => Value::Bool(false),
+            b'i' => Value::Int(i64::from_le_bytes(self.word()?)),
+            b'd' => Value::Duration(i64::from_le_bytes(self.word()?)),
+            b'r' => Value::Float(self.float()?),
+            b's' => Value::str(self.text()?),
+            b'v' => Value::Vec2([self.float()?, self.float()?]),
+            b'b' => Value::BBox(BBox::new(self.float()?, self.float()?, self.float()?, self.float()?)),
+            b'l' => {
+                let n = self.count()?;
+                // Every item takes at least a byte: a count cannot make us reserve more than that.
+                let mut items = Vec::with_capacity(n.min(self.bytes.len() - self.at));
+                for _ in 0..n {
+                    // Lists of numbers are the common case: read floats without recursing.
+                    if self.bytes.get(self.at) == Some(&b'r') {
+                        self.at += 1;
+                        items.push(Value::Float(self.float()?));
+                    } else {
+                        items.push(self.value(depth + 1)?);
+                    }
+                }
+                Value::List(items.into())
+            }
+            b'o' => {
+                let n = self.count()?;
+                let mut record = Record::default();
+                for _ in 0..n {
+                    let name = self.text()?;
+                    let value = self.value(depth + 1)?;
+                    match (name, value) {
+                        ("id", Value::Str(id)) => record.id = Some(id),
+                        (name, value) => match record.fields.iter_mut().find(|(n, _)| &**n == name) {
+                            Some(slot) => slot.1 = value,
+                            None => record.fields.push((Arc::from(name), value)),
+                        },
+                    }
+                }
+                Value::Record(Arc::new(record))
+            }
+            other => return Err(format!("has an unknown tag 0x{other:02x} at byte {at}")),
+        })
     }
 }
 
-fn finite<S: serde::Serializer>(x: f64, s: S) -> Result<S::Ok, S::Error> {
-    if x.is_finite() { s.serialize_f64(x) } else { s.serialize_unit() }
+/// Why a value does not fit a type: where (`.pos[1]`), what was expected and what was found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Mismatch {
+    /// Path segments, innermost last once complete (collected while unwinding).
+    path: Vec<String>,
+    expected: String,
+    found: String,
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let path: String = self.path.iter().rev().map(String::as_str).collect();
+        let path = if path.is_empty() { ".".to_string() } else { path };
+        write!(f, "at `{path}`: expected {}, found {}", self.expected, self.found)
+    }
+}
+
+fn mismatch(expected: impl Into<String>, found: &Value) -> Mismatch {
+    Mismatch { path: Vec::new(), expected: expected.into(), found: describe(found) }
+}
+
+fn describe(value: &Value) -> String {
+    match value {
+        Value::Bool(_) => "a boolean".into(),
+        Value::Int(_) => "an integer".into(),
+        Value::Float(_) => "a float".into(),
+        Value::Duration(_) => "a duration".into(),
+        Value::Str(s) if s.len() <= 16 => format!("the string {s:?}"),
+        Value::Str(_) => "a string".into(),
+        Value::Vec2(_) => "a vec2".into(),
+        Value::BBox(_) => "a box".into(),
+        Value::List(items) => format!("a list of {}", items.len()),
+        Value::Record(_) => "an object".into(),
+    }
+}
+
+fn within(mut e: Mismatch, segment: String) -> Mismatch {
+    e.path.push(segment);
+    e
+}
+
+/// A number as a float (ints widen).
+fn number(value: &Value) -> Option<f64> {
+    match value {
+        Value::Float(x) => Some(*x),
+        Value::Int(i) | Value::Duration(i) => Some(*i as f64),
+        _ => None,
+    }
+}
+
+/// `N` numbers from a vec2, a box or a list of numbers.
+fn numbers<const N: usize>(value: &Value, shape: &str) -> Result<[f64; N], Mismatch> {
+    let expected = || format!("{shape} with finite numbers");
+    let list: Vec<f64> = match value {
+        Value::Vec2(xy) => xy.to_vec(),
+        Value::BBox(b) => vec![b.x1, b.y1, b.x2, b.y2],
+        Value::List(items) => items
+            .iter()
+            .map(number)
+            .collect::<Option<Vec<f64>>>()
+            .ok_or_else(|| mismatch(expected(), value))?,
+        _ => return Err(mismatch(expected(), value)),
+    };
+    <[f64; N]>::try_from(list).map_err(|_| mismatch(expected(), value))
+}
+
+/// Whether a value already has exactly the declared shape (what a KPL producer sends), so that
+/// [`conform`] can keep it as it is.
+fn fits(value: &Value, ty: &ValueType) -> bool {
+    match (ty, value) {
+        (ValueType::Any, _)
+        | (ValueType::Bool, Value::Bool(_))
+        | (ValueType::Int, Value::Int(_))
+        | (ValueType::Duration, Value::Duration(_))
+        | (ValueType::Float, Value::Float(_))
+        | (ValueType::Str, Value::Str(_))
+        | (ValueType::Vec2, Value::Vec2(_))
+        | (ValueType::BBox, Value::BBox(_)) => true,
+        (ValueType::List(item), Value::List(items)) => items.iter().all(|x| fits(x, item)),
+        (ValueType::Record(record), Value::Record(value)) => {
+            value.fields.len() == record.fields.len()
+                && value
+                    .fields
+                    .iter()
+                    .zip(&record.fields)
+                    .all(|((name, x), field)| **name == *field.name && &**name != "id" && fits(x, &field.ty))
+        }
+        _ => false,
+    }
+}
+
+/// The value as the type declares it (as `Value::from_json` would read its JSON).
+fn conform(value: Value, ty: &ValueType) -> Result<Value, Mismatch> {
+    if fits(&value, ty) {
+        return Ok(value);
+    }
+    Ok(match (ty, value) {
+        (ValueType::Any, value) => value,
+        (ValueType::Bool, value @ Value::Bool(_)) => value,
+        (ValueType::Int, Value::Int(i) | Value::Duration(i)) => Value::Int(i),
+        (ValueType::Duration, Value::Int(i) | Value::Duration(i)) => Value::Duration(i),
+        (ValueType::Float, Value::Float(x)) => Value::Float(x),
+        (ValueType::Float, Value::Int(i) | Value::Duration(i)) => Value::Float(i as f64),
+        (ValueType::Str, value @ Value::Str(_)) => value,
+        (ValueType::Vec2, value) => Value::Vec2(numbers::<2>(&value, "[x, y]")?),
+        (ValueType::BBox, value) => {
+            let [x1, y1, x2, y2] = numbers::<4>(&value, "[x1, y1, x2, y2]")?;
+            Value::BBox(BBox { x1, y1, x2, y2 })
+        }
+        (ValueType::List(item), value) => {
+            let items: Vec<Value> = match value {
+                Value::List(items) => items.iter().cloned().collect(),
+                Value::Vec2(xy) => xy.iter().map(|x| Value::Float(*x)).collect(),
+                Value::BBox(b) => [b.x1, b.y1, b.x2, b.y2].into_iter().map(Value::Float).collect(),
+                other => return Err(mismatch("an array", &other)),
+            };
+            let mut out = Vec::with_capacity(items.len());
+            for (i, x) in items.into_iter().enumerate() {
+                out.push(conform(x, item).map_err(|e| within(e, format!("[{i}]")))?);
+            }
+            Value::List(out.into())
+        }
+        (ValueType::Record(record), Value::Record(value)) => conform_record(&value, record)?,
+        (ValueType::Record(record), other) => {
+            return Err(mismatch(format!("an object of type {}", record.name), &other));
+        }
+        (ValueType::Bool, other) => return Err(mismatch("a boolean", &other)),
+        (ValueType::Int, other) => return Err(mismatch("an integer", &other)),
+        (ValueType::Duration, other) => return Err(mismatch("an integer number of microseconds", &other)),
+        (ValueType::Float, other) => return Err(mismatch("a finite number", &other)),
+        (ValueType::Str, other) => return Err(mismatch("a string", &other)),
+    })
+}
+
+fn conform_record(value: &Record, ty: &RecordType) -> Result<Value, Mismatch> {
+    if let Some((_, id)) = value.fields.iter().find(|(n, _)| &**n == "id") {
+        return Err(within(mismatch("a string", id), ".id".into()));
+    }
+    let mut fields = Vec::with_capacity(ty.fields.len());
+    for field in &ty.fields {
+        let segment = format!(".{}", field.name);
+        let found = value.fields.iter().find(|(n, _)| **n == *field.name).map(|(_, v)| v.clone());
+        let Some(found) = found else {
+            return Err(Mismatch {
+                path: vec![segment],
+                expected: format!("field `{}` of type {}", field.name, field.ty),
+                found: "nothing".into(),
+            });
+        };
+        fields.push((field.name.clone(), conform(found, &field.ty).map_err(|e| within(e, segment))?));
+    }
+    Ok(Value::Record(Arc::new(Record { id: value.id.clone(), fields })))
 }
 
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
-    use std::sync::Arc;
-
-    use kpl_core::{BBox, Record};
+    use kpl_core::FieldType;
     use proptest::prelude::*;
 
     use super::*;
@@ -208,13 +488,33 @@ mod tests {
         out
     }
 
+    fn record_type(fields: &[(&str, ValueType)]) -> ValueType {
+        ValueType::Record(Arc::new(RecordType {
+            name: "Car".into(),
+            parent: None,
+            symbol: "co".into(),
+            fields: fields.iter().map(|(n, t)| FieldType { name: (*n).into(), ty: t.clone() }).collect(),
+        }))
+    }
+
     #[test]
     fn the_documented_layout() {
         let bytes = encode(&Sample::new(100, -7, Value::vec2(1.5, -2.0)));
         assert_eq!(&bytes[..5], b"KPL\x01S");
         assert_eq!(&bytes[5..13], &100i64.to_le_bytes());
         assert_eq!(&bytes[13..21], &(-7i64).to_le_bytes());
-        assert_eq!(&bytes[21..], b"[1.5,-2.0]");
+        assert_eq!(bytes[21], b'v');
+        assert_eq!(&bytes[22..30], &1.5f64.to_le_bytes());
+        assert_eq!(&bytes[30..], &(-2.0f64).to_le_bytes());
+        let record = Value::Record(Arc::new(Record {
+            id: Some("co1".into()),
+            fields: vec![("n".into(), Value::List(vec![Value::Int(3), Value::str("é")].into()))],
+        }));
+        let bytes = encode(&Sample::new(0, 0, record));
+        let mut expected = b"o\x02\0\0\0\x02\0\0\0ids\x03\0\0\0co1\x01\0\0\0nl\x02\0\0\0i".to_vec();
+        expected.extend_from_slice(&3i64.to_le_bytes());
+        expected.extend_from_slice(b"s\x02\0\0\0\xc3\xa9");
+        assert_eq!(&bytes[21..], &expected[..]);
         assert_eq!(encode_end(3), b"KPL\x01E\x03\0\0\0\0\0\0\0");
         assert_eq!(decode(&encode_end(3), &ValueType::Any), Ok(Message::End { published: 3 }));
     }
@@ -234,40 +534,68 @@ mod tests {
         for (bytes, expected) in cases {
             assert_eq!(decode(&bytes, &ValueType::Float), Err(expected), "{bytes:?}");
         }
-        let mut not_json = good[..21].to_vec();
-        not_json.extend_from_slice(b"[1,");
-        assert!(matches!(decode(&not_json, &ValueType::Float), Err(DecodeError::Json(_))));
-        let mut nan = good[..21].to_vec();
-        nan.extend_from_slice(b"\"NaN\"");
-        let err = decode(&nan, &ValueType::Float).unwrap_err();
-        assert!(err.to_string().contains("finite number"), "{err}");
+        let value_error = |body: &[u8]| {
+            let mut bytes = good[..21].to_vec();
+            bytes.extend_from_slice(body);
+            match decode(&bytes, &ValueType::Any) {
+                Err(DecodeError::Value(e)) => e,
+                other => panic!("{body:?}: {other:?}"),
+            }
+        };
+        assert!(value_error(b"").contains("cut short"));
+        assert!(value_error(b"r\0\0").contains("cut short"));
+        assert!(value_error(b"x").contains("unknown tag 0x78 at byte 21"));
+        assert!(value_error(b"s\x02\0\0\0\xff\xfe").contains("not UTF-8"));
+        assert!(value_error(b"l\xff\xff\xff\xff").contains("cut short"), "a huge count reserves nothing");
+        assert!(value_error(b"tt").contains("ends at byte 22"));
+        let mut nan = b"r".to_vec();
+        nan.extend_from_slice(&f64::NAN.to_le_bytes());
+        assert!(value_error(&nan).contains("not finite"));
+        let deep: Vec<u8> =
+            std::iter::repeat_n(&b"l\x01\0\0\0"[..], MAX_DEPTH + 2).flatten().copied().collect();
+        assert!(value_error(&deep).contains("nests deeper"));
         let wrong_type = decode(&good, &ValueType::Str).unwrap_err();
-        assert!(matches!(wrong_type, DecodeError::Type(_)), "{wrong_type}");
+        assert_eq!(wrong_type, DecodeError::Type("at `.`: expected a string, found a float".into()));
     }
 
     #[test]
-    fn records_and_objects_round_trip_with_their_type() {
-        let ty = ValueType::Record(Arc::new(kpl_core::RecordType {
-            name: "Car".into(),
-            parent: None,
-            symbol: "co".into(),
-            fields: vec![
-                kpl_core::FieldType { name: "pos".into(), ty: ValueType::Vec2 },
-                kpl_core::FieldType { name: "box".into(), ty: ValueType::BBox },
-                kpl_core::FieldType { name: "age".into(), ty: ValueType::Duration },
-            ],
-        }));
-        let car = Value::Record(Arc::new(Record {
+    fn values_are_checked_against_the_declared_type() {
+        let ty = record_type(&[
+            ("pos", ValueType::Vec2),
+            ("speed", ValueType::Float),
+            ("age", ValueType::Duration),
+        ]);
+        let sent = Value::Record(Arc::new(Record {
             id: Some("co1".into()),
             fields: vec![
-                ("pos".into(), Value::vec2(1.0, 2.0)),
-                ("box".into(), Value::BBox(BBox::new(0.0, 1.0, 2.0, 3.5))),
-                ("age".into(), Value::Duration(1_500_000)),
+                ("extra".into(), Value::Bool(true)),
+                ("speed".into(), Value::Int(3)),
+                ("age".into(), Value::Int(5)),
+                ("pos".into(), Value::List(vec![Value::Int(1), Value::Float(2.5)].into())),
             ],
         }));
-        let list = ValueType::List(Box::new(ty));
-        let sample = Sample::new(10, 20, Value::List(vec![car.clone(), car].into()));
-        assert_eq!(decode(&encode(&sample), &list), Ok(Message::Sample(sample)));
+        let got = decode(&encode(&Sample::new(1, 1, sent)), &ty).unwrap();
+        let expected = Value::Record(Arc::new(Record {
+            id: Some("co1".into()),
+            fields: vec![
+                ("pos".into(), Value::vec2(1.0, 2.5)),
+                ("speed".into(), Value::Float(3.0)),
+                ("age".into(), Value::Duration(5)),
+            ],
+        }));
+        assert_eq!(got, Message::Sample(Sample::new(1, 1, expected)));
+        let missing =
+            Value::Record(Arc::new(Record { id: None, fields: vec![("pos".into(), Value::vec2(0.0, 0.0))] }));
+        let err = decode(
+            &encode(&Sample::new(1, 1, Value::List(vec![missing].into()))),
+            &ValueType::List(Box::new(ty)),
+        );
+        assert_eq!(
+            err,
+            Err(DecodeError::Type(
+                "at `[0].speed`: expected field `speed` of type float, found nothing".into()
+            ))
+        );
     }
 
     fn value() -> impl Strategy<Value = Value> {
@@ -275,8 +603,10 @@ mod tests {
             any::<bool>().prop_map(Value::Bool),
             any::<i64>().prop_map(Value::Int),
             (-1e300f64..1e300).prop_map(Value::Float),
-            "\\PC{0,12}".prop_map(|s| Value::str(&s)),
+            prop::collection::vec(any::<char>(), 0..12)
+                .prop_map(|c| Value::str(&c.into_iter().collect::<String>())),
             (-1e6f64..1e6, -1e6f64..1e6).prop_map(|(x, y)| Value::vec2(x, y)),
+            (-1e6f64..1e6, -1e6f64..1e6).prop_map(|(x, y)| Value::BBox(BBox::new(x, y, x + 1.0, y + 2.0))),
             any::<i64>().prop_map(Value::Duration),
         ];
         leaf.prop_recursive(3, 24, 4, |inner| {
@@ -296,26 +626,57 @@ mod tests {
         })
     }
 
+    fn value_type() -> impl Strategy<Value = ValueType> {
+        let leaf = prop_oneof![
+            Just(ValueType::Any),
+            Just(ValueType::Bool),
+            Just(ValueType::Int),
+            Just(ValueType::Float),
+            Just(ValueType::Str),
+            Just(ValueType::Vec2),
+            Just(ValueType::BBox),
+            Just(ValueType::Duration),
+        ];
+        leaf.prop_recursive(2, 8, 3, |inner| {
+            prop_oneof![
+                inner.clone().prop_map(|t| ValueType::List(Box::new(t))),
+                prop::collection::vec(("[a-c]", inner), 0..3).prop_map(|fields| {
+                    let mut seen = std::collections::BTreeSet::new();
+                    let fields: Vec<(String, ValueType)> =
+                        fields.into_iter().filter(|(n, _)| seen.insert(n.clone())).collect();
+                    let fields: Vec<(&str, ValueType)> =
+                        fields.iter().map(|(n, t)| (n.as_str(), t.clone())).collect();
+                    record_type(&fields)
+                }),
+            ]
+        })
+    }
+
     proptest! {
-        /// The value part is the JSON of the files (kpl-core's `to_json`), and decoding it as
-        /// the files do gives the same sample back.
+        /// Untyped, every value comes back exactly, with its times.
         #[test]
-        fn the_value_is_the_json_of_the_files(valid: i64, available: i64, value in value()) {
+        fn values_round_trip_bit_for_bit(valid: i64, available: i64, value in value()) {
             let sample = Sample::new(valid, available, value);
-            let bytes = encode(&sample);
-            let json: serde_json::Value = serde_json::from_slice(&bytes[SAMPLE_HEADER_LEN..]).unwrap();
-            prop_assert_eq!(&json, &sample.value.to_json());
-            let expected = Value::from_json(&sample.value.to_json(), &ValueType::Any).unwrap();
-            prop_assert_eq!(
-                decode(&bytes, &ValueType::Any),
-                Ok(Message::Sample(Sample::new(valid, available, expected)))
-            );
+            prop_assert_eq!(decode(&encode(&sample), &ValueType::Any), Ok(Message::Sample(sample)));
+        }
+
+        /// Typed, the wire agrees with the JSON-lines files: a value fits a type on the wire
+        /// exactly when its JSON fits it in a file, and means the same (compared as JSON).
+        #[test]
+        fn typed_decoding_agrees_with_the_json_files(value in value(), ty in value_type()) {
+            let wire = decode(&encode(&Sample::new(0, 0, value.clone())), &ty);
+            let file = Value::from_json(&value.to_json(), &ty);
+            match (wire, file) {
+                (Ok(Message::Sample(s)), Ok(v)) => prop_assert_eq!(s.value.to_json(), v.to_json()),
+                (Err(DecodeError::Type(_)), Err(_)) => {}
+                (wire, file) => prop_assert!(false, "wire {:?}, file {:?}", wire, file),
+            }
         }
 
         /// No byte string makes decoding panic.
         #[test]
         fn arbitrary_bytes_never_panic(mut bytes in prop::collection::vec(any::<u8>(), 0..64), header in any::<bool>()) {
-            if header && bytes.len() >= 5 {
+            if header && bytes.len() >= 21 {
                 bytes[..5].copy_from_slice(b"KPL\x01S");
             }
             let _ = decode(&bytes, &ValueType::Any);

@@ -10,8 +10,9 @@
 //! - **Nothing is dropped under load.** Publishers use zenoh's `Block` congestion control and
 //!   subscribers a bounded queue: a slow consumer slows its producer down.
 //! - **The end travels.** When a producer ends, an end-of-stream message follows its last
-//!   sample; a subscriber whose producing host goes away without one (a crash, Ctrl-C) ends the
-//!   stream too, with a warning, instead of waiting forever.
+//!   sample, and the producer waits (up to `KPL_ZENOH_WAIT`) until every consuming host has it
+//!   before its process may close the session; a subscriber whose producing host goes away
+//!   without one (a crash) ends the stream too, with a warning, instead of waiting forever.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -282,6 +283,50 @@ impl ZenohSender {
         }
     }
 
+    /// Waits until every consuming host has received the end of the stream (it then drops its
+    /// subscription and token), or until the wait is over. Closing the session earlier would
+    /// undeclare this host's tokens ahead of the samples still queued (zenoh sends declarations
+    /// before data), and a consumer would take that for the producer going away.
+    async fn wait_for_consumers_to_finish(&self) {
+        let start = Instant::now();
+        let deadline = start + self.wait;
+        loop {
+            let replies = match self
+                .session
+                .liveliness()
+                .get(keys::subscriber_tokens(&self.key))
+                .timeout(Duration::from_secs(2))
+                .await
+            {
+                Ok(replies) => replies,
+                Err(e) => {
+                    tracing::warn!(stream = %self.key_expr, "cannot see the consuming hosts: {e}");
+                    return;
+                }
+            };
+            let mut receiving = BTreeSet::new();
+            while let Ok(reply) = replies.recv_async().await {
+                if let Ok(token) = reply.result() {
+                    receiving.insert(keys::token_host(token.key_expr().as_str()).unwrap_or_default());
+                }
+            }
+            if receiving.is_empty() {
+                tracing::debug!(stream = %self.key_expr, waited = ?start.elapsed(), "every consumer has the end");
+                return;
+            }
+            if Instant::now() >= deadline {
+                tracing::warn!(
+                    "stream `{}`: host(s) {receiving:?} still receiving {:.1} s after the end; closing anyway \
+                     (the last samples may not reach them; KPL_ZENOH_WAIT=SECONDS waits longer)",
+                    self.key_expr,
+                    self.wait.as_secs_f64()
+                );
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
     /// Waits until `n` hosts subscribed (their liveliness tokens) and zenoh matches a
     /// subscriber, or until the wait is over. Returns how many hosts subscribed.
     async fn wait_for(&mut self, n: usize) -> Result<usize, zenoh::Error> {
@@ -356,6 +401,9 @@ impl RemoteSender for ZenohSender {
             self.put(bytes).await;
             if self.failures > 0 {
                 tracing::warn!(stream = %self.key_expr, "{} sample(s) could not be published", self.failures);
+            }
+            if !self.consumers.is_empty() {
+                self.wait_for_consumers_to_finish().await;
             }
         })
     }

@@ -74,11 +74,18 @@ async fn samples_cross_with_their_times_then_the_end() {
     for sample in &samples {
         sender.send(sample).await;
     }
-    sender.end().await;
-    for sample in &samples {
-        assert_eq!(recv(&mut receiver).await, Some(Remote::Sample(sample.clone())));
-    }
-    assert_eq!(recv(&mut receiver).await, Some(Remote::End));
+    // The end returns once the consuming host has it and lets go of its subscription, as the
+    // runtime does after an end.
+    let consume = async move {
+        for sample in &samples {
+            assert_eq!(recv(&mut receiver).await, Some(Remote::Sample(sample.clone())));
+        }
+        assert_eq!(recv(&mut receiver).await, Some(Remote::End));
+    };
+    let started = std::time::Instant::now();
+    tokio::join!(sender.end(), consume);
+    // Not a speed check: the end must not have run into its 60-second wait.
+    assert!(started.elapsed() < Duration::from_secs(50), "the end waited for a consumer that had left");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -92,7 +99,7 @@ async fn bytes_that_are_not_kpl_messages_are_malformed() {
     raw.put(b"{\"valid\": 1}".to_vec()).await.unwrap();
     let mut wrong_type = b"KPL\x01S".to_vec();
     wrong_type.extend_from_slice(&[0; 16]);
-    wrong_type.extend_from_slice(b"\"NaN\"");
+    wrong_type.extend_from_slice(b"s\x03\0\0\0NaN"); // the string "NaN" where a float is declared
     raw.put(wrong_type).await.unwrap();
     let mut good = Vec::new();
     kpl_zenoh::codec::encode_sample(&Sample::new(5, 6, Value::Float(2.5)), &mut good).unwrap();
