@@ -153,10 +153,7 @@ fn every_command_has_help_with_an_example() {
         args.push("--help");
         let out = kpl(&args);
         assert_eq!(out.status.code(), Some(0), "{command}");
-        assert!(
-            String::from_utf8_lossy(&out.stdout).contains("Example"),
-            "{command} --help has no example"
-        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("Example"), "{command} --help has no example");
     }
 }
 
