@@ -1,5 +1,5 @@
 //! Data-driven tests of `kpl check` over the spec folders:
-//! - every spec outside `specs/err/` checks with exit 0;
+//! - every spec outside `specs/err/` checks with exit 0 and is in `kpl fmt`'s layout;
 //! - every `specs/warn/NAME.kpl` checks with exit 0 and warnings equal to `NAME.diagnostics`;
 //! - every `specs/err/NAME.kpl` fails with exit 1, and its rendered diagnostics equal
 //!   `specs/err/NAME.diagnostics` (rewrite them with `KPL_BLESS=1 cargo test -p kpl --test specs`);
@@ -39,8 +39,8 @@ fn specs_under(dir: &str) -> Vec<String> {
     out
 }
 
-#[test]
-fn valid_specs_check() {
+/// Every spec outside `specs/err/`.
+fn valid_specs() -> Vec<String> {
     let mut specs = Vec::new();
     for entry in std::fs::read_dir(root().join("specs")).unwrap() {
         let path = entry.unwrap().path();
@@ -50,10 +50,30 @@ fn valid_specs_check() {
         }
     }
     assert!(specs.len() >= 3, "expected valid specs, found {specs:?}");
-    for spec in specs {
+    specs
+}
+
+#[test]
+fn valid_specs_check() {
+    for spec in valid_specs() {
         let out = kpl(&["check", &spec]);
         assert_eq!(out.status.code(), Some(0), "{spec}:\n{}", String::from_utf8_lossy(&out.stderr));
     }
+}
+
+#[test]
+fn valid_specs_are_in_canonical_layout() {
+    let mut args = vec!["fmt", "--check"];
+    let specs = valid_specs();
+    args.extend(specs.iter().map(String::as_str));
+    let out = kpl(&args);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "run `kpl fmt` on these:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
