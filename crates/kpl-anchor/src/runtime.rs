@@ -1,6 +1,7 @@
 //! Anchoring on the stream runtime (`kpl run`): [`register`] adds the signatures of the link
 //! units and prediction models, the `anchor.world_model` unit, and the factory of link processes
-//! to a runtime registry.
+//! to a runtime registry, and `anchor.identify`, through which a running system asks for an
+//! object by description (top-down identification).
 //!
 //! The link processes of one run (on one host) share one [`Anchoring`] engine, kept in the run's
 //! shared extensions: the object store is shared, as several links may lead into one type and
@@ -40,6 +41,7 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
         registry.add_signature(entry);
     }
     registry.add_unit(world_model_entry(), build_world_model);
+    registry.add_unit(identify_entry(), build_identify);
     registry.set_link_processes(build_link);
 }
 
@@ -50,6 +52,21 @@ fn world_model_entry() -> Entry {
         "The world model of the run's anchoring (every object with its state and status), at each time its trigger (a link's output) has a sample.",
     )
     .variadic(1, "trigger", TypeReq::Any, "a link's output: one world model per time it has a sample")
+    .output(TypeReq::Any)
+}
+
+fn identify_entry() -> Entry {
+    let field = |name: &str| (name.to_string(), kpl_core::ValueType::Str);
+    Entry::new(
+        EntryKind::Compute,
+        "anchor.identify",
+        "Asks the run's anchoring for objects by description (top-down identification): one answer per request, with the symbol of the partial object or why it was refused.",
+    )
+    .input(
+        "requests",
+        TypeReq::Fields(vec![field("name"), field("type"), field("description")]),
+        "a request: the name to give the object, its type, and a formula over `this`",
+    )
     .output(TypeReq::Any)
 }
 
@@ -290,4 +307,86 @@ fn build_world_model(
         Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
     };
     Ok(Box::new(SyncUnit(WorldModel { index, shared })))
+}
+
+/// `anchor.identify`: hands each request to the run's anchoring engine
+/// ([`Anchoring::identify_text`]) and answers it. The partial object is created in the engine's
+/// next step and completed by the link processes; `created`, `linked` and `identified` with the
+/// request's name appear on the links' change streams.
+struct Identify {
+    shared: SharedHandle,
+    /// The spec's types and the built-in functions: a description is checked as an `identify`
+    /// item of the spec is, so that a misspelt attribute is refused rather than never true.
+    types: hir::TypeTable,
+    functions: kpl_semantic::registry::Registry,
+}
+
+impl Identify {
+    /// Checks and hands a request to the engine; the symbol of the partial object, or why not.
+    fn ask(&self, name: &str, ty: &str, description: &str) -> Result<Arc<str>, String> {
+        let expr = kpl_syntax::parse_formula(description).map_err(|d| describe_errors(&d))?;
+        if self.types.get(ty).is_some() {
+            let errors = kpl_semantic::check_identification(&self.functions, &self.types, ty, &expr);
+            if !errors.is_empty() {
+                return Err(describe_errors(&errors));
+            }
+        }
+        let mut shared = self.shared.lock().map_err(|e| e.to_string())?;
+        let engine = shared.engine().map_err(|e| e.to_string())?;
+        engine.identify(name, ty, &expr).map_err(|e| e.to_string())
+    }
+}
+
+/// Diagnostics of a description, on one line: `the description does not compile: ...`.
+fn describe_errors(diagnostics: &[kpl_syntax::Diagnostic]) -> String {
+    let messages: Vec<String> = diagnostics
+        .iter()
+        .map(|d| match &d.hint {
+            Some(hint) => format!("{} ({hint})", d.message),
+            None => d.message.clone(),
+        })
+        .collect();
+    format!("the description does not compile: {}", messages.join("; "))
+}
+
+impl Unit for Identify {
+    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+        let Some(request) = input.trigger_value() else { return Ok(()) };
+        let text = |name: &str| request.field(name).and_then(|v| v.as_str().map(str::to_string));
+        let (Some(name), Some(ty), Some(description)) = (text("name"), text("type"), text("description"))
+        else {
+            return Err(ProcessError::failed(
+                "an identification request needs `name`, `type` and `description`",
+            ));
+        };
+        let result = self.ask(&name, &ty, &description);
+        let mut fields: Vec<(Arc<str>, Value)> =
+            vec![(Arc::from("name"), Value::str(&name)), (Arc::from("type"), Value::str(&ty))];
+        let refused = match result {
+            Ok(symbol) => {
+                fields.push((Arc::from("accepted"), Value::Bool(true)));
+                fields.push((Arc::from("symbol"), Value::Str(symbol)));
+                None
+            }
+            Err(e) => {
+                fields.push((Arc::from("accepted"), Value::Bool(false)));
+                fields.push((Arc::from("error"), Value::str(&e)));
+                Some(e)
+            }
+        };
+        out.emit(Value::Record(Arc::new(kpl_core::Record { id: None, fields })));
+        match refused {
+            None => Ok(()),
+            Some(e) => Err(ProcessError::failed(format!("identification `{name}` refused: {e}"))),
+        }
+    }
+}
+
+fn build_identify(
+    ctx: &mut BuildContext<'_>,
+) -> Result<Box<dyn kpl_runtime::process::AsyncUnit>, BuildError> {
+    let shared = SharedHandle::get(ctx);
+    let types = ctx.spec.types.clone();
+    let functions = kpl_runtime::Registry::with_builtins().signatures().clone();
+    Ok(Box::new(SyncUnit(Identify { shared, types, functions })))
 }

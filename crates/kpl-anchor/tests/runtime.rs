@@ -124,3 +124,89 @@ fn the_bridge_spec_runs_on_the_runtime_as_the_engine_computes_it() {
     assert!(by_stream.contains_key("world"));
     let _ = std::fs::remove_dir_all(&out_dir);
 }
+
+/// A running system asks for objects by description through `anchor.identify`: here the
+/// requests are replayed from a file (they could as well come from `zenoh.subscribe`). A good
+/// request is answered with the partial object's symbol and completed by the link processes
+/// (`identified` with its name on a change stream); a refused one is answered with the reason,
+/// counted as an error of the unit, and the run goes on.
+#[test]
+fn a_running_system_asks_for_a_car_by_description() {
+    let registry = registry();
+    let bridge = std::fs::read_to_string(specs_dir().join("bridge.kpl")).unwrap();
+    let out_dir = std::env::temp_dir().join(format!("kpl-anchor-identify-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out_dir);
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let requests = [
+        (5_000_000, "eastbound", "Car", "this.vel.x > 5.0"),
+        (6_000_000, "truck", "Truck", "true"),
+        (7_000_000, "eastbound", "Car", "this.vel.x > 0.0"),
+        (8_000_000, "typo", "Car", "this.speeed > 1.0"),
+    ];
+    let lines: Vec<String> = requests
+        .iter()
+        .map(|(t, name, ty, description)| {
+            serde_json::json!({"stream": "requests", "valid": t, "value": {"name": name, "type": ty, "description": description}})
+                .to_string()
+        })
+        .collect();
+    let requests_path = out_dir.join("requests.jsonl");
+    std::fs::write(&requests_path, lines.join("\n") + "\n").unwrap();
+    let text = format!(
+        "{bridge}\ntype IdentifyRequest {{ name: string, type: string, description: string }}\n\
+         source requests : IdentifyRequest = file.jsonl(path: {path:?})\n\
+         compute answers = anchor.identify(requests)\n\
+         sink everything = file.jsonl(answers, vision_world.changes, world_onroad.changes, onroad_car.changes, path: \"all.jsonl\")\n",
+        path = requests_path.to_string_lossy()
+    );
+    let spec = check(&text, &registry);
+    let config = RunConfig {
+        duration: Some(30_000_000),
+        seed: 3,
+        out_dir: out_dir.clone(),
+        spec_dir: specs_dir(),
+        spec_name: "bridge".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &registry, &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+
+    let samples = read_samples(&out_dir.join("all.jsonl"));
+    let answers: Vec<&serde_json::Value> =
+        samples.iter().filter(|(s, _, _)| s == "answers").map(|(_, _, v)| v).collect();
+    assert_eq!(answers.len(), 4, "{answers:?}");
+    assert_eq!(answers[0]["accepted"], true, "{}", answers[0]);
+    let symbol = answers[0]["symbol"].as_str().unwrap();
+    assert!(symbol.starts_with("co"), "{symbol}");
+    for (answer, reason) in answers[1..].iter().zip(["not declared", "already in use", "does not compile"]) {
+        assert_eq!(answer["accepted"], false, "{answer}");
+        assert!(answer["error"].as_str().unwrap().contains(reason), "{answer}");
+    }
+    // Checked as the spec's `identify` items are: a misspelt attribute is named, with the type's.
+    let typo = answers[3]["error"].as_str().unwrap();
+    assert!(typo.contains("`Car` has no attribute `speeed`") && typo.contains("lane_offset"), "{typo}");
+    // The request was completed: `identified` with its name, at or after the request.
+    let changes: Vec<(Time, &serde_json::Value)> = samples
+        .iter()
+        .filter(|(s, _, _)| s.ends_with(".changes"))
+        .flat_map(|(_, t, v)| v.as_array().unwrap().iter().map(move |c| (*t, c)))
+        .collect();
+    let created = changes
+        .iter()
+        .find(|(_, c)| c["kind"] == "created" && c["name"] == "eastbound")
+        .expect("the partial object's creation is reported");
+    assert_eq!(created.1["symbol"], symbol);
+    assert!(created.0 >= 5_000_000);
+    let identified = changes
+        .iter()
+        .find(|(_, c)| c["kind"] == "identified" && c["name"] == "eastbound")
+        .unwrap_or_else(|| panic!("`eastbound` never identified: {changes:?}"));
+    assert!(identified.0 >= created.0);
+    assert!(!changes.iter().any(|(_, c)| c["name"] == "truck" || c["name"] == "typo"));
+    // The refusals are counted and reported as errors of the unit; the run went on to the end.
+    let unit = report.summary.processes.iter().find(|p| p.process == "answers").unwrap();
+    assert_eq!(unit.errors, 3, "{unit:?}");
+    assert!(unit.error_examples.iter().any(|e| e.contains("`truck` refused")), "{unit:?}");
+    assert!(matches!(report.ending, Ending::DurationReached | Ending::SourcesEnded), "{:?}", report.ending);
+    let _ = std::fs::remove_dir_all(&out_dir);
+}

@@ -31,6 +31,37 @@ impl Checked {
     }
 }
 
+/// Checks the description of an identification asked for while a spec runs, as an
+/// `identify NAME : TYPE where FORMULA` item of the spec is checked: `this` is an object of type
+/// `ty` (which must be declared), and the formula may use `registry`'s functions. Returns the
+/// errors; an empty list means the description is well typed.
+pub fn check_identification(
+    registry: &Registry,
+    types: &TypeTable,
+    ty: &str,
+    description: &ast::Expr,
+) -> Vec<Diagnostic> {
+    let mut diagnostics = Vec::new();
+    let Some(record) = types.get(ty) else {
+        let names: Vec<&str> = types.names().collect();
+        diagnostics.push(diag::unknown_type(description.span, ty, &names));
+        return diagnostics;
+    };
+    let mut checker = FormulaChecker {
+        registry,
+        local_functions: &[],
+        types,
+        context: Context::Identify,
+        vars: vec![("this".to_string(), ValueType::Record(record.clone()))],
+        streams: None,
+        diagnostics: &mut diagnostics,
+        used_streams: Vec::new(),
+        quantified_types: Vec::new(),
+    };
+    checker.check_formula(description);
+    diagnostics
+}
+
 /// Checks a parsed spec against a registry.
 pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
     let mut checker =

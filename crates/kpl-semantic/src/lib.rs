@@ -26,7 +26,7 @@ pub mod render;
 mod suggest;
 mod types;
 
-pub use check::{Checked, check};
+pub use check::{Checked, check, check_identification};
 pub use formula::bound_micros;
 pub use suggest::{closest, did_you_mean};
 pub use types::{BUILTIN_TYPES, default_symbol};
