@@ -47,18 +47,9 @@ pub fn check_identification(
         diagnostics.push(diag::unknown_type(description.span, ty, &names));
         return diagnostics;
     };
-    let mut checker = FormulaChecker {
-        registry,
-        local_functions: &[],
-        types,
-        context: Context::Identify,
-        vars: vec![("this".to_string(), ValueType::Record(record.clone()))],
-        streams: None,
-        diagnostics: &mut diagnostics,
-        used_streams: Vec::new(),
-        quantified_types: Vec::new(),
-    };
-    checker.check_formula(description);
+    let this = vec![("this".to_string(), ValueType::Record(record.clone()))];
+    FormulaChecker::new(registry, types, Context::Identify, this, &mut diagnostics)
+        .check_formula(description);
     diagnostics
 }
 
@@ -592,7 +583,9 @@ impl<'a> Checker<'a> {
                 continue;
             }
             seen.insert(decl.name.name.clone(), decl.name.span);
-            let Some(ty) = self.record_type(&decl.ty) else { continue };
+            if self.record_type(&decl.ty).is_none() {
+                continue;
+            }
             let linked_into =
                 drafts.iter().any(|d| matches!(d.decl, Decl::Link(l) if l.to_type.name == decl.ty.name));
             if !linked_into {
@@ -608,20 +601,9 @@ impl<'a> Checker<'a> {
                     )),
                 );
             }
-            let mut diagnostics = Vec::new();
-            let mut checker = FormulaChecker {
-                registry: self.registry,
-                local_functions: &[],
-                types: &self.types,
-                context: Context::Identify,
-                vars: vec![("this".to_string(), ty)],
-                streams: None,
-                diagnostics: &mut diagnostics,
-                used_streams: Vec::new(),
-                quantified_types: Vec::new(),
-            };
-            checker.check_formula(&decl.description);
-            self.diagnostics.extend(diagnostics);
+            // The same check as an identification asked for while the spec runs.
+            let errors = check_identification(self.registry, &self.types, &decl.ty.name, &decl.description);
+            self.diagnostics.extend(errors);
             out.push(hir::Identification {
                 name: decl.name.name.clone(),
                 ty: decl.ty.name.clone(),
@@ -1058,30 +1040,22 @@ impl Resolver<'_, '_, '_> {
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
         // Borrow the checker's parts separately: the formula checker reads the types and the
         // registry while the scope resolves stream names and marks streams used.
-        let mut diagnostics = Vec::new();
+        let Checker { registry, types, diagnostics, names } = &mut *self.checker;
         let mut scope = MonitorScope {
             refs: BTreeMap::new(),
-            names: &self.checker.names,
+            names,
             drafts: self.drafts,
             streams: self.streams,
             used: self.used,
         };
         let mut checker = FormulaChecker {
-            registry: self.checker.registry,
-            local_functions: &[],
-            types: &self.checker.types,
-            context: Context::Monitor,
-            vars: Vec::new(),
             streams: Some(&mut scope),
-            diagnostics: &mut diagnostics,
-            used_streams: Vec::new(),
-            quantified_types: Vec::new(),
+            ..FormulaChecker::new(registry, types, Context::Monitor, Vec::new(), diagnostics)
         };
         checker.check_formula(&m.formula);
         let used_streams = std::mem::take(&mut checker.used_streams);
         let quantified = std::mem::take(&mut checker.quantified_types);
         drop(checker);
-        self.checker.diagnostics.extend(diagnostics);
         let refs = std::mem::take(&mut scope.refs);
         let mut inputs: Vec<hir::Input> = used_streams
             .iter()
@@ -1111,20 +1085,10 @@ impl Resolver<'_, '_, '_> {
         vars: Vec<(String, ValueType)>,
         local_functions: &[Function],
     ) {
-        let mut diagnostics = Vec::new();
-        let mut checker = FormulaChecker {
-            registry: self.checker.registry,
-            local_functions,
-            types: &self.checker.types,
-            context,
-            vars,
-            streams: None,
-            diagnostics: &mut diagnostics,
-            used_streams: Vec::new(),
-            quantified_types: Vec::new(),
-        };
+        let Checker { registry, types, diagnostics, .. } = &mut *self.checker;
+        let mut checker = FormulaChecker::new(registry, types, context, vars, diagnostics);
+        checker.local_functions = local_functions;
         checker.check_formula(expr);
-        self.checker.diagnostics.extend(diagnostics);
     }
 }
 

@@ -69,7 +69,29 @@ pub(crate) fn assignable(found: &ValueType, expected: &ValueType, types: &TypeTa
     }
 }
 
-impl FormulaChecker<'_> {
+impl<'a> FormulaChecker<'a> {
+    /// A checker for a formula that names no streams and may call only the registry's functions
+    /// (set `streams` or `local_functions` on the result where a formula may).
+    pub fn new(
+        registry: &'a Registry,
+        types: &'a TypeTable,
+        context: Context,
+        vars: Vec<(String, ValueType)>,
+        diagnostics: &'a mut Vec<Diagnostic>,
+    ) -> Self {
+        FormulaChecker {
+            registry,
+            local_functions: &[],
+            types,
+            context,
+            vars,
+            streams: None,
+            diagnostics,
+            used_streams: Vec::new(),
+            quantified_types: Vec::new(),
+        }
+    }
+
     /// Checks a formula (must be boolean).
     pub fn check_formula(&mut self, expr: &ast::Expr) {
         let ty = self.expr(expr);
