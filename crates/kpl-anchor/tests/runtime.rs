@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use kpl_anchor::{AnchorConfig, Anchoring, Snapshot};
 use kpl_core::{Time, Value};
-use kpl_runtime::{Ending, RunConfig};
+use kpl_runtime::{Ending, RunConfig, RunReport};
 
 fn registry() -> kpl_runtime::Registry {
     // Built-ins, kpl-std and kpl_anchor::runtime::register, as the `kpl` command builds it.
@@ -26,6 +26,35 @@ fn check(text: &str, registry: &kpl_runtime::Registry) -> kpl_semantic::hir::Spe
     let checked = kpl_semantic::check(&parse.spec, registry.signatures());
     assert!(!checked.has_errors(), "{:?}", checked.diagnostics);
     checked.spec.unwrap()
+}
+
+/// A fresh directory for one test's run (`name` keeps the tests apart).
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kpl-anchor-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Runs a spec made from `bridge.kpl` as `kpl run` does, with simulated time (seed 3) for
+/// `duration`, its outputs in `out_dir`; no process may fail.
+fn run_bridge(
+    spec: &kpl_semantic::hir::Spec,
+    registry: &kpl_runtime::Registry,
+    out_dir: &Path,
+    duration: Time,
+) -> RunReport {
+    let config = RunConfig {
+        duration: Some(duration),
+        seed: 3,
+        out_dir: out_dir.to_path_buf(),
+        spec_dir: specs_dir(),
+        spec_name: "bridge".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(spec, registry, &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    report
 }
 
 /// One recorded sample: (stream, valid time, value as JSON).
@@ -50,18 +79,8 @@ fn the_bridge_spec_runs_on_the_runtime_as_the_engine_computes_it() {
         "{bridge}\nsink everything = file.jsonl(tracker, vision_world, world_onroad, onroad_car, vision_world.changes, world_onroad.changes, onroad_car.changes, world, path: \"all.jsonl\")\ncompute world = anchor.world_model(onroad_car)\n"
     );
     let spec = check(&text, &registry);
-    let out_dir = std::env::temp_dir().join(format!("kpl-anchor-runtime-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out_dir);
-    let config = RunConfig {
-        duration: Some(40_000_000),
-        seed: 3,
-        out_dir: out_dir.clone(),
-        spec_dir: specs_dir(),
-        spec_name: "bridge".into(),
-        ..RunConfig::default()
-    };
-    let report = kpl_runtime::run(&spec, &registry, &config, None).unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let out_dir = fresh_dir("runtime");
+    let report = run_bridge(&spec, &registry, &out_dir, 40_000_000);
     assert!(matches!(report.ending, Ending::DurationReached | Ending::SourcesEnded), "{:?}", report.ending);
 
     let samples = read_samples(&out_dir.join("all.jsonl"));
@@ -134,9 +153,7 @@ fn the_bridge_spec_runs_on_the_runtime_as_the_engine_computes_it() {
 fn a_running_system_asks_for_a_car_by_description() {
     let registry = registry();
     let bridge = std::fs::read_to_string(specs_dir().join("bridge.kpl")).unwrap();
-    let out_dir = std::env::temp_dir().join(format!("kpl-anchor-identify-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out_dir);
-    std::fs::create_dir_all(&out_dir).unwrap();
+    let out_dir = fresh_dir("identify");
     let requests = [
         (5_000_000, "eastbound", "Car", "this.vel.x > 5.0"),
         (6_000_000, "truck", "Truck", "true"),
@@ -160,16 +177,7 @@ fn a_running_system_asks_for_a_car_by_description() {
         path = requests_path.to_string_lossy()
     );
     let spec = check(&text, &registry);
-    let config = RunConfig {
-        duration: Some(30_000_000),
-        seed: 3,
-        out_dir: out_dir.clone(),
-        spec_dir: specs_dir(),
-        spec_name: "bridge".into(),
-        ..RunConfig::default()
-    };
-    let report = kpl_runtime::run(&spec, &registry, &config, None).unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let report = run_bridge(&spec, &registry, &out_dir, 30_000_000);
 
     let samples = read_samples(&out_dir.join("all.jsonl"));
     let answers: Vec<&serde_json::Value> =
