@@ -32,6 +32,7 @@ use kpl_semantic::hir;
 use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
 
 use crate::engine::{AnchorConfig, Anchoring, Snapshot};
+use crate::error::IdentifyError;
 use crate::networks::Networks;
 
 /// Adds anchoring to a runtime registry: the signatures of the link units and prediction models,
@@ -100,13 +101,12 @@ struct SharedHandle(Arc<Mutex<Shared>>);
 
 impl SharedHandle {
     fn get(ctx: &mut BuildContext<'_>) -> SharedHandle {
-        let spec = ctx.spec.clone();
-        let spec_dir = ctx.spec_dir.to_path_buf();
+        let (spec, spec_dir) = (ctx.spec, ctx.spec_dir);
         ctx.shared
             .get_or_insert_with(|| {
                 SharedHandle(Arc::new(Mutex::new(Shared {
-                    spec,
-                    spec_dir,
+                    spec: spec.clone(),
+                    spec_dir: spec_dir.to_path_buf(),
                     links: Vec::new(),
                     engine: None,
                     queues: BTreeMap::new(),
@@ -310,43 +310,44 @@ fn build_world_model(
 }
 
 /// `anchor.identify`: hands each request to the run's anchoring engine
-/// ([`Anchoring::identify_text`]) and answers it. The partial object is created in the engine's
-/// next step and completed by the link processes; `created`, `linked` and `identified` with the
+/// ([`Anchoring::identify`]) and answers it. The partial object is created in the engine's next
+/// step and completed by the link processes; `created`, `linked` and `identified` with the
 /// request's name appear on the links' change streams.
 struct Identify {
     shared: SharedHandle,
-    /// The spec's types and the built-in functions: a description is checked as an `identify`
-    /// item of the spec is, so that a misspelt attribute is refused rather than never true.
-    types: hir::TypeTable,
+    /// The built-in functions: a description is checked as an `identify` item of the spec is
+    /// (against the spec's types), so that a misspelt attribute is refused rather than never true.
     functions: kpl_semantic::registry::Registry,
 }
 
 impl Identify {
     /// Checks and hands a request to the engine; the symbol of the partial object, or why not.
     fn ask(&self, name: &str, ty: &str, description: &str) -> Result<Arc<str>, String> {
-        let expr = kpl_syntax::parse_formula(description).map_err(|d| describe_errors(&d))?;
-        if self.types.get(ty).is_some() {
-            let errors = kpl_semantic::check_identification(&self.functions, &self.types, ty, &expr);
+        let expr = kpl_syntax::parse_formula(description).map_err(|d| description_error(&d))?;
+        let mut shared = self.shared.lock().map_err(|e| e.to_string())?;
+        // An undeclared type is left to the engine, which says so.
+        if shared.spec.types.get(ty).is_some() {
+            let errors = kpl_semantic::check_identification(&self.functions, &shared.spec.types, ty, &expr);
             if !errors.is_empty() {
-                return Err(describe_errors(&errors));
+                return Err(description_error(&errors));
             }
         }
-        let mut shared = self.shared.lock().map_err(|e| e.to_string())?;
         let engine = shared.engine().map_err(|e| e.to_string())?;
         engine.identify(name, ty, &expr).map_err(|e| e.to_string())
     }
 }
 
-/// Diagnostics of a description, on one line: `the description does not compile: ...`.
-fn describe_errors(diagnostics: &[kpl_syntax::Diagnostic]) -> String {
-    let messages: Vec<String> = diagnostics
+/// Diagnostics of a description, with their hints, as the engine words a description that does
+/// not compile ([`IdentifyError::Description`]).
+fn description_error(diagnostics: &[kpl_syntax::Diagnostic]) -> String {
+    let messages = diagnostics
         .iter()
         .map(|d| match &d.hint {
             Some(hint) => format!("{} ({hint})", d.message),
             None => d.message.clone(),
         })
         .collect();
-    format!("the description does not compile: {}", messages.join("; "))
+    IdentifyError::Description(messages).to_string()
 }
 
 impl Unit for Identify {
@@ -386,7 +387,6 @@ fn build_identify(
     ctx: &mut BuildContext<'_>,
 ) -> Result<Box<dyn kpl_runtime::process::AsyncUnit>, BuildError> {
     let shared = SharedHandle::get(ctx);
-    let types = ctx.spec.types.clone();
     let functions = kpl_runtime::Registry::with_builtins().signatures().clone();
-    Ok(Box::new(SyncUnit(Identify { shared, types, functions })))
+    Ok(Box::new(SyncUnit(Identify { shared, functions })))
 }
