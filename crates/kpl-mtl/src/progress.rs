@@ -376,23 +376,14 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             Kind::False => FALSE,
             Kind::And | Kind::Or => {
                 let is_and = node.kind == Kind::And;
-                let absorbing = if is_and { FALSE } else { TRUE };
                 let start = self.scratch.buf.len();
-                let mut decided = false;
                 for &kid in old.kids_of(&node) {
                     let v = self.progress(kid)?;
-                    if v == absorbing {
-                        decided = true;
+                    if self.push_child(is_and, start, v) {
                         break;
                     }
-                    self.scratch.buf.push(v);
                 }
-                if decided {
-                    self.scratch.buf.truncate(start);
-                    absorbing
-                } else {
-                    self.junction(is_and, start)
-                }
+                self.junction(is_and, start)
             }
             Kind::Temporal(op) => {
                 let env = if node.env == 0 { 0 } else { self.new.intern_env(&old.envs[node.env as usize]) };
@@ -502,29 +493,18 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             }
             TNode::And(kids) | TNode::Or(kids) => {
                 let is_and = matches!(formula.nodes[tpl as usize], TNode::And(_));
-                let absorbing = if is_and { FALSE } else { TRUE };
                 let start = self.scratch.buf.len();
-                let mut decided = false;
                 for &kid in kids {
                     let v = self.instantiate(kid, env)?;
-                    if v == absorbing {
-                        decided = true;
+                    if self.push_child(is_and, start, v) {
                         break;
                     }
-                    self.scratch.buf.push(v);
                 }
-                if decided {
-                    self.scratch.buf.truncate(start);
-                    absorbing
-                } else {
-                    self.junction(is_and, start)
-                }
+                self.junction(is_and, start)
             }
             TNode::Temporal { op, lo, hi, .. } => self.temporal(*op, *lo, *hi, tpl, env, true)?,
             TNode::Quant { forall, domain, body } => {
-                let absorbing = if *forall { FALSE } else { TRUE };
                 let start = self.scratch.buf.len();
-                let mut decided = false;
                 let base = self.new.envs[env as usize].clone();
                 for object in self.state.objects(*domain) {
                     let id = match object {
@@ -543,18 +523,11 @@ impl<S: State + ?Sized> Stepper<'_, S> {
                     bindings.push(Binding { domain: *domain, id });
                     let inner_env = self.new.intern_env(&Arc::from(bindings));
                     let v = self.instantiate(*body, inner_env)?;
-                    if v == absorbing {
-                        decided = true;
+                    if self.push_child(*forall, start, v) {
                         break;
                     }
-                    self.scratch.buf.push(v);
                 }
-                if decided {
-                    self.scratch.buf.truncate(start);
-                    absorbing
-                } else {
-                    self.junction(*forall, start)
-                }
+                self.junction(*forall, start)
             }
         };
         if env == 0 {
@@ -563,6 +536,18 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             self.scratch.memo_inst_env.insert((tpl, env), result);
         }
         Ok(result)
+    }
+
+    /// Pushes the value of a child of the `and` (or `or`) whose children start at `buf[start]`.
+    /// Returns true when the value decides it (`false` for `and`): the value then replaces the
+    /// children pushed so far, and the caller evaluates no more of them.
+    fn push_child(&mut self, is_and: bool, start: usize, v: u32) -> bool {
+        let decides = v == if is_and { FALSE } else { TRUE };
+        if decides {
+            self.scratch.buf.truncate(start);
+        }
+        self.scratch.buf.push(v);
+        decides
     }
 
     /// Builds the `and` (or `or`) of `buf[start..]`, simplified, and pops those children.
