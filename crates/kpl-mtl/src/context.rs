@@ -21,13 +21,11 @@ use crate::term::{DomainId, FuncId, Function, SlotId, builtins};
 /// ```
 #[derive(Debug, Clone)]
 pub struct Context {
-    slot_names: Vec<Arc<str>>,
-    slots: HashMap<Arc<str>, SlotId>,
+    slots: Names,
     /// When set, an unknown name becomes a new slot instead of an error (the command line, whose
     /// states are JSON objects with whatever fields they have).
     open_names: bool,
-    domain_names: Vec<Arc<str>>,
-    domains: HashMap<Arc<str>, DomainId>,
+    domains: Names,
     functions: Vec<Function>,
     time_unit: TimeUnit,
     tick_unit: TimeUnit,
@@ -39,11 +37,9 @@ impl Context {
     /// milliseconds in a spec. Built-in functions are registered.
     pub fn new(time_unit: TimeUnit, tick_unit: TimeUnit) -> Context {
         Context {
-            slot_names: Vec::new(),
-            slots: HashMap::new(),
+            slots: Names::default(),
             open_names: false,
-            domain_names: Vec::new(),
-            domains: HashMap::new(),
+            domains: Names::default(),
             functions: builtins(),
             time_unit,
             tick_unit,
@@ -61,34 +57,20 @@ impl Context {
 
     /// Declares a name of the state; declaring it again returns the same slot.
     pub fn declare_value(&mut self, name: &str) -> SlotId {
-        if let Some(slot) = self.slots.get(name) {
-            return *slot;
-        }
-        let slot = self.slot_names.len() as SlotId;
-        let name: Arc<str> = Arc::from(name);
-        self.slot_names.push(name.clone());
-        self.slots.insert(name, slot);
-        slot
+        self.slots.declare(name)
     }
 
     pub fn slot(&self, name: &str) -> Option<SlotId> {
-        self.slots.get(name).copied()
+        self.slots.get(name)
     }
 
     /// Declares an object type that quantifiers may range over.
     pub fn declare_object_type(&mut self, name: &str) -> DomainId {
-        if let Some(d) = self.domains.get(name) {
-            return *d;
-        }
-        let d = self.domain_names.len() as DomainId;
-        let name: Arc<str> = Arc::from(name);
-        self.domain_names.push(name.clone());
-        self.domains.insert(name, d);
-        d
+        self.domains.declare(name)
     }
 
     pub fn domain(&self, name: &str) -> Option<DomainId> {
-        self.domains.get(name).copied()
+        self.domains.get(name)
     }
 
     /// Registers a host function (a predicate such as `on_road`); a later registration of the
@@ -115,11 +97,11 @@ impl Context {
     }
 
     pub fn slot_names(&self) -> &[Arc<str>] {
-        &self.slot_names
+        &self.slots.names
     }
 
     pub fn domain_names(&self) -> &[Arc<str>] {
-        &self.domain_names
+        &self.domains.names
     }
 
     pub fn time_unit(&self) -> TimeUnit {
@@ -128,5 +110,30 @@ impl Context {
 
     pub fn tick_unit(&self) -> TimeUnit {
         self.tick_unit
+    }
+}
+
+/// Names numbered in the order they were first declared (slots, object types).
+#[derive(Debug, Clone, Default)]
+struct Names {
+    names: Vec<Arc<str>>,
+    index: HashMap<Arc<str>, u32>,
+}
+
+impl Names {
+    /// The number of `name`, given the next free one if it is new.
+    fn declare(&mut self, name: &str) -> u32 {
+        if let Some(i) = self.index.get(name) {
+            return *i;
+        }
+        let i = self.names.len() as u32;
+        let name: Arc<str> = Arc::from(name);
+        self.names.push(name.clone());
+        self.index.insert(name, i);
+        i
+    }
+
+    fn get(&self, name: &str) -> Option<u32> {
+        self.index.get(name).copied()
     }
 }
