@@ -80,10 +80,11 @@ impl Aapa {
         let mut notes = Vec::new();
 
         // Anchors of the previous cycle (a malformed state with duplicate symbols keeps the first).
-        let mut seen_symbols = HashSet::new();
+        let mut used_symbols: HashSet<Symbol> =
+            HashSet::with_capacity(previous.anchors.len() + percepts.len());
         let mut work: Vec<Work> = Vec::with_capacity(previous.anchors.len() + percepts.len());
         for anchor in &previous.anchors {
-            if !seen_symbols.insert(anchor.symbol.clone()) {
+            if !used_symbols.insert(anchor.symbol.clone()) {
                 notes.push(format!("duplicate anchor `{}` in the previous state ignored", anchor.symbol));
                 continue;
             }
@@ -154,8 +155,8 @@ impl Aapa {
             w.aligned = true;
         }
 
-        // New percepts become new anchors with confidence 0 (III-B.2c).
-        let mut used_symbols: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+        // New percepts become new anchors with confidence 0 (III-B.2c), named apart from every
+        // anchor so far (`used_symbols` holds exactly the symbols of `work`).
         for (percept, _) in percepts.iter().zip(&percept_used).filter(|(_, used)| !**used) {
             let symbol = fresh_symbol(percept, &used_symbols);
             used_symbols.insert(symbol.clone());
@@ -535,7 +536,12 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
     }
 }
 
+/// Where each anchor is in `work`, by symbol. Only attachments' parents are looked up in it, so a
+/// cycle without attachments (most cycles) builds none.
 fn symbol_index(work: &[Work]) -> HashMap<Symbol, usize> {
+    if work.iter().all(|w| w.anchor.attachment.is_none()) {
+        return HashMap::new();
+    }
     work.iter().enumerate().filter(|(_, w)| !w.removed).map(|(i, w)| (w.anchor.symbol.clone(), i)).collect()
 }
 
