@@ -243,19 +243,19 @@ impl PerceptionFile {
     /// the frame, the way a detector numbers instances (and so not stable over time).
     pub fn percepts(&self, frame: usize) -> Vec<Percept> {
         let Some(detections) = self.frames.get(frame) else { return Vec::new() };
-        let class_of = |d: &Detection| self.classes.get(d.class as usize).map(String::as_str);
-        let shape_of = |d: &Detection| {
-            let class = class_of(d).unwrap_or("");
-            class.split('_').nth(2).unwrap_or(class)
-        };
-        // Detections naming no class are skipped (`read` rejects such files).
-        let mut order: Vec<&Detection> = detections.iter().filter(|d| class_of(d).is_some()).collect();
-        order.sort_by(|a, b| shape_of(a).cmp(shape_of(b)).then(a.bbox[0].total_cmp(&b.bbox[0])));
+        // Detections naming no class are skipped (`read` rejects such files). Each one's class and
+        // shape are looked up once, not in every comparison of the sort.
+        let mut order: Vec<(&str, &str, &Detection)> = detections
+            .iter()
+            .filter_map(|d| {
+                let class = self.classes.get(d.class as usize)?.as_str();
+                Some((class.split('_').nth(2).unwrap_or(class), class, d))
+            })
+            .collect();
+        order.sort_by(|a, b| a.0.cmp(b.0).then(a.2.bbox[0].total_cmp(&b.2.bbox[0])));
         let mut out = Vec::with_capacity(order.len());
         let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
-        for d in order {
-            let class = class_of(d).unwrap_or("");
-            let shape = shape_of(d);
+        for (shape, class, d) in order {
             let n = counts.entry(shape).or_insert(0);
             let [x1, y1, x2, y2] = d.bbox;
             out.push(Percept::new(&format!("{shape}{n}"), class, BBox::new(x1, y1, x2, y2)));
