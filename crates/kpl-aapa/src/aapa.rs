@@ -19,6 +19,7 @@
 //! assert!((cube.confidence - 0.2).abs() < 1e-9); // 0 when first seen, +0.1 per aligned cycle
 //! ```
 
+use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
 
 use kpl_core::{BBox, Time};
@@ -74,26 +75,56 @@ impl Aapa {
         camera: Option<&CameraPose>,
         previous: &WorldState,
     ) -> Result<WorldState, AapaError> {
+        self.cycle(time, percepts, actions, camera, Cow::Borrowed(previous))
+    }
+
+    /// [`Aapa::step`] taking the previous world state by value, for the usual loop
+    /// `world = aapa.step_from(.., world)?`: its anchors move into the new state instead of being
+    /// copied.
+    pub fn step_from(
+        &self,
+        time: Time,
+        percepts: &[Percept],
+        actions: &[Action],
+        camera: Option<&CameraPose>,
+        previous: WorldState,
+    ) -> Result<WorldState, AapaError> {
+        self.cycle(time, percepts, actions, camera, Cow::Owned(previous))
+    }
+
+    fn cycle(
+        &self,
+        time: Time,
+        percepts: &[Percept],
+        actions: &[Action],
+        camera: Option<&CameraPose>,
+        previous: Cow<'_, WorldState>,
+    ) -> Result<WorldState, AapaError> {
         let p = &self.params;
-        self.validate_inputs(time, percepts, actions, previous)?;
-        let dt_seconds = previous.time.map(|t| (time - t) as f64 / 1e6);
+        self.validate_inputs(time, percepts, actions, &previous)?;
+        let (previous_time, previous_camera) = (previous.time, previous.camera);
+        let previous_anchors = match previous {
+            Cow::Borrowed(w) => w.anchors.clone(),
+            Cow::Owned(w) => w.anchors,
+        };
+        let dt_seconds = previous_time.map(|t| (time - t) as f64 / 1e6);
         let mut notes = Vec::new();
 
         // Anchors of the previous cycle (a malformed state with duplicate symbols keeps the first).
         let mut used_symbols: HashSet<Symbol> =
-            HashSet::with_capacity(previous.anchors.len() + percepts.len());
-        let mut work: Vec<Work> = Vec::with_capacity(previous.anchors.len() + percepts.len());
-        for anchor in &previous.anchors {
+            HashSet::with_capacity(previous_anchors.len() + percepts.len());
+        let mut work: Vec<Work> = Vec::with_capacity(previous_anchors.len() + percepts.len());
+        for anchor in previous_anchors {
             if !used_symbols.insert(anchor.symbol.clone()) {
                 notes.push(format!("duplicate anchor `{}` in the previous state ignored", anchor.symbol));
                 continue;
             }
             let seen_last_cycle =
-                anchor.status == AnchorStatus::Visible && Some(anchor.last_seen) == previous.time;
+                anchor.status == AnchorStatus::Visible && Some(anchor.last_seen) == previous_time;
             work.push(Work {
                 previous_centre: seen_last_cycle.then(|| centre(&anchor.bbox)),
                 previous_confidence: anchor.confidence,
-                anchor: anchor.clone(),
+                anchor,
                 aligned: false,
                 removed: false,
             });
@@ -101,12 +132,12 @@ impl Aapa {
 
         // 1a. Camera movement alignment.
         if let Some(pose) = camera {
-            self.compensate_camera(pose, previous.camera.as_ref(), &mut work)?;
+            self.compensate_camera(pose, previous_camera.as_ref(), &mut work)?;
         }
 
         // Motion prediction for objects an action is moving (extension).
         if p.extensions.predict_motion
-            && let Some(previous_time) = previous.time
+            && let Some(previous_time) = previous_time
         {
             predict_motion(&mut work, previous_time, time, p.extensions.motion_profile);
         }
@@ -262,7 +293,7 @@ impl Aapa {
         }
         Ok(WorldState {
             time: Some(time),
-            camera: camera.copied().or(previous.camera),
+            camera: camera.copied().or(previous_camera),
             anchors: work.into_iter().map(|w| w.anchor).collect(),
             relations,
             notes,

@@ -113,7 +113,7 @@ pub fn predict(
             for (frame, frame_actions) in actions.iter().enumerate() {
                 let percepts = perception.percepts(frame);
                 world = aapa
-                    .step(frame as Time * FRAME_US, &percepts, frame_actions, None, &world)
+                    .step_from(frame as Time * FRAME_US, &percepts, frame_actions, None, world)
                     .map_err(|source| CaterError::Aapa { video: scene.video.clone(), frame, source })?;
                 out.push(
                     world

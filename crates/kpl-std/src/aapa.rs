@@ -159,7 +159,7 @@ impl Unit for AnchorUnit {
         }
         let mut world = self
             .aapa
-            .step(time, &percepts, &actions, camera.as_ref(), &previous)
+            .step_from(time, &percepts, &actions, camera.as_ref(), previous)
             .map_err(|e| at(e.to_string()))?;
         world.notes.extend(note);
         let value = world_to_value(&world);
