@@ -79,16 +79,19 @@ pub fn link_context(functions: Vec<Function>) -> Context {
     context
 }
 
+/// Lowers an expression in `context` and compiles it: the lowered and the compiled formula.
+fn lower_and_compile(expr: &ast::Expr, context: &mut Context) -> Result<(Mtl, Arc<Formula>), Vec<String>> {
+    let mtl = kpl_mtl::lower(expr, context).map_err(messages)?;
+    let formula = Formula::new(&mtl, context).map_err(|e| vec![e.to_string()])?;
+    Ok((mtl, Arc::new(formula)))
+}
+
 fn compile_one(
     expr: &ast::Expr,
     context: &mut Context,
     condition: &'static str,
 ) -> Result<(Mtl, Arc<Formula>), ConditionError> {
-    let mtl =
-        kpl_mtl::lower(expr, context).map_err(|e| ConditionError { condition, messages: messages(e) })?;
-    let formula = Formula::new(&mtl, context)
-        .map_err(|e| ConditionError { condition, messages: vec![e.to_string()] })?;
-    Ok((mtl, Arc::new(formula)))
+    lower_and_compile(expr, context).map_err(|messages| ConditionError { condition, messages })
 }
 
 impl LinkConditions {
@@ -111,14 +114,10 @@ impl LinkConditions {
     }
 }
 
-/// The description of an identification alone (`this` is an existing object of the type).
-pub fn description_formula(
-    description: &ast::Expr,
-    functions: Vec<Function>,
-) -> Result<Arc<Formula>, Vec<String>> {
-    let mut context = link_context(functions);
-    let mtl = kpl_mtl::lower(description, &mut context).map_err(messages)?;
-    Formula::new(&mtl, &context).map(Arc::new).map_err(|e| vec![e.to_string()])
+/// The description of an identification alone (`this` is an existing object of the type; the
+/// built-in functions only).
+pub fn description_formula(description: &ast::Expr) -> Result<Arc<Formula>, Vec<String>> {
+    lower_and_compile(description, &mut link_context(Vec::new())).map(|(_, formula)| formula)
 }
 
 /// The gate of a formula over `from` and `to` (module doc).

@@ -403,8 +403,7 @@ impl Anchoring {
         {
             return Err(IdentifyError::NameInUse(name.to_string()));
         }
-        let description_only =
-            description_formula(description, Vec::new()).map_err(IdentifyError::Description)?;
+        let description_only = description_formula(description).map_err(IdentifyError::Description)?;
         let mut per_link = Vec::new();
         for &l in &links_into {
             let formula = self.links[l as usize]
