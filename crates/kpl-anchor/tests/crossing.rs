@@ -5,10 +5,12 @@
 //! hypothesis, and that branch is the one kept: the on-road object is on the north road again.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
+mod common;
+
 use std::sync::Arc;
 
-use kpl_anchor::{AnchorConfig, Anchoring, ChangeKind, Snapshot, Status};
-use kpl_core::{Record, Time, Value};
+use kpl_anchor::{Anchoring, ChangeKind, Status};
+use kpl_core::Value;
 
 const SPEC: &str = r#"
 type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
@@ -31,23 +33,11 @@ forget after 30s
 "#;
 
 fn percept(id: &str, pos: [f64; 2], vel: [f64; 2]) -> Value {
-    Value::Record(Arc::new(Record {
-        id: Some(id.into()),
-        fields: vec![
-            ("pos".into(), Value::Vec2(pos)),
-            ("vel".into(), Value::Vec2(vel)),
-            ("size".into(), Value::Float(4.5)),
-        ],
-    }))
+    common::percept(id, pos, vel, 4.5)
 }
 
 fn step(engine: &mut Anchoring, i: i64, items: Vec<Value>) -> kpl_anchor::StepOutput {
-    let objects = Value::List(items.into());
-    let output = engine
-        .step(i * 100_000 as Time, &[Snapshot { source: "tracker", ty: "VisionPercept", objects: &objects }])
-        .unwrap();
-    assert!(output.warnings.is_empty(), "{:?}", output.warnings);
-    output
+    common::step(engine, i * 100_000, &Value::List(items.into()))
 }
 
 fn record_field(value: &Value, name: &str) -> Value {
@@ -56,8 +46,7 @@ fn record_field(value: &Value, name: &str) -> Value {
 
 #[test]
 fn the_reacquired_branch_is_kept() {
-    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
-    let mut engine = Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap();
+    let mut engine = common::engine(SPEC);
     let network = kpl_sim::RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap();
     let north = i64::from(network.road_by_name("north").unwrap().id.0);
     let west = i64::from(network.road_by_name("west").unwrap().id.0);

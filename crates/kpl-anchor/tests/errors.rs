@@ -4,9 +4,11 @@
 //! never make the engine panic.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
+mod common;
+
 use std::sync::Arc;
 
-use kpl_anchor::{AnchorConfig, Anchoring, Snapshot, StepError};
+use kpl_anchor::{Anchoring, Snapshot, StepError};
 use kpl_core::{Record, Value};
 use proptest::prelude::*;
 
@@ -24,7 +26,7 @@ forget after 1s
 "#;
 
 fn engine() -> Anchoring {
-    Anchoring::from_spec(&kpl_anchor::registry::check_text(SPEC).unwrap(), AnchorConfig::default()).unwrap()
+    common::engine(SPEC)
 }
 
 fn percept(id: Option<&str>, fields: Vec<(&str, Value)>) -> Value {

@@ -6,10 +6,12 @@
 //! their status, each link instance with its pending conditions, and the changes of each step.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
+mod common;
+
 use std::sync::Arc;
 
-use kpl_anchor::{AnchorConfig, Anchoring, InstanceView, Snapshot, Status};
-use kpl_core::{Record, Time, Value};
+use kpl_anchor::{Anchoring, InstanceView, Snapshot, Status};
+use kpl_core::{Time, Value};
 
 const SPEC: &str = r#"
 type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
@@ -41,14 +43,7 @@ const SPEED: f64 = 12.0;
 const LANE_Y: f64 = -1.75;
 
 fn percept(id: &str, x: f64, y: f64, size: f64) -> Value {
-    Value::Record(Arc::new(Record {
-        id: Some(id.into()),
-        fields: vec![
-            ("pos".into(), Value::vec2(x, y)),
-            ("vel".into(), Value::vec2(SPEED, 0.0)),
-            ("size".into(), Value::Float(size)),
-        ],
-    }))
+    common::percept(id, [x, y], [SPEED, 0.0], size)
 }
 
 /// The tracker's snapshot at step `i` (100 ms apart): vp1 from 0 to 4.9 s, nothing from 5.0 to
@@ -146,8 +141,7 @@ const CHANGES: &[(i64, &[&str])] = &[
 ];
 
 fn engine() -> Anchoring {
-    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
-    Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap()
+    common::engine(SPEC)
 }
 
 fn position(view: &kpl_anchor::ObjectView) -> [f64; 2] {

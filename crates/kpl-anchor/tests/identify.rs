@@ -4,10 +4,12 @@
 //! system can ask the same, and an existing object that satisfies the description resolves it.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
+mod common;
+
 use std::sync::Arc;
 
-use kpl_anchor::{AnchorConfig, Anchoring, Cause, ChangeKind, IdentifyError, Snapshot, Status};
-use kpl_core::{Record, Time, Value};
+use kpl_anchor::{Anchoring, Cause, ChangeKind, IdentifyError, Status};
+use kpl_core::Value;
 
 const SPEC: &str = r#"
 type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
@@ -39,14 +41,7 @@ identify suspect : Car where xydist(this.pos, vec2(-110.0, -1.75)) < 20.0 and th
 "#;
 
 fn percept(id: &str, x: f64, y: f64, vx: f64) -> Value {
-    Value::Record(Arc::new(Record {
-        id: Some(id.into()),
-        fields: vec![
-            ("pos".into(), Value::vec2(x, y)),
-            ("vel".into(), Value::vec2(vx, 0.0)),
-            ("size".into(), Value::Float(4.5)),
-        ],
-    }))
+    common::percept(id, [x, y], [vx, 0.0], 4.5)
 }
 
 /// Two cars on `main`: vp1 eastbound from x = -150 at 12 m/s (it passes (-110, -1.75) after
@@ -60,17 +55,11 @@ fn snapshot(i: i64) -> Value {
 }
 
 fn engine() -> Anchoring {
-    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
-    Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap()
+    common::engine(SPEC)
 }
 
 fn step(engine: &mut Anchoring, i: i64) -> kpl_anchor::StepOutput {
-    let objects = snapshot(i);
-    let output = engine
-        .step(i * 100_000 as Time, &[Snapshot { source: "tracker", ty: "VisionPercept", objects: &objects }])
-        .unwrap();
-    assert!(output.warnings.is_empty(), "{:?}", output.warnings);
-    output
+    common::step(engine, i * 100_000, &snapshot(i))
 }
 
 #[test]

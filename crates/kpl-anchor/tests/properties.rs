@@ -13,11 +13,13 @@
 //! - the same trace gives the same structures (determinism).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use kpl_anchor::{AnchorConfig, Anchoring, Cause, ChangeKind, Snapshot};
-use kpl_core::{Record, Time, Value};
+use kpl_anchor::{Anchoring, Cause, ChangeKind, Snapshot};
+use kpl_core::{Time, Value};
 use proptest::prelude::*;
 
 const SPEC: &str = r#"
@@ -92,14 +94,7 @@ fn track(steps: usize) -> impl Strategy<Value = Track> {
 
 fn percept(id: &str, t: f64, track: &Track, step: usize) -> Value {
     let (x, y) = (track.start.0 + track.vel.0 * t, track.start.1 + track.vel.1 * t);
-    Value::Record(Arc::new(Record {
-        id: Some(id.into()),
-        fields: vec![
-            ("pos".into(), Value::vec2(x, y)),
-            ("vel".into(), Value::vec2(track.vel.0, track.vel.1)),
-            ("size".into(), Value::Float(track.sizes[step])),
-        ],
-    }))
+    common::percept(id, [x, y], [track.vel.0, track.vel.1], track.sizes[step])
 }
 
 fn snapshots(tracks: &[Track], step: usize) -> (Value, Value) {
@@ -119,8 +114,7 @@ fn snapshots(tracks: &[Track], step: usize) -> (Value, Value) {
 }
 
 fn engine() -> Anchoring {
-    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
-    Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap()
+    common::engine(SPEC)
 }
 
 /// Runs the trace and checks the properties after every step; returns the structures.
