@@ -373,10 +373,6 @@ proptest! {
     ) {
         check_snapping(&CROSSING, p, heading)?;
     }
-}
-
-proptest! {
-    #![proptest_config(ProptestConfig::with_cases(2000))]
 
     #[test]
     fn snapping_in_a_town_is_on_road_and_idempotent(
