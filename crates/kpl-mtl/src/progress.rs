@@ -24,7 +24,7 @@ use kpl_core::Time;
 use crate::error::EvalError;
 use crate::formula::{Formula, INF, TNode, TemporalOp, TplId};
 use crate::state::State;
-use crate::term::{Binding, TermEnv};
+use crate::term::{Binding, TermEnv, name_of};
 
 pub(crate) const TRUE: u32 = 0;
 pub(crate) const FALSE: u32 = 1;
@@ -513,10 +513,7 @@ impl<S: State + ?Sized> Stepper<'_, S> {
                     };
                     let Some(id) = id else {
                         return Err(EvalError::ObjectWithoutId {
-                            domain: formula
-                                .domain_names
-                                .get(*domain as usize)
-                                .map_or_else(|| format!("#{domain}"), |n| n.to_string()),
+                            domain: name_of(&formula.domain_names, *domain),
                         });
                     };
                     let mut bindings: Vec<Binding> = base.to_vec();

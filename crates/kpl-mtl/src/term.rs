@@ -157,6 +157,13 @@ fn finite(x: f64, func: &str) -> Result<Value, String> {
     if x.is_finite() { Ok(Value::Float(x)) } else { Err(format!("{func} gives a non-finite result")) }
 }
 
+/// The Euclidean distance of two positions (see [`point`]).
+fn distance(a: &Value, b: &Value, func: &str) -> Result<Value, String> {
+    let [x1, y1] = point(a, func)?;
+    let [x2, y2] = point(b, func)?;
+    finite((x1 - x2).hypot(y1 - y2), func)
+}
+
 /// The built-in functions: `abs`, `sqrt`, `min`, `max`, `floor`, `ceil`, `norm` (length of a
 /// vec2), `vec2(x, y)`, `dist` and `xydist` (Euclidean distance of two vec2 positions, or of two
 /// records' `pos`; `dist` of two numbers is `|a - b|`).
@@ -182,20 +189,12 @@ pub fn builtins() -> Vec<Function> {
             let (x, y) = (number(&a[0], "vec2")?, number(&a[1], "vec2")?);
             Ok(Value::Vec2([x, y]))
         }),
-        Function::new("xydist", (2, Some(2)), |a| {
-            let [x1, y1] = point(&a[0], "xydist")?;
-            let [x2, y2] = point(&a[1], "xydist")?;
-            finite((x1 - x2).hypot(y1 - y2), "xydist")
-        }),
+        Function::new("xydist", (2, Some(2)), |a| distance(&a[0], &a[1], "xydist")),
         Function::new("dist", (2, Some(2)), |a| match (&a[0], &a[1]) {
             (l, r) if l.as_f64().is_some() && r.as_f64().is_some() => {
                 finite((number(l, "dist")? - number(r, "dist")?).abs(), "dist")
             }
-            (l, r) => {
-                let [x1, y1] = point(l, "dist")?;
-                let [x2, y2] = point(r, "dist")?;
-                finite((x1 - x2).hypot(y1 - y2), "dist")
-            }
+            (l, r) => distance(l, r, "dist"),
         }),
     ]
 }
@@ -233,7 +232,7 @@ pub struct Binding {
 
 impl<S: State + ?Sized> TermEnv<'_, S> {
     fn slot_name(&self, slot: SlotId) -> String {
-        self.slot_names.get(slot as usize).map_or_else(|| format!("#{slot}"), |n| n.to_string())
+        name_of(self.slot_names, slot)
     }
 
     /// Evaluates an atom: a term that must give a `bool`.
@@ -275,10 +274,7 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
                     .ok_or_else(|| EvalError::Missing { name: format!("quantified variable #{var}") })?;
                 self.state.object(binding.domain, &binding.id).cloned().ok_or_else(|| {
                     EvalError::MissingObject {
-                        domain: self
-                            .domain_names
-                            .get(binding.domain as usize)
-                            .map_or_else(|| format!("#{}", binding.domain), |n| n.to_string()),
+                        domain: name_of(self.domain_names, binding.domain),
                         id: binding.id.to_string(),
                     }
                 })
@@ -351,10 +347,15 @@ fn type_error(context: &str, expected: &str, found: &Value) -> EvalError {
     }
 }
 
+/// The name of slot or object type `i` for messages, or `#i` when there is none.
+pub(crate) fn name_of(names: &[Arc<str>], i: u32) -> String {
+    names.get(i as usize).map_or_else(|| format!("#{i}"), |n| n.to_string())
+}
+
 /// A short text for a term, used in messages (`from.pos`).
 fn describe(term: &Term, slot_names: &[Arc<str>]) -> String {
     match term {
-        Term::Slot(s) => slot_names.get(*s as usize).map_or_else(|| format!("#{s}"), |n| n.to_string()),
+        Term::Slot(s) => name_of(slot_names, *s),
         Term::Var(v) => format!("variable #{v}"),
         Term::Field(base, f) => format!("{}.{f}", describe(base, slot_names)),
         _ => "the value".to_string(),
