@@ -135,30 +135,30 @@ fn eval_inner(args: &EvalArgs) -> Result<(), Failure> {
 
 /// Parses and compiles the formula; errors are rendered against the formula text.
 fn compile(source: &str, context: &mut Context) -> Result<Arc<Formula>, Failure> {
+    let index = kpl_syntax::LineIndex::new(source);
     let expr = kpl_syntax::parse_formula(source).map_err(|diagnostics| {
-        let index = kpl_syntax::LineIndex::new(source);
         Failure::Input(diagnostics.iter().map(|d| d.render("<formula>", source, &index)).collect())
     })?;
-    let formula = Formula::from_ast(&expr, context)
-        .map_err(|errors| Failure::Input(errors.iter().map(|e| render_compile_error(e, source)).collect()))?;
+    let formula = Formula::from_ast(&expr, context).map_err(|errors| {
+        Failure::Input(errors.iter().map(|e| render_compile_error(e, source, &index)).collect())
+    })?;
     Ok(Arc::new(formula))
 }
 
 /// Renders a compile error like the syntax diagnostics: message, location, the formula with the
 /// span marked, and the hint.
-fn render_compile_error(error: &CompileError, source: &str) -> String {
+fn render_compile_error(error: &CompileError, source: &str, index: &kpl_syntax::LineIndex) -> String {
     let mut out = String::new();
-    let start = (error.span.start as usize).min(source.len());
-    let end = (error.span.end as usize).clamp(start, source.len());
-    let line_start = source[..start].rfind('\n').map_or(0, |i| i + 1);
-    let line_no = source[..start].matches('\n').count() + 1;
-    let line_end = source[start..].find('\n').map_or(source.len(), |i| start + i);
-    let column = source[line_start..start].chars().count() + 1;
-    let width = source[start..end.min(line_end)].chars().count().max(1);
+    let (line_no, column) = index.line_col(source, error.span.start);
+    let (end_line, end_column) = index.line_col(source, error.span.end.max(error.span.start));
+    let text = index.line_text(source, line_no);
+    // The span is marked up to its end, or to the end of its first line.
+    let end_column = if end_line == line_no { end_column } else { text.chars().count() + 1 };
+    let width = end_column.saturating_sub(column).max(1);
     let _ = writeln!(out, "error: {}", error.message);
     let _ = writeln!(out, " --> <formula>:{line_no}:{column}");
     let _ = writeln!(out, "  |");
-    let _ = writeln!(out, "{line_no} | {}", &source[line_start..line_end]);
+    let _ = writeln!(out, "{line_no} | {text}");
     let _ = writeln!(out, "  | {}{}", " ".repeat(column - 1), "^".repeat(width));
     if let Some(help) = &error.help {
         let _ = writeln!(out, "  = hint: {help}");
