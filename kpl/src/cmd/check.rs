@@ -1,6 +1,6 @@
 //! `kpl check`: parse and check spec files against the runtime's registry.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
@@ -37,7 +37,7 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
 
 /// Reads and checks one spec, printing its diagnostics; the checked spec, or the exit code to
 /// stop with (1: the spec has errors, 2: it cannot be read).
-pub fn load_checked(path: &std::path::Path) -> Result<kpl_semantic::hir::Spec, ExitCode> {
+pub fn load_checked(path: &Path) -> Result<kpl_semantic::hir::Spec, ExitCode> {
     let file = SourceFile::read(path).map_err(|err| {
         report::io_error(path, &err);
         ExitCode::from(2)
@@ -49,28 +49,39 @@ pub fn load_checked(path: &std::path::Path) -> Result<kpl_semantic::hir::Spec, E
     spec.ok_or(ExitCode::from(1))
 }
 
-pub fn run(args: Args) -> ExitCode {
-    let files = match report::expand(&args.files) {
-        Ok(files) => files,
-        Err(err) => {
-            report::io_error(&args.files[0], &err);
-            return ExitCode::from(2);
-        }
-    };
-    let mut reporter = Reporter::new(args.format);
+/// Reads each spec file that `paths` name (directories are searched for `.kpl` files) and hands
+/// it to `each`; a file that cannot be read is reported and skipped. Returns whether some file
+/// could not be read, or exit code 2 when `paths` cannot be listed.
+pub(crate) fn for_each_file(
+    paths: &[PathBuf],
+    mut each: impl FnMut(&Path, SourceFile),
+) -> Result<bool, ExitCode> {
+    let files = report::expand(paths).map_err(|err| {
+        report::io_error(&paths[0], &err);
+        ExitCode::from(2)
+    })?;
     let mut io_failed = false;
     for path in &files {
-        let file = match SourceFile::read(path) {
-            Ok(file) => file,
+        match SourceFile::read(path) {
+            Ok(file) => each(path, file),
             Err(err) => {
                 report::io_error(path, &err);
                 io_failed = true;
-                continue;
             }
-        };
+        }
+    }
+    Ok(io_failed)
+}
+
+pub fn run(args: Args) -> ExitCode {
+    let mut reporter = Reporter::new(args.format);
+    let io_failed = match for_each_file(&args.files, |_, file| {
         let (diagnostics, _) = check_file(&file);
         reporter.report(&file, &diagnostics);
-    }
+    }) {
+        Ok(io_failed) => io_failed,
+        Err(code) => return code,
+    };
     let errors = reporter.errors;
     reporter.finish();
     if io_failed {

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
 
-use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
+use crate::report::{self, DiagnosticFormat, Reporter};
 
 #[derive(Debug, ClapArgs)]
 #[command(
@@ -22,50 +22,39 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let files = match report::expand(&args.files) {
-        Ok(files) => files,
-        Err(err) => {
-            report::io_error(&args.files[0], &err);
-            return ExitCode::from(2);
-        }
-    };
     let mut reporter = Reporter::new(DiagnosticFormat::Text);
-    let mut io_failed = false;
+    let mut write_failed = false;
     let mut would_change = Vec::new();
-    for path in &files {
-        let file = match SourceFile::read(path) {
-            Ok(file) => file,
-            Err(err) => {
-                report::io_error(path, &err);
-                io_failed = true;
-                continue;
-            }
-        };
+    let read_failed = match super::check::for_each_file(&args.files, |path, file| {
         if let Some(d) = &file.decode_error {
             reporter.report(&file, std::slice::from_ref(d));
-            continue;
+            return;
         }
         let formatted = match kpl_syntax::format::format(&file.text) {
             Ok(formatted) => formatted,
             Err(diagnostics) => {
                 reporter.report(&file, &diagnostics);
-                continue;
+                return;
             }
         };
         if path.as_os_str() == "-" {
             let _ = std::io::stdout().lock().write_all(formatted.as_bytes());
-            continue;
+            return;
         }
         if formatted == file.text {
-            continue;
+            return;
         }
         if args.check {
             would_change.push(file.display_name());
         } else if let Err(err) = std::fs::write(path, formatted) {
             report::io_error(path, &err);
-            io_failed = true;
+            write_failed = true;
         }
-    }
+    }) {
+        Ok(read_failed) => read_failed,
+        Err(code) => return code,
+    };
+    let io_failed = read_failed || write_failed;
     let errors = reporter.errors;
     reporter.finish();
     if !would_change.is_empty() {
