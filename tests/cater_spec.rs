@@ -4,9 +4,11 @@
 //! generator seeds and both perception modes.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
+use std::path::Path;
+
+use common::root;
 use kpl_aapa::WorldState;
 use serde_json::Value;
 
@@ -15,12 +17,8 @@ const SNITCH_CLASS: &str = "small_gold_spl_metal";
 /// θ_anch of the spec and of `kpl cater eval`'s `aapa` model.
 const THETA_ANCH: f64 = 0.1;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf() // kpl/ -> the workspace
-}
-
 fn kpl(dir: &Path, args: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_kpl")).args(args).current_dir(dir).output().unwrap();
+    let out = common::kpl_command(args).current_dir(dir).output().unwrap();
     assert!(out.status.success(), "kpl {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 

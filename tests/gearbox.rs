@@ -10,32 +10,19 @@
 //!   replaces the built-in table; two runs record the same bytes.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
+
+use common::{kpl, root};
 
 use kpl_aapa::gearbox;
 use kpl_aapa::{Aapa, WorldState};
 use serde_json::Value;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf() // kpl/ -> the workspace
-}
-
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("kpl-gearbox-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn kpl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_kpl"))
-        .args(args)
-        .current_dir(root())
-        .env("NO_COLOR", "1")
-        .output()
-        .unwrap()
+    common::fresh_dir("gearbox", name)
 }
 
 /// One recorded cycle: the world state, the detector's frame and the truth, by stream.

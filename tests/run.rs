@@ -7,38 +7,22 @@
 //! - `RUST_LOG` turns on the runtime's logs.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use common::{kpl_command as kpl, lines};
+
 use serde_json::Value;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf() // kpl/ -> the workspace
-}
-
 fn out_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("kpl-run-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
-fn kpl(args: &[&str]) -> Command {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_kpl"));
-    command.args(args).current_dir(root());
-    command
+    common::fresh_dir("run", name)
 }
 
 fn run(spec: &str, out: &Path, extra: &[&str]) -> Output {
     kpl(&["run", "--quiet", spec, "--out", out.to_str().unwrap()]).args(extra).output().unwrap()
-}
-
-fn lines(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
 }
 
 fn summary(out: &Path) -> Value {

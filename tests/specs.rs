@@ -6,21 +6,9 @@
 //! - `--format json` gives the documented fields, and every code it uses is in docs/diagnostics.md.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf() // kpl/ -> the workspace
-}
-
-fn kpl(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_kpl"))
-        .args(args)
-        .current_dir(root())
-        .env("NO_COLOR", "1")
-        .output()
-        .unwrap()
-}
+use common::{kpl, root};
 
 fn specs_under(dir: &str) -> Vec<String> {
     let mut out = Vec::new();

@@ -11,24 +11,20 @@
 //! the only times here; nothing asserts a speed.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests
 
-use std::io::{BufRead, BufReader};
+mod common;
+
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{lines, root};
 use serde_json::Value;
 
 const HANG: Duration = Duration::from_secs(180);
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf() // kpl/ -> the workspace
-}
-
 fn out_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("kpl-zenoh-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::fresh_dir("zenoh", name)
 }
 
 /// A base port whose next `n` ports are free now (the processes bind them a moment later).
@@ -47,10 +43,15 @@ fn free_ports(n: u16) -> u16 {
 }
 
 fn host(spec: &str, host: &str, out: &Path, port_base: u16) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_kpl"))
-        .args(["run", spec, "--clock", "wall", "--host", host, "--out"])
+    wall_run(&[spec, "--host", host], out, port_base)
+}
+
+/// Starts `kpl run ARGS --clock wall --out OUT` with zenoh's ports from `port_base`.
+fn wall_run(args: &[&str], out: &Path, port_base: u16) -> Child {
+    common::kpl_command(&["run"])
+        .args(args)
+        .args(["--clock", "wall", "--out"])
         .arg(out)
-        .current_dir(root())
         .env("KPL_ZENOH_PORT_BASE", port_base.to_string())
         .env("KPL_ZENOH_WAIT", "120")
         .stdin(Stdio::null())
@@ -62,33 +63,36 @@ fn host(spec: &str, host: &str, out: &Path, port_base: u16) -> Child {
 
 /// Waits for a process (killing it if it hangs); returns its exit code and standard error.
 fn finish(mut child: Child, name: &str) -> (Option<i32>, String) {
-    let mut stderr = child.stderr.take().unwrap();
-    let reader = std::thread::spawn(move || {
-        let mut text = String::new();
-        std::io::Read::read_to_string(&mut stderr, &mut text).unwrap();
-        text
-    });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if start.elapsed() > HANG {
-            child.kill().unwrap();
-            let _ = child.wait();
-            panic!("{name} did not finish:\n{}", reader.join().unwrap());
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    let reader = read_to_end(child.stderr.take().unwrap());
+    let Some(status) = wait_or_kill(&mut child) else {
+        panic!("{name} did not finish:\n{}", reader.join().unwrap());
     };
     (status.code(), reader.join().unwrap())
 }
 
-fn lines(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
+/// Waits for a process to end; kills it and gives `None` if it has not ended within [`HANG`].
+fn wait_or_kill(child: &mut Child) -> Option<ExitStatus> {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return Some(status);
+        }
+        if start.elapsed() > HANG {
+            child.kill().unwrap();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Reads what is left of a process's output on its own thread (so the process never blocks on it).
+fn read_to_end(mut from: impl Read + Send + 'static) -> std::thread::JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut text = String::new();
+        from.read_to_string(&mut text).unwrap();
+        text
+    })
 }
 
 fn of_stream(lines: &[Value], stream: &str) -> Vec<Value> {
@@ -176,21 +180,9 @@ fn a_consumer_ends_when_its_producer_is_killed() {
     }
     producer.kill().unwrap();
     let _ = producer.wait();
-    let drain = std::thread::spawn(move || {
-        let mut rest = String::new();
-        std::io::Read::read_to_string(&mut reader, &mut rest).unwrap();
-        rest
-    });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = consumer.try_wait().unwrap() {
-            break status;
-        }
-        if start.elapsed() > HANG {
-            consumer.kill().unwrap();
-            panic!("the consumer did not end after its producer was killed");
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    let drain = read_to_end(reader);
+    let Some(status) = wait_or_kill(&mut consumer) else {
+        panic!("the consumer did not end after its producer was killed");
     };
     let rest = drain.join().unwrap();
     assert!(status.success(), "{seen}{rest}");
@@ -241,17 +233,7 @@ fn python_follows_the_docs_to_decode_and_encode_samples() {
     std::fs::write(&input, text.join("\n") + "\n").unwrap();
 
     let port = free_ports(1);
-    let run = Command::new(env!("CARGO_BIN_EXE_kpl"))
-        .args(["run", "specs/zenoh/outside.kpl", "--clock", "wall", "--out"])
-        .arg(out.join("run"))
-        .current_dir(root())
-        .env("KPL_ZENOH_PORT_BASE", port.to_string())
-        .env("KPL_ZENOH_WAIT", "120")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let run = wall_run(&["specs/zenoh/outside.kpl"], &out.join("run"), port);
     let client = Command::new(&python)
         .arg(root().join("tests/zenoh_client.py"))
         .arg(root().join("docs/streams.md"))
