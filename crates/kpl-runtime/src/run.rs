@@ -340,17 +340,17 @@ pub async fn run_async(
                     result
                 }
                 TaskKind::Unit(unit) => {
-                    run_unit(
+                    let names = task.inputs.iter().map(|i| i.name.clone()).collect();
+                    let caller = Caller {
                         unit,
-                        task.inputs,
-                        task.outputs,
-                        port_names,
-                        clock,
-                        process_stats,
+                        emitter: Emitter::new(port_names),
+                        outputs: task.outputs,
+                        names,
+                        stats: process_stats,
                         run_stats,
                         strict,
-                    )
-                    .await
+                    };
+                    run_unit(caller, task.inputs, clock).await
                 }
             };
             tracing::debug!(process = %name, id = task.id, "process ended");
@@ -484,20 +484,8 @@ async fn feed_remote(
 
 /// One unit's loop: receive from the input edges (fairly, in batches), apply each consumer
 /// policy, synchronize if the unit asks for it, run the unit, send what it emits.
-#[allow(clippy::too_many_arguments)] // the pieces of one task, passed once
-async fn run_unit(
-    mut unit: Box<dyn AsyncUnit>,
-    mut inputs: Vec<InputEdge>,
-    mut outputs: Outputs,
-    port_names: Arc<[String]>,
-    clock: Clock,
-    stats: Arc<ProcessStats>,
-    run_stats: Arc<RunStats>,
-    strict: bool,
-) -> Result<(), ProcessError> {
-    let names: Vec<Arc<str>> = inputs.iter().map(|i| i.name.clone()).collect();
-    let synchronized = unit.synchronized();
-    let mut sync = synchronized.then(|| {
+async fn run_unit(mut caller: Caller, mut inputs: Vec<InputEdge>, clock: Clock) -> Result<(), ProcessError> {
+    let mut sync = caller.unit.synchronized().then(|| {
         StateSync::new(
             inputs
                 .iter()
@@ -511,9 +499,10 @@ async fn run_unit(
     });
     let mut latest: Vec<Option<Sample>> = vec![None; inputs.len()];
     let mut ended = vec![false; inputs.len()];
-    let mut emitter = Emitter::new(port_names);
     let mut batch: Vec<Sample> = Vec::new();
     let mut delivered: Vec<Sample> = Vec::new();
+    // What the policies let through, by input port, in arrival order.
+    let mut arrived: Vec<(usize, Sample)> = Vec::new();
     let mut states: Vec<SyncState> = Vec::new();
     let mut next = 0usize;
     let live =
@@ -525,7 +514,7 @@ async fn run_unit(
             .filter_map(|i| i.filter.deadline())
             .chain(sync.as_ref().and_then(StateSync::deadline))
             .min();
-        let mut sleep = deadline.map(|t| Box::pin(tokio::time::sleep_until(clock.instant(t))));
+        let mut sleep = std::pin::pin!(deadline.map(|t| tokio::time::sleep_until(clock.instant(t))));
         enum Event {
             Samples(usize),
             Ended(usize),
@@ -544,8 +533,8 @@ async fn run_unit(
                     Poll::Pending => {}
                 }
             }
-            if let Some(sleep) = &mut sleep
-                && sleep.as_mut().poll(cx).is_ready()
+            if let Some(sleep) = sleep.as_mut().as_pin_mut()
+                && sleep.poll(cx).is_ready()
             {
                 return Poll::Ready(Event::Timer);
             }
@@ -553,14 +542,12 @@ async fn run_unit(
         })
         .await;
         let now = clock.now();
-        // What the policies let through, by input port, in arrival order.
-        let mut arrived: Vec<(usize, Sample)> = Vec::new();
         let timer = matches!(event, Event::Timer);
         match event {
             Event::Samples(port) => {
                 next = (port + 1) % inputs.len();
                 if let Some(last) = batch.last() {
-                    run_stats.observe_time(last.available);
+                    caller.run_stats.observe_time(last.available);
                 }
                 for sample in batch.drain(..) {
                     inputs[port].filter.on_sample(sample, now, &mut delivered);
@@ -580,59 +567,28 @@ async fn run_unit(
                 }
             }
         }
-        for (port, sample) in arrived {
+        for (port, sample) in arrived.drain(..) {
             match &mut sync {
                 Some(sync) => sync.push(port, sample, now, &mut states),
                 None => {
                     let valid = sample.valid;
                     latest[port] = Some(sample);
-                    let input =
-                        Input { now, valid, trigger: Trigger::Sample(port), values: &latest, names: &names };
-                    call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
+                    caller.call(now, valid, Trigger::Sample(port), &latest).await?;
                 }
             }
         }
-        if let (true, Some(sync)) = (timer, &mut sync) {
-            sync.on_timer(now, &mut states);
-        }
-        for mut state in std::mem::take(&mut states) {
-            if let Some(sync) = &mut sync {
-                refresh_feedback(sync, &mut inputs, &mut state, now);
+        if let Some(sync) = &mut sync {
+            if timer {
+                sync.on_timer(now, &mut states);
             }
-            let input = Input {
-                now,
-                valid: state.valid,
-                trigger: Trigger::State,
-                values: &state.values,
-                names: &names,
-            };
-            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
+            caller.call_states(sync, &mut inputs, &mut states, now).await?;
         }
     }
     if let Some(sync) = &mut sync {
         sync.finish(&mut states);
-        let now = clock.now();
-        for mut state in std::mem::take(&mut states) {
-            refresh_feedback(sync, &mut inputs, &mut state, now);
-            let input = Input {
-                now,
-                valid: state.valid,
-                trigger: Trigger::State,
-                values: &state.values,
-                names: &names,
-            };
-            call(&mut unit, &input, &mut emitter, &mut outputs, &stats, &run_stats, strict).await?;
-        }
+        caller.call_states(sync, &mut inputs, &mut states, clock.now()).await?;
     }
-    let now = clock.now();
-    emitter.begin(now, now);
-    if let Err(e) = unit.on_end(&mut emitter).await {
-        stats.error(e.to_string());
-    }
-    for (port, sample) in emitter.take() {
-        outputs.send(port, sample).await;
-    }
-    outputs.close().await;
+    caller.end(clock.now()).await;
     Ok(())
 }
 
@@ -657,38 +613,78 @@ fn refresh_feedback(sync: &mut StateSync, inputs: &mut [InputEdge], state: &mut 
     }
 }
 
-/// Runs the unit once and sends what it emitted. A unit's error is counted and the run goes on
-/// (a failing input must not stop the other processes), except in a `--strict` run.
-async fn call(
-    unit: &mut Box<dyn AsyncUnit>,
-    input: &Input<'_>,
-    emitter: &mut Emitter,
-    outputs: &mut Outputs,
-    stats: &ProcessStats,
-    run_stats: &RunStats,
+/// A unit with what each call needs: where its output goes, its input names, its counters.
+struct Caller {
+    unit: Box<dyn AsyncUnit>,
+    emitter: Emitter,
+    outputs: Outputs,
+    names: Vec<Arc<str>>,
+    stats: Arc<ProcessStats>,
+    run_stats: Arc<RunStats>,
     strict: bool,
-) -> Result<(), ProcessError> {
-    emitter.begin(input.now, input.valid);
-    let result = match unit.as_sync() {
-        Some(unit) => unit.on_input(input, emitter),
-        None => unit.on_input(input, emitter).await,
-    };
-    if let Err(e) = result {
-        if strict {
-            return Err(e);
+}
+
+impl Caller {
+    /// Runs the unit once and sends what it emitted. A unit's error is counted and the run goes
+    /// on (a failing input must not stop the other processes), except in a `--strict` run.
+    async fn call(
+        &mut self,
+        now: Time,
+        valid: Time,
+        trigger: Trigger,
+        values: &[Option<Sample>],
+    ) -> Result<(), ProcessError> {
+        let input = Input { now, valid, trigger, values, names: &self.names };
+        let emitter = &mut self.emitter;
+        emitter.begin(now, valid);
+        let result = match self.unit.as_sync() {
+            Some(unit) => unit.on_input(&input, emitter),
+            None => self.unit.on_input(&input, emitter).await,
+        };
+        if let Err(e) = result {
+            if self.strict {
+                return Err(e);
+            }
+            self.stats.error(e.to_string());
         }
-        stats.error(e.to_string());
-    }
-    if !emitter.unknown_ports.is_empty() {
-        for port in std::mem::take(&mut emitter.unknown_ports) {
-            stats.error(format!("emitted on `{port}`, which is not an output of this process"));
+        if !emitter.unknown_ports.is_empty() {
+            for port in std::mem::take(&mut emitter.unknown_ports) {
+                self.stats.error(format!("emitted on `{port}`, which is not an output of this process"));
+            }
         }
+        self.run_stats.delivered.fetch_add(emitter.out.len() as u64, Ordering::Relaxed);
+        for (port, sample) in emitter.drain() {
+            self.outputs.send(port, sample).await;
+        }
+        Ok(())
     }
-    run_stats.delivered.fetch_add(emitter.out.len() as u64, Ordering::Relaxed);
-    for (port, sample) in emitter.drain() {
-        outputs.send(port, sample).await;
+
+    /// Runs the unit on each released state, oldest first, its feedback inputs refreshed.
+    async fn call_states(
+        &mut self,
+        sync: &mut StateSync,
+        inputs: &mut [InputEdge],
+        states: &mut Vec<SyncState>,
+        now: Time,
+    ) -> Result<(), ProcessError> {
+        for mut state in states.drain(..) {
+            refresh_feedback(sync, inputs, &mut state, now);
+            self.call(now, state.valid, Trigger::State, &state.values).await?;
+        }
+        Ok(())
     }
-    Ok(())
+
+    /// Every input has ended: lets the unit emit what is pending, sends it, ends the outputs.
+    async fn end(mut self, now: Time) {
+        self.emitter.begin(now, now);
+        if let Err(e) = self.unit.on_end(&mut self.emitter).await {
+            self.stats.error(e.to_string());
+        }
+        for (port, sample) in self.emitter.drain() {
+            self.outputs.send(port, sample).await;
+        }
+        self.outputs.close().await;
+    }
 }
 
 /// The progress line: clock and wall time and the rate of samples, once a second on stderr,
