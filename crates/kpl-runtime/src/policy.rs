@@ -126,8 +126,7 @@ impl PolicyFilter {
         }
         self.recent_used = tick == sample.valid;
         if self.recent_used {
-            self.stats.delivered.fetch_add(1, Ordering::Relaxed);
-            out.push(sample.clone());
+            self.deliver(sample.clone(), out);
             tick += period;
         }
         self.next_tick = Some(tick);

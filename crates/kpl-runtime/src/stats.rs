@@ -104,21 +104,21 @@ impl ProcessStats {
     pub const KEEP: usize = 5;
 
     pub fn malformed(&self, malformed: Malformed) {
-        self.malformed.fetch_add(1, Ordering::Relaxed);
-        if let Ok(mut examples) = self.malformed_examples.lock()
-            && examples.len() < Self::KEEP
-        {
-            examples.push(malformed);
-        }
+        count(&self.malformed, &self.malformed_examples, malformed);
     }
 
     pub fn error(&self, error: String) {
-        self.errors.fetch_add(1, Ordering::Relaxed);
-        if let Ok(mut examples) = self.error_examples.lock()
-            && examples.len() < Self::KEEP
-        {
-            examples.push(error);
-        }
+        count(&self.errors, &self.error_examples, error);
+    }
+}
+
+/// Counts one more and keeps it as an example if fewer than [`ProcessStats::KEEP`] are kept.
+fn count<T>(counter: &AtomicU64, examples: &Mutex<Vec<T>>, example: T) {
+    counter.fetch_add(1, Ordering::Relaxed);
+    if let Ok(mut examples) = examples.lock()
+        && examples.len() < ProcessStats::KEEP
+    {
+        examples.push(example);
     }
 }
 
@@ -156,7 +156,7 @@ impl RunStats {
 
     /// A snapshot for the end-of-run summary.
     pub fn summary(&self) -> Summary {
-        let edges = self.edges.lock().map(|e| e.clone()).unwrap_or_default();
+        let edges = snapshot(&self.edges);
         let streams = edges
             .iter()
             .map(|(stream, consumer, s)| {
@@ -186,13 +186,9 @@ impl RunStats {
                     .map(|(name, s)| ProcessSummary {
                         process: name.clone(),
                         malformed: s.malformed.load(Ordering::Relaxed),
-                        malformed_examples: s
-                            .malformed_examples
-                            .lock()
-                            .map(|e| e.clone())
-                            .unwrap_or_default(),
+                        malformed_examples: snapshot(&s.malformed_examples),
                         errors: s.errors.load(Ordering::Relaxed),
-                        error_examples: s.error_examples.lock().map(|e| e.clone()).unwrap_or_default(),
+                        error_examples: snapshot(&s.error_examples),
                         instances_created: s.instances_created.load(Ordering::Relaxed),
                         instances_removed: s.instances_removed.load(Ordering::Relaxed),
                     })
@@ -202,6 +198,11 @@ impl RunStats {
             .unwrap_or_default();
         Summary { streams, processes }
     }
+}
+
+/// A copy of what a shared list holds now.
+fn snapshot<T: Clone>(list: &Mutex<Vec<T>>) -> Vec<T> {
+    list.lock().map(|l| l.clone()).unwrap_or_default()
 }
 
 #[derive(Debug, Clone, Serialize)]
