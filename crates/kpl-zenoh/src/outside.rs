@@ -213,11 +213,10 @@ impl Publish {
     }
 
     async fn put(&mut self, bytes: Vec<u8>) -> Result<(), ProcessError> {
-        let key = self.key.clone();
         let result = self.publisher().await?.put(bytes).await;
         if let Err(e) = result {
             self.failures += 1;
-            return Err(ProcessError::failed(format!("cannot publish on `{key}`: {e}")));
+            return Err(ProcessError::failed(format!("cannot publish on `{}`: {e}", self.key)));
         }
         Ok(())
     }
