@@ -33,23 +33,16 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     pub repeat: u32,
     /// Also run the memory test for this long (e.g. 10min); off by default.
-    #[arg(long, value_parser = parse_minutes)]
+    #[arg(long, value_parser = parse_memory_duration)]
     pub memory: Option<Duration>,
     /// Samples per second in the memory test.
     #[arg(long, default_value_t = 100_000)]
     pub rate: u64,
 }
 
-fn parse_minutes(text: &str) -> Result<Duration, String> {
-    let (number, factor) = if let Some(n) = text.strip_suffix("min") {
-        (n, 60.0)
-    } else if let Some(n) = text.strip_suffix('s') {
-        (n, 1.0)
-    } else {
-        return Err(format!("`{text}`: write e.g. 10min or 90s"));
-    };
-    let value: f64 = number.parse().map_err(|_| format!("`{text}` is not a duration"))?;
-    Ok(Duration::from_secs_f64(value * factor))
+/// A duration as `kpl run --for` takes it (10min, 90s, ...).
+fn parse_memory_duration(text: &str) -> Result<Duration, String> {
+    super::run::parse_duration(text).map(|us| Duration::from_micros(us.unsigned_abs()))
 }
 
 /// Emits `count` integers as fast as the consumers take them (or `rate` per second, in bursts

@@ -50,7 +50,7 @@ pub struct Args {
     pub quiet: bool,
 }
 
-fn parse_duration(text: &str) -> Result<Time, String> {
+pub(crate) fn parse_duration(text: &str) -> Result<Time, String> {
     let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
     let (number, unit) = text.split_at(split);
     let unit = TimeUnit::from_suffix(unit)
