@@ -728,8 +728,6 @@ fn apply_rule(
 /// that changes depth or slides moves both). Then, and for as long as that stays so, the cut edge is
 /// moved out to restore the remembered size. A percept overlapping nothing refreshes the size.
 fn restore_partial_box(anchor: &mut Anchor, own: usize, percepts: &[Percept]) -> BBox {
-    const SHRUNK: f64 = 0.85;
-    const TOLERANCE: f64 = 2.0;
     let b = percepts[own].bbox;
     let previous = anchor.last_percept_box.map(|[x1, y1, x2, y2]| BBox::new(x1, y1, x2, y2));
     anchor.last_percept_box = Some([b.x1, b.y1, b.x2, b.y2]);
@@ -745,41 +743,42 @@ fn restore_partial_box(anchor: &mut Anchor, own: usize, percepts: &[Percept]) ->
         return b;
     }
     let (Some([full_w, full_h]), Some(prev)) = (anchor.full_size, previous) else { return b };
-    let within = |v: f64, lo: f64, hi: f64| lo - TOLERANCE <= v && v <= hi + TOLERANCE;
+    let [x1, x2] = restore_edges(|b| [b.x1, b.x2], &b, &prev, full_w, &occluders, was_partial);
+    let [y1, y2] = restore_edges(|b| [b.y1, b.y2], &b, &prev, full_h, &occluders, was_partial);
+    let restored = BBox::new(x1, y1, x2, y2);
+    anchor.partial = restored != b;
+    restored
+}
+
+/// One axis of [`restore_partial_box`]: the percept's `[low, high]` edges on the axis `edges`
+/// picks, with the cut edge moved out to restore the remembered length `full` if the rules hold.
+/// (Every occluder overlaps the percept on both axes, so only the edges on this axis matter.)
+fn restore_edges(
+    edges: impl Fn(&BBox) -> [f64; 2],
+    b: &BBox,
+    prev: &BBox,
+    full: f64,
+    occluders: &[&BBox],
+    was_partial: bool,
+) -> [f64; 2] {
+    const SHRUNK: f64 = 0.85;
+    const TOLERANCE: f64 = 2.0;
+    let ([low, high], [prev_low, prev_high]) = (edges(b), edges(prev));
+    let shrunk = high - low < SHRUNK * full;
+    if !shrunk {
+        return [low, high];
+    }
+    let within = |v: f64, [lo, hi]: [f64; 2]| lo - TOLERANCE <= v && v <= hi + TOLERANCE;
     let kept = |now: f64, then: f64| (now - then).abs() <= TOLERANCE;
     // The cut edge is shrinking now, or the part was already being restored.
     let cutting = |now: f64, then: f64, inwards: f64| was_partial || (now - then) * inwards > 0.5;
-    let mut restored = b;
-    if b.height() < SHRUNK * full_h {
-        let overlaps_x = |d: &&&BBox| d.x1 < b.x2 && b.x1 < d.x2;
-        let top_cut = occluders.iter().filter(overlaps_x).any(|d| within(b.y1, d.y1, d.y2) && d.y1 < b.y1);
-        let bottom_cut = occluders.iter().filter(overlaps_x).any(|d| within(b.y2, d.y1, d.y2) && d.y2 > b.y2);
-        match (top_cut, bottom_cut) {
-            (true, false) if kept(b.y2, prev.y2) && cutting(b.y1, prev.y1, 1.0) => {
-                restored.y1 = b.y2 - full_h
-            }
-            (false, true) if kept(b.y1, prev.y1) && cutting(b.y2, prev.y2, -1.0) => {
-                restored.y2 = b.y1 + full_h
-            }
-            _ => {}
-        }
+    let low_cut = occluders.iter().map(|d| edges(d)).any(|d| within(low, d) && d[0] < low);
+    let high_cut = occluders.iter().map(|d| edges(d)).any(|d| within(high, d) && d[1] > high);
+    match (low_cut, high_cut) {
+        (true, false) if kept(high, prev_high) && cutting(low, prev_low, 1.0) => [high - full, high],
+        (false, true) if kept(low, prev_low) && cutting(high, prev_high, -1.0) => [low, low + full],
+        _ => [low, high],
     }
-    if b.width() < SHRUNK * full_w {
-        let overlaps_y = |d: &&&BBox| d.y1 < b.y2 && b.y1 < d.y2;
-        let left_cut = occluders.iter().filter(overlaps_y).any(|d| within(b.x1, d.x1, d.x2) && d.x1 < b.x1);
-        let right_cut = occluders.iter().filter(overlaps_y).any(|d| within(b.x2, d.x1, d.x2) && d.x2 > b.x2);
-        match (left_cut, right_cut) {
-            (true, false) if kept(b.x2, prev.x2) && cutting(b.x1, prev.x1, 1.0) => {
-                restored.x1 = b.x2 - full_w
-            }
-            (false, true) if kept(b.x1, prev.x1) && cutting(b.x2, prev.x2, -1.0) => {
-                restored.x2 = b.x1 + full_w
-            }
-            _ => {}
-        }
-    }
-    anchor.partial = restored != b;
-    restored
 }
 
 /// Counts one detection of `object_type` for the anchor and makes its type the most frequent one
