@@ -435,9 +435,7 @@ impl Aapa {
             old.anchor.status = AnchorStatus::Visible;
             old.anchor.last_seen = time;
             old.anchor.confidence = (old.anchor.confidence + p.conf_plus).min(1.0);
-            old.anchor.moving = false;
-            old.anchor.moving_until = None;
-            old.anchor.moving_since = None;
+            stop_moving(&mut old.anchor);
             if new.colour.is_some() {
                 old.anchor.colour = new.colour;
             }
@@ -560,11 +558,16 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
             w.anchor.bbox = translate(&w.anchor.bbox, shift);
         }
         if w.anchor.moving_until.is_some_and(|until| time >= until) {
-            w.anchor.moving = false;
-            w.anchor.moving_until = None;
-            w.anchor.moving_since = None;
+            stop_moving(&mut w.anchor);
         }
     }
+}
+
+/// The move an action started is over (or no longer believed): no motion state is left.
+fn stop_moving(anchor: &mut Anchor) {
+    anchor.moving = false;
+    anchor.moving_until = None;
+    anchor.moving_since = None;
 }
 
 /// Where each anchor is in `work`, by symbol. Only attachments' parents are looked up in it, so a
@@ -712,9 +715,7 @@ fn apply_rule(
             }
             Effect::StopMoving { object } => {
                 if let Some(o) = lookup(*object, work, notes) {
-                    work[o].anchor.moving = false;
-                    work[o].anchor.moving_until = None;
-                    work[o].anchor.moving_since = None;
+                    stop_moving(&mut work[o].anchor);
                 }
             }
         }
