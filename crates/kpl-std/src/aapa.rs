@@ -18,20 +18,21 @@ mod gearbox;
 mod values;
 
 use kpl_aapa::{
-    Aapa, Action, ActionRule, CameraModel, CameraPose, Extensions, ImageSize, MotionProfile, Params,
+    Aapa, Action, ActionRule, CameraModel, CameraPose, Extensions, ImageSize, MotionProfile, Params, Percept,
     WorldState,
 };
 use std::sync::Arc;
 
 use kpl_core::{Time, Value, ValueType};
+use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::{BuildContext, BuildError};
 use kpl_runtime::sample::Sample;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 
 use values::{
-    actions_from_value, anchor_fields, percepts_from_value, pose_from_value, relation_fields,
-    world_from_value, world_scalar_fields, world_to_value,
+    action_value, actions_from_value, anchor_fields, percept_value, percepts_from_value, pose_from_value,
+    relation_fields, world_from_value, world_scalar_fields, world_to_value,
 };
 
 /// The input ports of `aapa.anchor`, in order.
@@ -354,6 +355,27 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process::Asy
     }
     let aapa = Aapa::new(params(ctx)?).map_err(|e| ctx.error(e.to_string()))?;
     Ok(Box::new(SyncUnit(AnchorUnit::new(aapa))))
+}
+
+/// The ports of the replay sources (`sim.gearbox`, `cater.video`) after the default one, which
+/// carries the percepts.
+const SOURCE_ACTIONS_PORT: usize = 1;
+const SOURCE_CAMERA_PORT: usize = 2;
+
+/// Emits one frame of a replay source at `t`: its percepts, its actions (expected ends moved onto
+/// the run's clock by `start`) and the camera pose.
+async fn emit_frame(
+    ctx: &mut SourceContext,
+    t: Time,
+    start: Time,
+    percepts: &[Percept],
+    actions: &[Action],
+    pose: Value,
+) {
+    ctx.emit(t, Value::List(percepts.iter().map(percept_value).collect())).await;
+    let actions = actions.iter().map(|a| action_value(a, start)).collect();
+    ctx.emit_port(SOURCE_ACTIONS_PORT, t, Value::List(actions)).await;
+    ctx.emit_port(SOURCE_CAMERA_PORT, t, pose).await;
 }
 
 fn fields(list: &[(&str, ValueType)]) -> Vec<(String, ValueType)> {

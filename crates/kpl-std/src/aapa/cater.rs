@@ -23,10 +23,8 @@ use kpl_runtime::process::{BoxFuture, ProcessError, Source};
 use kpl_runtime::registry::{BuildContext, BuildError};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType};
 
-use super::values::{action_value, percept_value, pose_value};
-
-const ACTIONS_PORT: usize = 1;
-const CAMERA_PORT: usize = 2;
+use super::emit_frame;
+use super::values::pose_value;
 
 struct Video {
     scene: Scene,
@@ -45,11 +43,8 @@ impl Source for Video {
                 if !ctx.wait_until(t).await {
                     break;
                 }
-                let percepts = self.perception.percepts(frame).iter().map(percept_value).collect();
-                ctx.emit(t, Value::List(percepts)).await;
-                let actions = frame_actions.iter().map(|a| action_value(a, start)).collect();
-                ctx.emit_port(ACTIONS_PORT, t, Value::List(actions)).await;
-                ctx.emit_port(CAMERA_PORT, t, pose.clone()).await;
+                let percepts = self.perception.percepts(frame);
+                emit_frame(ctx, t, start, &percepts, frame_actions, pose.clone()).await;
                 if ctx.unconsumed() {
                     break;
                 }

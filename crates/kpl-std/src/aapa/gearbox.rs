@@ -13,30 +13,20 @@
 //! 640x480 pixels with a focal length of 600 px and the principal point at the centre, looking at a
 //! table at z = 0.6 m (`aapa.anchor(..., image: [640.0, 480.0], focal_px: 600.0, surface_z: 0.6)`).
 
-use std::sync::Arc;
-
 use kpl_aapa::gearbox::{self, Cycle};
-use kpl_core::{Record, Time, Value, ValueType};
+use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{BoxFuture, ProcessError, Source};
 use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
 
-use super::values::{action_value, percept_value, pose_value};
+use super::emit_frame;
+use super::values::{pose_value, record};
 
-/// Output ports after the default one, in the entry's order.
-const ACTIONS_PORT: usize = 1;
-const CAMERA_PORT: usize = 2;
+/// The output port after `actions` and `camera` (see [`emit_frame`]).
 const TRUTH_PORT: usize = 3;
 
 struct Gearbox {
     cycles: Vec<Cycle>,
-}
-
-fn record(fields: Vec<(&str, Value)>) -> Value {
-    Value::Record(Arc::new(Record {
-        id: None,
-        fields: fields.into_iter().map(|(n, v)| (Arc::from(n), v)).collect(),
-    }))
 }
 
 fn truth_value(cycle: &Cycle) -> Value {
@@ -64,11 +54,7 @@ impl Source for Gearbox {
                 if !ctx.wait_until(t).await {
                     break;
                 }
-                let percepts = cycle.percepts.iter().map(percept_value).collect();
-                ctx.emit(t, Value::List(percepts)).await;
-                let actions = cycle.actions.iter().map(|a| action_value(a, start)).collect();
-                ctx.emit_port(ACTIONS_PORT, t, Value::List(actions)).await;
-                ctx.emit_port(CAMERA_PORT, t, pose_value(&cycle.camera)).await;
+                emit_frame(ctx, t, start, &cycle.percepts, &cycle.actions, pose_value(&cycle.camera)).await;
                 ctx.emit_port(TRUTH_PORT, t, truth_value(&cycle)).await;
                 if ctx.unconsumed() {
                     break;

@@ -61,7 +61,7 @@ pub(crate) fn status_name(status: AnchorStatus) -> &'static str {
     }
 }
 
-fn record(fields: Vec<(&str, Value)>) -> Value {
+pub(super) fn record(fields: Vec<(&str, Value)>) -> Value {
     Value::Record(Arc::new(Record {
         id: None,
         fields: fields.into_iter().map(|(name, value)| (Arc::from(name), value)).collect(),
