@@ -30,6 +30,14 @@ fn state(unit: &mut AnchorUnit, valid: Time, values: &[Option<Sample>]) -> Vec<V
         .collect()
 }
 
+/// Runs the unit on one state that must fail, and returns the error.
+fn failing_state(unit: &mut AnchorUnit, valid: Time, values: &[Option<Sample>]) -> String {
+    let names = names();
+    let input = Input { now: valid, valid, trigger: Trigger::State, values, names: &names };
+    let mut out = Emitter::new(Arc::from(Vec::<String>::new()));
+    unit.on_input(&input, &mut out).unwrap_err().to_string()
+}
+
 fn s(valid: Time, value: Value) -> Option<Sample> {
     Some(Sample::new(valid, valid, value))
 }
@@ -40,6 +48,17 @@ fn frame(c: &gearbox::Cycle) -> Value {
 
 fn actions(list: &[Action]) -> Value {
     Value::List(list.iter().map(|a| action_value(a, 0)).collect())
+}
+
+/// The unit's four inputs for a frame of the scenario: its percepts, these actions and this pose at
+/// the frame's time, and the fed-back world.
+fn inputs(
+    c: &gearbox::Cycle,
+    list: &[Action],
+    pose: &CameraPose,
+    fed_back: Option<Sample>,
+) -> [Option<Sample>; 4] {
+    [s(c.time, frame(c)), s(c.time, actions(list)), s(c.time, pose_value(pose)), fed_back]
 }
 
 fn gearbox_unit() -> AnchorUnit {
@@ -57,12 +76,7 @@ fn the_unit_with_its_feedback_reproduces_the_library_run() {
     let mut fed_back: Option<Sample> = None;
     for c in &cycles {
         expected = aapa.step(c.time, &c.percepts, &c.actions, Some(&c.camera), &expected).unwrap();
-        let values = [
-            s(c.time, frame(c)),
-            s(c.time, actions(&c.actions)),
-            s(c.time, pose_value(&c.camera)),
-            fed_back.clone(),
-        ];
+        let values = inputs(c, &c.actions, &c.camera, fed_back.clone());
         let out = state(&mut unit, c.time, &values);
         assert_eq!(out.len(), 1);
         assert_eq!(world_from_value(&out[0]).unwrap(), expected, "t={}", c.time);
@@ -83,8 +97,7 @@ fn actions_between_frames_apply_once_at_the_next_frame() {
     for c in opening {
         assert!(c.actions.is_empty());
         expected = aapa.step(c.time, &c.percepts, &[], Some(&c.camera), &expected).unwrap();
-        let values =
-            [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&c.camera)), fed_back];
+        let values = inputs(c, &[], &c.camera, fed_back);
         fed_back = s(c.time, state(&mut unit, c.time, &values).remove(0));
     }
     let last = &opening[opening.len() - 1];
@@ -127,8 +140,7 @@ fn a_world_that_has_not_come_back_is_replaced_by_the_units_copy_with_a_note() {
     let w0 = aapa.step(c0.time, &c0.percepts, &[], Some(&c0.camera), &WorldState::default()).unwrap();
     let w1 = aapa.step(c1.time, &c1.percepts, &[], Some(&c1.camera), &w0).unwrap();
     let run = |unit: &mut AnchorUnit, c: &gearbox::Cycle, fed_back: Option<Sample>| {
-        let values =
-            [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&c.camera)), fed_back];
+        let values = inputs(c, &[], &c.camera, fed_back);
         world_from_value(&state(unit, c.time, &values)[0]).unwrap()
     };
     assert_eq!(run(&mut unit, c0, None), w0);
@@ -150,13 +162,11 @@ fn a_bad_input_fails_one_cycle_and_the_next_goes_on() {
     let cycles = gearbox::scenario();
     let mut unit = gearbox_unit();
     let c = &cycles[0];
-    let values = [s(c.time, Value::Int(3)), s(c.time, actions(&[])), s(c.time, pose_value(&c.camera)), None];
-    let names = names();
-    let input = Input { now: 0, valid: c.time, trigger: Trigger::State, values: &values, names: &names };
-    let mut out = Emitter::new(Arc::from(Vec::<String>::new()));
-    let err = unit.on_input(&input, &mut out).unwrap_err();
-    assert!(err.to_string().contains("t=0: the percepts: expected a list"), "{err}");
-    let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&c.camera)), None];
+    let mut values = inputs(c, &[], &c.camera, None);
+    values[PERCEPTS] = s(c.time, Value::Int(3));
+    let err = failing_state(&mut unit, c.time, &values);
+    assert!(err.contains("t=0: the percepts: expected a list"), "{err}");
+    let values = inputs(c, &[], &c.camera, None);
     assert_eq!(state(&mut unit, c.time, &values).len(), 1);
 }
 
@@ -246,7 +256,7 @@ fn without_a_camera_model_the_camera_must_stay_still() {
     let mut fed_back = None;
     for c in &cycles[..3] {
         expected = aapa.step(c.time, &c.percepts, &[], None, &expected).unwrap();
-        let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&still)), fed_back];
+        let values = inputs(c, &[], &still, fed_back);
         let out = state(&mut unit, c.time, &values);
         assert_eq!(world_from_value(&out[0]).unwrap(), expected);
         fed_back = s(c.time, out[0].clone());
@@ -254,11 +264,7 @@ fn without_a_camera_model_the_camera_must_stay_still() {
     // A pose that moves cannot be compensated: the cycle fails and says what to set.
     let c = &cycles[3];
     let moved = CameraPose { x: 0.15, ..still };
-    let values = [s(c.time, frame(c)), s(c.time, actions(&[])), s(c.time, pose_value(&moved)), fed_back];
-    let names = names();
-    let input = Input { now: c.time, valid: c.time, trigger: Trigger::State, values: &values, names: &names };
-    let mut out = Emitter::new(Arc::from(Vec::<String>::new()));
-    let err = unit.on_input(&input, &mut out).unwrap_err().to_string();
+    let err = failing_state(&mut unit, c.time, &inputs(c, &[], &moved, fed_back));
     assert!(err.contains("the camera moved") && err.contains("set `focal_px`"), "{err}");
 }
 
@@ -270,9 +276,7 @@ fn a_world_edited_on_its_way_back_is_the_one_used() {
     let aapa = Aapa::new(gearbox::params()).unwrap();
     let mut unit = gearbox_unit();
     let run = |unit: &mut AnchorUnit, c: &gearbox::Cycle, fed_back: Option<Sample>| {
-        let values =
-            [s(c.time, frame(c)), s(c.time, actions(&c.actions)), s(c.time, pose_value(&c.camera)), fed_back];
-        state(unit, c.time, &values).remove(0)
+        state(unit, c.time, &inputs(c, &c.actions, &c.camera, fed_back)).remove(0)
     };
     let mut fed_back = None;
     for c in &cycles[..30] {
