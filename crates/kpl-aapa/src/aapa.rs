@@ -32,7 +32,8 @@ use crate::geometry::{
 };
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
-    Action, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,
+    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Percept, Relation, Symbol,
+    WorldState,
 };
 
 /// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
@@ -103,9 +104,9 @@ impl Aapa {
         let p = &self.params;
         self.validate_inputs(time, percepts, actions, &previous)?;
         let (previous_time, previous_camera) = (previous.time, previous.camera);
-        let previous_anchors = match previous {
-            Cow::Borrowed(w) => w.anchors.clone(),
-            Cow::Owned(w) => w.anchors,
+        let (previous_anchors, mut bindings) = match previous {
+            Cow::Borrowed(w) => (w.anchors.clone(), w.bindings.clone()),
+            Cow::Owned(w) => (w.anchors, w.bindings),
         };
         let dt_seconds = previous_time.map(|t| (time - t) as f64 / 1e6);
         let mut notes = Vec::new();
@@ -228,12 +229,13 @@ impl Aapa {
             self.reacquire(&mut work, time, &mut notes);
         }
 
-        // Effects of actions: attachments (III-B.2b) and motion.
+        // Effects of actions: attachments (III-B.2b) and motion. Actions moving one of several
+        // identical objects wait for its motion to tell which (bindings).
+        self.decide_bindings(&mut bindings, time, &mut work, &mut notes);
         for action in actions {
-            for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, &mut work, p.theta_anch, &mut notes);
-            }
+            self.apply_action(action, time, &mut work, &mut bindings, &mut notes);
         }
+        forget_stale_bindings(&mut bindings, time, &mut notes);
 
         // 2. Hypothesis reasoning and confidence for anchors not aligned this cycle.
         let index = symbol_index(&work);
@@ -297,7 +299,97 @@ impl Aapa {
             anchors: work.into_iter().map(|w| w.anchor).collect(),
             relations,
             notes,
+            bindings,
         })
+    }
+
+    /// Applies one action event: directly when its moving object (argument 0) is known; a `started`
+    /// event naming a type several anchors share opens a binding instead, and the matching
+    /// `completed` event closes it.
+    fn apply_action(
+        &self,
+        action: &Action,
+        time: Time,
+        work: &mut [Work],
+        bindings: &mut Vec<Binding>,
+        notes: &mut Vec<String>,
+    ) {
+        let theta_anch = self.params.theta_anch;
+        if self.rules_for(action).next().is_none() {
+            return;
+        }
+        let ambiguous = action.args.first().is_some_and(|arg| {
+            !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) && candidates(arg, work).len() > 1
+        });
+        if !ambiguous {
+            for rule in self.rules_for(action) {
+                apply_rule(rule, action, time, work, theta_anch, notes);
+            }
+            return;
+        }
+        match action.phase {
+            ActionPhase::Started => {
+                let taken = bound_symbols(bindings);
+                let candidates = candidates(&action.args[0], work)
+                    .into_iter()
+                    .filter(|&i| !taken.contains(&work[i].anchor.symbol))
+                    .map(|i| (work[i].anchor.symbol.clone(), centre(&work[i].anchor.bbox)))
+                    .collect();
+                bindings.push(Binding { action: action.clone(), started: time, candidates, bound: None });
+            }
+            ActionPhase::Completed => {
+                let open = bindings
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| b.action.name == action.name && b.action.args == action.args)
+                    .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
+                    .map(|(i, _)| i);
+                let actor = match open {
+                    Some(i) => {
+                        let binding = bindings.remove(i);
+                        match &binding.bound {
+                            Some(symbol) => Some(symbol.clone()),
+                            None => {
+                                let symbol = most_moved(&binding, work, &bound_symbols(bindings), 0.0)
+                                    .or_else(|| resolve(&action.args[0], work, theta_anch).map(|i| work[i].anchor.symbol.clone()));
+                                if let Some(symbol) = &symbol {
+                                    self.apply_bound(&binding.action, symbol, time, work, notes);
+                                }
+                                symbol
+                            }
+                        }
+                    }
+                    None => resolve(&action.args[0], work, theta_anch).map(|i| work[i].anchor.symbol.clone()),
+                };
+                match actor {
+                    Some(symbol) => self.apply_bound(action, &symbol, time, work, notes),
+                    None => notes.push(format!("action `{}`: no anchor for `{}`", action.name, action.args[0])),
+                }
+            }
+        }
+    }
+
+    /// Applies an action's rules with its moving object named by symbol.
+    fn apply_bound(&self, action: &Action, symbol: &Symbol, time: Time, work: &mut [Work], notes: &mut Vec<String>) {
+        let mut bound = action.clone();
+        bound.args[0] = symbol.clone();
+        for rule in self.rules_for(&bound) {
+            apply_rule(rule, &bound, time, work, self.params.theta_anch, notes);
+        }
+    }
+
+    /// Decides the open bindings whose moving object now shows, and applies their started effects.
+    fn decide_bindings(&self, bindings: &mut [Binding], time: Time, work: &mut [Work], notes: &mut Vec<String>) {
+        for k in 0..bindings.len() {
+            if bindings[k].bound.is_some() {
+                continue;
+            }
+            let taken = bound_symbols(bindings);
+            if let Some(symbol) = most_moved(&bindings[k], work, &taken, BINDING_MIN_MOVE) {
+                self.apply_bound(&bindings[k].action, &symbol, time, work, notes);
+                bindings[k].bound = Some(symbol);
+            }
+        }
     }
 
     fn validate_inputs(
@@ -618,6 +710,71 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
     }
 }
 
+/// How far (pixels) the moving object of a binding must have moved, and by how much more than any
+/// other candidate (twice as far plus half a pixel), before the binding is decided.
+const BINDING_MIN_MOVE: f64 = 2.0;
+/// Bindings kept at most; beyond, the oldest are dropped (a source that starts actions and never
+/// completes them must not grow the world state without bound).
+const MAX_BINDINGS: usize = 64;
+
+/// The anchors of a type.
+fn candidates(object_type: &str, work: &[Work]) -> Vec<usize> {
+    (0..work.len()).filter(|&i| !work[i].removed && &*work[i].anchor.object_type == object_type).collect()
+}
+
+fn bound_symbols(bindings: &[Binding]) -> Vec<Symbol> {
+    bindings.iter().filter_map(|b| b.bound.clone()).collect()
+}
+
+/// The candidate of a binding that moved furthest since the action started, if it moved at least
+/// `min_move` pixels and clearly more than every other (with `min_move` 0, simply the furthest).
+fn most_moved(binding: &Binding, work: &[Work], taken: &[Symbol], min_move: f64) -> Option<Symbol> {
+    let mut moves: Vec<(f64, &Symbol)> = binding
+        .candidates
+        .iter()
+        .filter(|(symbol, _)| !taken.contains(symbol))
+        .filter_map(|(symbol, start)| {
+            let w = work.iter().find(|w| !w.removed && w.anchor.symbol == *symbol)?;
+            let now = centre(&w.anchor.bbox);
+            Some((((now[0] - start[0]).powi(2) + (now[1] - start[1]).powi(2)).sqrt(), symbol))
+        })
+        .collect();
+    moves.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (best, symbol) = *moves.first()?;
+    let second = moves.get(1).map_or(0.0, |m| m.0);
+    let clear = min_move <= 0.0 || (best >= min_move && best >= 2.0 * second + 0.5);
+    clear.then(|| symbol.clone())
+}
+
+/// The anchor of a type (other than `to`) whose box's bottom centre is nearest `to`'s.
+fn nearest(object_type: &str, to: usize, work: &[Work]) -> Option<usize> {
+    let target = bottom_centre(&work[to].anchor.bbox);
+    candidates(object_type, work).into_iter().filter(|&i| i != to).min_by(|&a, &b| {
+        let d = |i: usize| {
+            let p = bottom_centre(&work[i].anchor.bbox);
+            (p[0] - target[0]).powi(2) + (p[1] - target[1]).powi(2)
+        };
+        d(a).total_cmp(&d(b))
+    })
+}
+
+/// Drops bindings whose action should long be over (a missed `completed` event) and keeps at most
+/// [`MAX_BINDINGS`].
+fn forget_stale_bindings(bindings: &mut Vec<Binding>, time: Time, notes: &mut Vec<String>) {
+    bindings.retain(|b| {
+        let stale = b.action.expected_end.is_some_and(|end| time > end.saturating_add(1_000_000));
+        if stale {
+            notes.push(format!("action `{}` started at {} never completed; forgotten", b.action.name, b.started));
+        }
+        !stale
+    });
+    if bindings.len() > MAX_BINDINGS {
+        let excess = bindings.len() - MAX_BINDINGS;
+        notes.push(format!("{excess} unfinished actions forgotten (more than {MAX_BINDINGS} open)"));
+        bindings.drain(..excess);
+    }
+}
+
 /// An anchor named by an action argument: by symbol, else the best anchor of that type.
 fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
     if let Some(i) = work.iter().position(|w| !w.removed && &*w.anchor.symbol == arg) {
@@ -640,9 +797,17 @@ fn apply_rule(
     theta_anch: f64,
     notes: &mut Vec<String>,
 ) {
+    // Other arguments that name a type several anchors share are the one nearest the moving object
+    // (argument 0): what a cone comes down over is where it ends.
     let lookup = |k: usize, work: &[Work], notes: &mut Vec<String>| -> Option<usize> {
         let arg = action.args.get(k)?;
-        let found = resolve(arg, work, theta_anch);
+        let near = if k == 0 { None } else { action.args.first().and_then(|a| resolve(a, work, theta_anch)) };
+        let found = match near {
+            Some(actor) if candidates(arg, work).len() > 1 && !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) => {
+                nearest(arg, actor, work)
+            }
+            _ => resolve(arg, work, theta_anch),
+        };
         if found.is_none() {
             notes.push(format!("action `{}`: no anchor for `{arg}`", action.name));
         }

@@ -202,6 +202,27 @@ pub struct WorldState {
     /// What this cycle could not use (an action naming no known anchor, ...). Cleared each cycle.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// Actions in progress whose moving object is named by a type that several anchors share: which
+    /// anchor it is, once its motion tells (or still undecided). Part of the memory, like the anchors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bindings: Vec<Binding>,
+}
+
+/// An action whose first argument (the object it moves) names a type several anchors have, from its
+/// `started` event to its `completed` one. Its started effects wait until the anchor is known: the
+/// candidate that moves clearly more than the others since the start, or at completion the one that
+/// moved most.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Binding {
+    /// The `started` event.
+    pub action: Action,
+    /// When it started.
+    pub started: Time,
+    /// The anchors of the type then, with their box centres.
+    pub candidates: Vec<(Symbol, [f64; 2])>,
+    /// The anchor decided on, once known (its started effects are then applied).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound: Option<Symbol>,
 }
 
 impl WorldState {
