@@ -27,6 +27,6 @@ pub use params::{
     RelationRule,
 };
 pub use types::{
-    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Percept, Relation, Symbol, WorldState,
+    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, Candidate, CameraPose, Percept, Relation, Symbol, WorldState,
     bbox_array,
 };

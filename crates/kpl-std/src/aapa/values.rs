@@ -267,7 +267,7 @@ field_names! {
     partial = "partial", attachment = "attachment", parent = "parent", relation = "relation",
     offset = "offset", size = "size", parent_scale = "parent_scale", type_votes = "type_votes",
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
-    relations = "relations", notes = "notes", bindings = "bindings",
+    relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -348,6 +348,9 @@ fn anchor_value(a: &Anchor) -> Value {
         geometry.push((n.offset.clone(), floats(&att.offset)));
         geometry.push((n.size.clone(), floats(&att.size)));
         geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
+        if att.hidden {
+            geometry.push((n.hidden.clone(), Value::Bool(true)));
+        }
         fields.push((n.attachment.clone(), named(geometry)));
     }
     if !type_votes.is_empty() {
