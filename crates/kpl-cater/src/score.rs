@@ -18,8 +18,8 @@ pub fn iou(a: IntBox, b: IntBox) -> f64 {
     let [a, b] = [a, b].map(|x| x.map(i64::from));
     let w = (a[2].min(b[2]) - a[0].max(b[0]) + 1).max(0);
     let h = (a[3].min(b[3]) - a[1].max(b[1]) + 1).max(0);
-    let inter = (w * h) as f64;
-    let area = |x: [i64; 4]| ((x[2] - x[0] + 1).max(0) * (x[3] - x[1] + 1).max(0)) as f64;
+    let inter = w as f64 * h as f64;
+    let area = |x: [i64; 4]| (x[2] - x[0] + 1).max(0) as f64 * (x[3] - x[1] + 1).max(0) as f64;
     let union = area(a) + area(b) - inter;
     if union <= 0.0 { 0.0 } else { inter / union }
 }

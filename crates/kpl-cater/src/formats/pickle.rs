@@ -137,6 +137,11 @@ fn numpy_array(value: &Value) -> Result<Option<Numbers>, String> {
         [raw @ Value::Bytes(_), dtype @ Value::Tuple(_), Value::Tuple(shape), Value::String(order)] => {
             (shape, dtype, order == "F", raw)
         }
+        // `_reconstruct`'s arguments: a second reference to an array the pickle already holds, which
+        // serde-pickle gives back as it was before its data was set.
+        [Value::None, Value::Tuple(_), Value::Bytes(b)] if b.as_slice() == b"b" => {
+            return Err("the same numpy array object appears twice (shared arrays are not supported)".into());
+        }
         _ => return Ok(None),
     };
     let dims: Vec<usize> = shape
