@@ -64,7 +64,10 @@ out=["# Diagnostics","","Every problem `kpl check` (and `kpl graph`, `kpl fmt`) 
 "`kpl/tests/specs.rs` keeps those outputs (and this list of codes) in step with the code.","",
 "`--format json` prints the same diagnostics as one JSON array of objects with the fields `file`, `line`,",
 "`column`, `end_line`, `end_column` (1-based; the end column is just past the span), `severity` (`error` or",
-"`warning`), `code`, `message` and, when there is one, `hint`.",""]
+"`warning`), `code`, `message`, when there is one, `hint`, and `labels`: every marked place, the primary span",
+"first and the others in source order, each with `line`, `column`, `end_line`, `end_column`, `primary` and",
+"`message` (the text under the span; empty when there is none).","",
+"`kpl explain CODE` prints the section of a code below (the text is built into `kpl`).",""]
 for code,title,text,examples in codes:
     out.append(f"## {code}: {title}")
     out.append("")

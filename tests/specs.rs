@@ -3,7 +3,9 @@
 //! - every `specs/warn/NAME.kpl` checks with exit 0 and warnings equal to `NAME.diagnostics`;
 //! - every `specs/err/NAME.kpl` fails with exit 1, and its rendered diagnostics equal
 //!   `specs/err/NAME.diagnostics` (rewrite them with `KPL_BLESS=1 cargo test -p kpl --test specs`);
-//! - `--format json` gives the documented fields, and every code it uses is in docs/diagnostics.md.
+//! - `--format json` gives the documented fields (every label, in source order), and every code
+//!   it uses is in docs/diagnostics.md, which `kpl explain CODE` prints;
+//! - `kpl fmt --check specs/` passes: files that do not parse on purpose carry `// kpl fmt: skip`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests
 
 mod common;
@@ -116,9 +118,20 @@ fn json_diagnostics_have_the_documented_fields_and_codes() {
     assert!(items.len() >= specs.len());
     let mut files_seen = std::collections::BTreeSet::new();
     for item in items {
-        for key in ["file", "line", "column", "end_line", "end_column", "severity", "code", "message"] {
+        for key in ["file", "line", "column", "end_line", "end_column", "severity", "code", "message", "labels"] {
             assert!(item.get(key).is_some(), "missing {key} in {item}");
         }
+        let labels = item["labels"].as_array().unwrap();
+        assert_eq!(labels[0]["primary"], true, "the primary label comes first: {item}");
+        assert_eq!((&labels[0]["line"], &labels[0]["column"]), (&item["line"], &item["column"]));
+        let places: Vec<(u64, u64)> = labels[1..]
+            .iter()
+            .map(|l| {
+                assert_eq!(l["primary"], false);
+                (l["line"].as_u64().unwrap(), l["column"].as_u64().unwrap())
+            })
+            .collect();
+        assert!(places.windows(2).all(|w| w[0] <= w[1]), "secondary labels in source order: {item}");
         let code = item["code"].as_str().unwrap();
         assert!(docs.contains(&format!("## {code}")), "code {code} is not documented in docs/diagnostics.md");
         assert!(item["line"].as_u64().unwrap() >= 1 && item["column"].as_u64().unwrap() >= 1);
@@ -183,4 +196,52 @@ fn every_code_in_the_code_base_is_documented() {
             "{code} is used but not documented in docs/diagnostics.md"
         );
     }
+}
+
+#[test]
+fn every_documented_code_is_explained() {
+    let docs = std::fs::read_to_string(root().join("docs/diagnostics.md")).unwrap();
+    let codes: Vec<&str> =
+        docs.lines().filter_map(|l| l.strip_prefix("## ")).filter_map(|l| l.split(':').next()).collect();
+    assert!(codes.len() > 40);
+    for code in &codes {
+        let out = kpl(&["explain", &code.to_lowercase()]);
+        assert_eq!(out.status.code(), Some(0), "{code}");
+        let text = String::from_utf8(out.stdout).unwrap();
+        assert!(text.starts_with(&format!("{code}: ")), "{code}: {text}");
+    }
+    let listed = String::from_utf8(kpl(&["explain"]).stdout).unwrap();
+    assert_eq!(listed.lines().count(), codes.len());
+    let unknown = kpl(&["explain", "E9999"]);
+    assert_eq!(unknown.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&unknown.stderr).contains("no diagnostic has the code"));
+}
+
+#[test]
+fn the_whole_specs_folder_is_in_canonical_layout() {
+    let out = kpl(&["fmt", "--check", "specs"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("marked `// kpl fmt: skip`"), "{stderr}");
+    // The skipped files are exactly the ones that do not parse.
+    for spec in specs_under("specs") {
+        let text = String::from_utf8_lossy(&std::fs::read(root().join(&spec)).unwrap()).into_owned();
+        let marked = text.lines().any(|l| l == "// kpl fmt: skip");
+        let parses = kpl_syntax_parses(&spec);
+        assert_eq!(marked, !parses, "{spec}: marked {marked}, parses {parses}");
+    }
+}
+
+/// Whether `kpl fmt -` can format the spec (it parses).
+fn kpl_syntax_parses(spec: &str) -> bool {
+    use std::io::Write;
+    let mut child = common::kpl_command(&["fmt", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let bytes = std::fs::read(root().join(spec)).unwrap();
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    child.wait().unwrap().success()
 }
