@@ -245,3 +245,55 @@ fn kpl_syntax_parses(spec: &str) -> bool {
     child.stdin.take().unwrap().write_all(&bytes).unwrap();
     child.wait().unwrap().success()
 }
+
+/// The numbers after `name="` in an SVG element.
+fn attr(element: &str, name: &str) -> f64 {
+    let at = element.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+    element[at..].split('"').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn graphs_are_drawn_as_svg_with_every_process_and_stream_and_no_box_over_another() {
+    for spec in valid_specs() {
+        let out = kpl(&["graph", &spec]);
+        assert_eq!(out.status.code(), Some(0), "{spec}");
+        let svg = String::from_utf8(out.stdout).unwrap();
+        assert!(svg.starts_with("<svg xmlns=\"http://www.w3.org/2000/svg\"") && svg.ends_with("</svg>\n"));
+        let json: serde_json::Value =
+            serde_json::from_slice(&kpl(&["graph", "--format", "json", &spec]).stdout).unwrap();
+        let processes = json["processes"].as_array().unwrap();
+        let boxes: Vec<(String, [f64; 4])> = svg
+            .lines()
+            .filter(|l| l.starts_with("<g class=\"process\""))
+            .map(|l| {
+                let name = l.split("data-name=\"").nth(1).unwrap().split('"').next().unwrap().to_string();
+                let rect = &l[l.find("<rect").unwrap()..];
+                (name, [attr(rect, "x"), attr(rect, "y"), attr(rect, "width"), attr(rect, "height")])
+            })
+            .collect();
+        assert_eq!(boxes.len(), processes.len(), "{spec}: a box per process");
+        for p in processes {
+            assert!(boxes.iter().any(|(n, _)| n == p["name"].as_str().unwrap()), "{spec}: {}", p["name"]);
+        }
+        for (i, (a, [ax, ay, aw, ah])) in boxes.iter().enumerate() {
+            for (b, [bx, by, bw, bh]) in &boxes[i + 1..] {
+                let apart = ax + aw <= *bx || bx + bw <= *ax || ay + ah <= *by || by + bh <= *ay;
+                assert!(apart, "{spec}: boxes of {a} and {b} overlap");
+            }
+        }
+        let streams = svg.lines().filter(|l| l.starts_with("<path class=\"stream\"")).count();
+        assert_eq!(streams, json["streams"].as_array().unwrap().len(), "{spec}: a curve per stream");
+    }
+}
+
+#[test]
+fn graphs_show_only_policies_that_differ_from_the_default() {
+    let dot = String::from_utf8(kpl(&["graph", "--format", "dot", "specs/ok/overview.kpl"]).stdout).unwrap();
+    assert!(!dot.contains("queue 1024 block") && !dot.contains("any update"), "{dot}");
+    assert!(dot.contains("sample every 100ms, max delay 50ms, strict order"), "{dot}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&kpl(&["graph", "--format", "json", "specs/ok/overview.kpl"]).stdout).unwrap();
+    let percepts = &json["streams"][0];
+    assert_eq!(percepts["policy_changes"], "sample every 100ms, max delay 50ms, strict order");
+    assert!(percepts["policy_text"].as_str().unwrap().contains("queue 1024 block"), "JSON keeps every part");
+}

@@ -251,44 +251,51 @@ impl Default for Queue {
 impl Policy {
     /// The policy as KPL text, defaults included (`no approximation, any update, any order, queue 1024 block`).
     pub fn describe(&self) -> String {
+        self.parts().into_iter().map(|(text, _)| text).collect::<Vec<_>>().join(", ")
+    }
+
+    /// Only what differs from the default policy, as KPL text (`sample every 1s, strict order`);
+    /// empty for a stream with the default policy. The defaults that `sample every` implies
+    /// (`use most recent`, `monotone order`) count as defaults.
+    pub fn describe_changes(&self) -> String {
+        self.parts().into_iter().filter(|(_, default)| !default).map(|(text, _)| text).collect::<Vec<_>>().join(", ")
+    }
+
+    /// The policy's parts as KPL text, each with whether it is what the stream gets by default.
+    fn parts(&self) -> Vec<(String, bool)> {
         use kpl_core::format_micros as d;
+        let sampled = matches!(self.change, Change::SampleEvery(_));
         let mut parts = vec![
             match self.approximation {
-                Approximation::None => "no approximation".to_string(),
-                Approximation::UseMostRecent => "use most recent".to_string(),
+                Approximation::None => ("no approximation".to_string(), !sampled),
+                Approximation::UseMostRecent => ("use most recent".to_string(), sampled),
             },
             match self.change {
-                Change::AnyUpdate => "any update".to_string(),
-                Change::AnyChange => "any change".to_string(),
-                Change::SampleEvery(t) => format!("sample every {}", d(t)),
+                Change::AnyUpdate => ("any update".to_string(), true),
+                Change::AnyChange => ("any change".to_string(), false),
+                Change::SampleEvery(t) => (format!("sample every {}", d(t)), false),
             },
         ];
         if let Some(t) = self.max_delay {
-            parts.push(format!("max delay {}", d(t)));
+            parts.push((format!("max delay {}", d(t)), false));
         }
         if let Some((from, to)) = self.window {
-            parts.push(format!("from {} to {}", d(from), to.map_or("inf".to_string(), d)));
+            parts.push((format!("from {} to {}", d(from), to.map_or("inf".to_string(), d)), false));
         }
-        parts.push(
-            match self.order {
-                Order::Any => "any order",
-                Order::Monotone => "monotone order",
-                Order::Strict => "strict order",
-            }
-            .to_string(),
-        );
-        parts.push(format!(
-            "queue {} {}",
-            self.queue.capacity,
-            match self.queue.overflow {
-                ast::Overflow::Block => "block",
-                ast::Overflow::DropOldest => "drop oldest",
-            }
-        ));
+        parts.push(match self.order {
+            Order::Any => ("any order".to_string(), !sampled),
+            Order::Monotone => ("monotone order".to_string(), sampled),
+            Order::Strict => ("strict order".to_string(), false),
+        });
+        let overflow = match self.queue.overflow {
+            ast::Overflow::Block => "block",
+            ast::Overflow::DropOldest => "drop oldest",
+        };
+        parts.push((format!("queue {} {overflow}", self.queue.capacity), self.queue == Queue::default()));
         if self.feedback {
-            parts.push("feedback".to_string());
+            parts.push(("feedback".to_string(), false));
         }
-        parts.join(", ")
+        parts
     }
 }
 

@@ -24,6 +24,7 @@ pub mod hir;
 pub mod registry;
 pub mod render;
 mod suggest;
+pub mod svg;
 mod types;
 
 pub use check::{Checked, check, check_identification};
