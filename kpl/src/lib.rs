@@ -41,7 +41,7 @@ struct Cli {
 enum Command {
     /// Parse and check specs: names, types, units, policies, links, cycles, deployment.
     Check(cmd::check::Args),
-    /// Draw the process graph of a spec (dot, mermaid or json), with streams and policies.
+    /// Draw the process graph of a spec (svg, dot, mermaid or json), with streams and policies.
     Graph(cmd::graph::Args),
     /// Explain a diagnostic code (E0101, W0201, ...): what it means, with an example.
     Explain(cmd::explain::Args),
@@ -60,7 +60,7 @@ enum Command {
     /// Metric temporal logic: evaluate formulas over traces.
     #[command(
         subcommand,
-        after_help = "Examples:\n  kpl mtl eval --formula 'always[0, 10] (p -> eventually[0, 3] q)' --trace trace.jsonl\n  kpl mtl eval --formula 'p until[0, 5s] q' --trace trace.jsonl --every"
+        after_help = "Examples:\n  kpl mtl eval --formula 'always[0, 10] (p -> eventually[0, 3] q)' --trace specs/mtl/trace.jsonl\n  kpl mtl eval --formula 'p until[0, 5s] q' --trace specs/mtl/trace.jsonl --every"
     )]
     Mtl(cmd::mtl::Command),
     /// Print a shell completion script (bash, zsh, fish, elvish or powershell).
@@ -116,14 +116,24 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// Logs go to stderr; `RUST_LOG` selects what is shown (default: warnings).
+/// Logs go to stderr; `RUST_LOG` selects what is shown. By default: KPL's warnings, and only the
+/// errors of zenoh's own crates (their warnings, such as a scouting delay, are about zenoh's
+/// internals; `kpl-zenoh` reports what a user can act on in its own words).
 fn init_tracing() {
     use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
+    const DEFAULT: &str = "warn,zenoh=error,zenoh_transport=error,zenoh_link=error,zenoh_link_tcp=error,\
+                           zenoh_config=error,zenoh_runtime=error";
     let ansi = report::colour();
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(ansi)
-        .with_writer(std::io::stderr)
-        .try_init();
+    let builder = tracing_subscriber::fmt().with_ansi(ansi).with_writer(std::io::stderr);
+    match EnvFilter::try_from_default_env() {
+        // Asked for: the full detail (times, modules), for debugging.
+        Ok(filter) => {
+            let _ = builder.with_env_filter(filter).try_init();
+        }
+        // By default, a warning reads as one line of text.
+        Err(_) => {
+            let filter = EnvFilter::new(DEFAULT);
+            let _ = builder.with_env_filter(filter).with_target(false).without_time().try_init();
+        }
+    }
 }
