@@ -115,7 +115,10 @@ fn malformed_input_is_counted_reported_and_survived() {
         .iter()
         .map(|m| format!("{}: {}", m["location"].as_str().unwrap(), m["error"].as_str().unwrap()))
         .collect();
-    assert!(examples[0].starts_with("specs/run/data/malformed.jsonl:3: not a sample line"), "{examples:?}");
+    assert!(
+        examples[0].starts_with("specs/run/data/malformed.jsonl:3: the line is not JSON (unexpected text at column 2)"),
+        "{examples:?}"
+    );
     assert_eq!(
         examples[1],
         "specs/run/data/malformed.jsonl:4: value at `.pos[0]`: expected a finite number, found the string \"NaN\""
@@ -204,4 +207,24 @@ fn a_spec_with_errors_does_not_run() {
     let result = run("specs/err/unknown_stream.kpl", &out, &[]);
     assert_eq!(result.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&result.stderr).contains("E0101"));
+}
+
+#[test]
+fn a_monitor_over_forall_reports_each_binding_once_per_decision() {
+    let out = out_dir("bindings");
+    let result = run("specs/run/bindings.kpl", &out, &[]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let verdicts: Vec<(i64, String, bool)> = lines(&out.join("verdicts.jsonl"))
+        .iter()
+        .map(|r| {
+            let v = &r["value"];
+            (r["valid"].as_i64().unwrap() / 1000, v["c"].as_str().unwrap().to_string(), v["verdict"].as_bool().unwrap())
+        })
+        .collect();
+    // No car at 0 s: nothing (not a vacuous `true`). car1 too fast at 2 s and 3 s: one `false`;
+    // fine at 4 s and gone at 5 s: `true` as of 4 s. car2 too fast at 5 s.
+    assert_eq!(
+        verdicts,
+        [(2000, "car1".to_string(), false), (4000, "car1".to_string(), true), (5000, "car2".to_string(), false)]
+    );
 }

@@ -178,6 +178,39 @@ pub struct Monitor {
     pub object_types: Vec<String>,
 }
 
+impl Monitor {
+    /// For a formula `forall x: T . φ`: the variable, the type and φ. Such a monitor keeps one
+    /// progression of φ per object of type `T` (a binding), from the object's first state to its
+    /// last, and each verdict names the object (see [`binding_verdict_type`]).
+    pub fn binding(&self) -> Option<(&str, &str, &ast::Expr)> {
+        monitor_binding(&self.formula)
+    }
+}
+
+/// The binding of a monitor's formula, if it is `forall x: T . φ` (see [`Monitor::binding`]).
+pub fn monitor_binding(formula: &ast::Expr) -> Option<(&str, &str, &ast::Expr)> {
+    match &formula.kind {
+        ast::ExprKind::Quantified { quantifier: ast::Quantifier::Forall, var, ty, body } => {
+            Some((var.name.as_str(), ty.name.as_str(), body))
+        }
+        _ => None,
+    }
+}
+
+/// The type of a verdict of a monitor with a binding: `{ VAR: string, verdict: bool }`, the
+/// object's symbol and the verdict for it.
+pub fn binding_verdict_type(monitor: &str, var: &str) -> ValueType {
+    ValueType::Record(Arc::new(RecordType {
+        name: Arc::from(format!("{monitor}.verdict")),
+        parent: None,
+        symbol: Arc::from(""),
+        fields: vec![
+            kpl_core::FieldType { name: Arc::from(var), ty: ValueType::Str },
+            kpl_core::FieldType { name: Arc::from("verdict"), ty: ValueType::Bool },
+        ],
+    }))
+}
+
 /// The policy of a stream for one consumer, with every default made explicit.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Policy {

@@ -17,6 +17,7 @@
 //! assert_eq!(checked.diagnostics[0].hint.as_deref(), Some("did you mean `ticks`?"));
 //! ```
 
+mod attributes;
 mod check;
 pub mod diagnostics;
 mod formula;
