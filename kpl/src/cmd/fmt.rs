@@ -10,7 +10,7 @@ use crate::report::{self, DiagnosticFormat, Reporter};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl fmt specs/traffic/bridge.kpl\n  kpl fmt --check specs/\n  cat spec.kpl | kpl fmt - > formatted.kpl\n\nFormatting keeps every comment, is idempotent and never changes what a spec means. A file whose\nleading comments include the line `// kpl fmt: skip` is left as it is (specs/err/ has files that\ndo not parse on purpose).\nExit status: 0 done (or, with --check, nothing to change), 1 a file would change or does not parse, 2 I/O errors."
+    after_help = "Examples:\n  kpl fmt specs/traffic/bridge.kpl\n  kpl fmt --check specs/\n  kpl fmt - < specs/ok/ticks.kpl > formatted.kpl\n\nFormatting keeps every comment, is idempotent and never changes what a spec means. A file whose\nleading comments include the line `// kpl fmt: skip` is left as it is (specs/err/ has files that\ndo not parse on purpose).\nExit status: 0 done (or, with --check, nothing to change), 1 a file would change or does not parse, 2 I/O errors."
 )]
 pub struct Args {
     /// Spec files or directories (`-` formats standard input to standard output).
