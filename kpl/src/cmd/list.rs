@@ -83,6 +83,17 @@ pub fn describe(registry: &Registry) -> String {
                     param.default.as_ref().map_or("required".to_string(), |d| format!("default {d}"));
                 let _ = writeln!(out, "      {:<24} {} ({default}) — {}", param.name, param.ty, param.doc);
             }
+            if let kpl_semantic::registry::Computes::Attributes { names, copies_shared } = &entry.computes {
+                let mut sets = names.join(", ");
+                if *copies_shared {
+                    sets = if sets.is_empty() {
+                        "what the linked-from object also has".to_string()
+                    } else {
+                        format!("{sets}, and what the linked-from object also has")
+                    };
+                }
+                let _ = writeln!(out, "      {:<24} {sets}", "sets");
+            }
             for function in &entry.provides {
                 let _ = writeln!(out, "      provides {:<15} — {}", function.signature(), function.summary);
             }
