@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use common::{kpl, root};
 
 /// How long a benchmark is watched before it is stopped.
-const WATCH: Duration = Duration::from_secs(10);
+const WATCH: Duration = Duration::from_secs(5);
 /// How long an ordinary command may take before it counts as hung.
 const HANG: Duration = Duration::from_secs(600);
 
@@ -125,8 +125,8 @@ fn examples(help: &str) -> Vec<Example> {
 }
 
 /// A folder with a copy of the shipped specs (commands may write beside them) and `bin/kpl`.
-fn workspace() -> PathBuf {
-    let dir = common::fresh_dir("tour", "work");
+fn workspace(name: &str) -> PathBuf {
+    let dir = common::fresh_dir("tour", name);
     copy_dir(&root().join("specs"), &dir.join("specs"));
     std::fs::create_dir_all(dir.join("bin")).unwrap();
     std::os::unix::fs::symlink(env!("CARGO_BIN_EXE_kpl"), dir.join("bin/kpl")).unwrap();
@@ -245,7 +245,7 @@ fn check_all(dir: &Path, examples: &[(String, Example)]) -> Vec<String> {
 
 #[test]
 fn every_command_of_the_readme_tour_runs_as_written() {
-    let dir = workspace();
+    let dir = workspace("readme");
     let tour: Vec<(String, Example)> = readme_tour()
         .into_iter()
         .map(|command| ("README.md".to_string(), Example { command, ..Example::default() }))
@@ -260,7 +260,7 @@ fn every_command_of_the_readme_tour_runs_as_written() {
 
 #[test]
 fn every_example_of_every_help_runs_as_written() {
-    let dir = workspace();
+    let dir = workspace("help");
     let commands = subcommands(&[]);
     assert!(commands.len() >= 15, "{commands:?}");
     let mut all = Vec::new();

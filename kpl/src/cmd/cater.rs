@@ -19,7 +19,7 @@ use kpl_cater::score::{Category, CategoryTable};
 pub enum Command {
     /// Generate videos: scene JSON, `<video>_bb.json` ground truth, perfect and detector perception.
     #[command(
-        after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  kpl cater generate --videos 1371 --seed 7 --out data/cater   # LA-CATER's test set size (docs/cater.md)"
+        after_help = "Example:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n\nLA-CATER's test set has 1371 videos (docs/cater.md)."
     )]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
