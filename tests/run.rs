@@ -116,7 +116,9 @@ fn malformed_input_is_counted_reported_and_survived() {
         .map(|m| format!("{}: {}", m["location"].as_str().unwrap(), m["error"].as_str().unwrap()))
         .collect();
     assert!(
-        examples[0].starts_with("specs/run/data/malformed.jsonl:3: the line is not JSON (unexpected text at column 2)"),
+        examples[0].starts_with(
+            "specs/run/data/malformed.jsonl:3: the line is not JSON (unexpected text at column 2)"
+        ),
         "{examples:?}"
     );
     assert_eq!(
@@ -218,14 +220,22 @@ fn a_monitor_over_forall_reports_each_binding_once_per_decision() {
         .iter()
         .map(|r| {
             let v = &r["value"];
-            (r["valid"].as_i64().unwrap() / 1000, v["c"].as_str().unwrap().to_string(), v["verdict"].as_bool().unwrap())
+            (
+                r["valid"].as_i64().unwrap() / 1000,
+                v["c"].as_str().unwrap().to_string(),
+                v["verdict"].as_bool().unwrap(),
+            )
         })
         .collect();
     // No car at 0 s: nothing (not a vacuous `true`). car1 too fast at 2 s and 3 s: one `false`;
     // fine at 4 s and gone at 5 s: `true` as of 4 s. car2 too fast at 5 s.
     assert_eq!(
         verdicts,
-        [(2000, "car1".to_string(), false), (4000, "car1".to_string(), true), (5000, "car2".to_string(), false)]
+        [
+            (2000, "car1".to_string(), false),
+            (4000, "car1".to_string(), true),
+            (5000, "car2".to_string(), false)
+        ]
     );
 }
 
@@ -234,8 +244,11 @@ fn for_on_the_wall_clock_lasts_its_time_even_when_the_last_sample_comes_earlier(
     // A 1 s timer: its sample after 1.5 s would come at 2 s; the run still lasts 1.5 s.
     let out = out_dir("for-last-sample");
     let spec = out.join("slow.kpl");
-    std::fs::write(&spec, "source ticks : int = timer(period: 1s)\nsink record = file.jsonl(ticks, path: \"t.jsonl\")\n")
-        .unwrap();
+    std::fs::write(
+        &spec,
+        "source ticks : int = timer(period: 1s)\nsink record = file.jsonl(ticks, path: \"t.jsonl\")\n",
+    )
+    .unwrap();
     let result = run(spec.to_str().unwrap(), &out, &["--clock", "wall", "--for", "1500ms"]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     let report = summary(&out);
@@ -270,7 +283,10 @@ fn a_host_that_receives_nothing_stops_at_the_end_of_for() {
     let report = summary(&out);
     assert_eq!(report["ending"], "duration_reached");
     let elapsed = report["clock_elapsed"].as_i64().unwrap();
-    assert!((2_000_000..600_000_000).contains(&elapsed), "stopped at --for, not after the wait: {elapsed} us");
+    assert!(
+        (2_000_000..600_000_000).contains(&elapsed),
+        "stopped at --for, not after the wait: {elapsed} us"
+    );
 }
 
 #[test]

@@ -118,7 +118,9 @@ fn json_diagnostics_have_the_documented_fields_and_codes() {
     assert!(items.len() >= specs.len());
     let mut files_seen = std::collections::BTreeSet::new();
     for item in items {
-        for key in ["file", "line", "column", "end_line", "end_column", "severity", "code", "message", "labels"] {
+        for key in
+            ["file", "line", "column", "end_line", "end_column", "severity", "code", "message", "labels"]
+        {
             assert!(item.get(key).is_some(), "missing {key} in {item}");
         }
         let labels = item["labels"].as_array().unwrap();

@@ -107,7 +107,10 @@ impl Bindings {
     fn verdict(&self, id: &Arc<str>, verdict: bool) -> Value {
         Value::Record(Arc::new(Record {
             id: None,
-            fields: vec![(self.var.clone(), Value::Str(id.clone())), (Arc::from("verdict"), Value::Bool(verdict))],
+            fields: vec![
+                (self.var.clone(), Value::Str(id.clone())),
+                (Arc::from("verdict"), Value::Bool(verdict)),
+            ],
         }))
     }
 

@@ -64,14 +64,18 @@ pub fn unset(spec: &ast::Spec, checked: &hir::Spec, registry: &Registry) -> Vec<
 /// The processes whose output carries objects of exactly type `ty`.
 fn producers<'a>(checked: &'a hir::Spec, registry: &Registry, ty: &str) -> Vec<Producer<'a>> {
     let carries = |t: &kpl_core::ValueType| match t {
-        kpl_core::ValueType::List(item) => matches!(&**item, kpl_core::ValueType::Record(r) if &*r.name == ty),
+        kpl_core::ValueType::List(item) => {
+            matches!(&**item, kpl_core::ValueType::Record(r) if &*r.name == ty)
+        }
         kpl_core::ValueType::Record(r) => &*r.name == ty,
         _ => false,
     };
     let mut out = Vec::new();
     for process in &checked.processes {
         let (kind, call, from_type) = match &process.kind {
-            hir::ProcessKind::Link(link) if link.to_type == ty => (EntryKind::Link, &link.via, Some(&link.from_type)),
+            hir::ProcessKind::Link(link) if link.to_type == ty => {
+                (EntryKind::Link, &link.via, Some(&link.from_type))
+            }
             hir::ProcessKind::Source(call) if process.output.as_ref().is_some_and(carries) => {
                 (EntryKind::Source, call, None)
             }

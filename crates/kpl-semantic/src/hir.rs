@@ -291,7 +291,12 @@ impl Policy {
     /// empty for a stream with the default policy. The defaults that `sample every` implies
     /// (`use most recent`, `monotone order`) count as defaults.
     pub fn describe_changes(&self) -> String {
-        self.parts().into_iter().filter(|(_, default)| !default).map(|(text, _)| text).collect::<Vec<_>>().join(", ")
+        self.parts()
+            .into_iter()
+            .filter(|(_, default)| !default)
+            .map(|(text, _)| text)
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 
     /// The policy's parts as KPL text, each with whether it is what the stream gets by default.

@@ -221,7 +221,8 @@ impl Computes {
         match self {
             Computes::Unknown => true,
             Computes::Attributes { names, copies_shared } => {
-                names.iter().any(|n| n == attribute) || (*copies_shared && from_attributes.contains(&attribute))
+                names.iter().any(|n| n == attribute)
+                    || (*copies_shared && from_attributes.contains(&attribute))
             }
         }
     }

@@ -83,7 +83,11 @@ fn dot(spec: &Spec) -> String {
     for (from, to, edge) in edges(spec) {
         let style = if edge.policy.feedback { ", style=dashed" } else { "" };
         let policy = edge.policy.describe_changes();
-        let label = if policy.is_empty() { escape(&edge.stream) } else { format!("{}\\n{}", escape(&edge.stream), escape(&policy)) };
+        let label = if policy.is_empty() {
+            escape(&edge.stream)
+        } else {
+            format!("{}\\n{}", escape(&edge.stream), escape(&policy))
+        };
         out.push_str(&format!(
             "  \"{}\" -> \"{}\" [label=\"{label}\"{style}];\n",
             escape(&spec.processes[from].name),
@@ -124,7 +128,8 @@ fn mermaid(spec: &Spec) -> String {
         let arrow = if edge.policy.feedback { "-.->" } else { "-->" };
         let policy = edge.policy.describe_changes();
         let label =
-            if policy.is_empty() { edge.stream.clone() } else { format!("{}: {policy}", edge.stream) }.replace('"', "'");
+            if policy.is_empty() { edge.stream.clone() } else { format!("{}: {policy}", edge.stream) }
+                .replace('"', "'");
         out.push_str(&format!(
             "  {} {arrow}|\"{label}\"| {}\n",
             id(&spec.processes[from]),

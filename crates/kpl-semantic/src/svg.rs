@@ -49,7 +49,9 @@ fn text_width(text: &str, size: f64) -> f64 {
 
 fn detail(p: &hir::Process) -> String {
     let what = match &p.kind {
-        hir::ProcessKind::Source(c) | hir::ProcessKind::Compute(c) | hir::ProcessKind::Sink(c) => c.entry.clone(),
+        hir::ProcessKind::Source(c) | hir::ProcessKind::Compute(c) | hir::ProcessKind::Sink(c) => {
+            c.entry.clone()
+        }
         hir::ProcessKind::Link(l) => format!("{} -> {} via {}", l.from_type, l.to_type, l.via.entry),
         hir::ProcessKind::Monitor(_) => "formula".to_string(),
     };
@@ -174,8 +176,9 @@ pub fn layout(spec: &Spec) -> Layout {
         }
     }
     let widths: Vec<f64> = rows.iter().map(|col| col.iter().map(|&i| size(i)).fold(0.0, f64::max)).collect();
-    let column_height =
-        |col: &[usize]| col.iter().map(|&i| height(i)).sum::<f64>() + col.len().saturating_sub(1) as f64 * ROW_GAP;
+    let column_height = |col: &[usize]| {
+        col.iter().map(|&i| height(i)).sum::<f64>() + col.len().saturating_sub(1) as f64 * ROW_GAP
+    };
     let inner_height = rows.iter().map(|c| column_height(c)).fold(0.0, f64::max);
     let mut boxes = vec![Placed { x: 0.0, y: 0.0, width: 0.0, height: NODE_HEIGHT }; n];
     let mut lane_at = vec![(0.0, 0.0, 0.0); items];
@@ -197,13 +200,20 @@ pub fn layout(spec: &Spec) -> Layout {
         .iter()
         .map(|chain| chain[1..chain.len() - 1].iter().map(|&item| lane_at[item]).collect())
         .collect();
-    let feedback_room = if edges.iter().any(|&(from, to, e)| e.policy.feedback || column[to] <= column[from]) {
+    let feedback_room = if edges.iter().any(|&(from, to, e)| e.policy.feedback || column[to] <= column[from])
+    {
         70.0
     } else {
         0.0
     };
     let legend = 40.0;
-    Layout { boxes, width: x + MARGIN, height: MARGIN * 2.0 + inner_height + feedback_room + legend, column, lanes }
+    Layout {
+        boxes,
+        width: x + MARGIN,
+        height: MARGIN * 2.0 + inner_height + feedback_room + legend,
+        column,
+        lanes,
+    }
 }
 
 fn escape(text: &str) -> String {
@@ -233,11 +243,22 @@ pub fn svg(spec: &Spec) -> String {
             .and_then(|h| hosts.iter().position(|x| *x == h))
             .map(|i| HOST_COLOURS[i % HOST_COLOURS.len()])
     };
-    let kinds = [("source", "#dbeafe"), ("compute", "#ede9fe"), ("link", "#dcfce7"), ("monitor", "#fef3c7"), ("sink", "#f3f4f6")];
+    let kinds = [
+        ("source", "#dbeafe"),
+        ("compute", "#ede9fe"),
+        ("link", "#dcfce7"),
+        ("monitor", "#fef3c7"),
+        ("sink", "#f3f4f6"),
+    ];
     let legend: Vec<(String, &str, bool)> = kinds
         .iter()
         .map(|(name, colour)| (name.to_string(), *colour, false))
-        .chain(hosts.iter().enumerate().map(|(i, h)| (format!("host {h}"), HOST_COLOURS[i % HOST_COLOURS.len()], true)))
+        .chain(
+            hosts
+                .iter()
+                .enumerate()
+                .map(|(i, h)| (format!("host {h}"), HOST_COLOURS[i % HOST_COLOURS.len()], true)),
+        )
         .collect();
     let legend_width: f64 = legend.iter().map(|(name, ..)| 28.0 + text_width(name, FONT - 1.0)).sum();
     let width = layout.width.max(legend_width + 2.0 * MARGIN);
@@ -274,7 +295,13 @@ pub fn svg(spec: &Spec) -> String {
             let (cx, y) = (a.x + a.width / 2.0, a.y + a.height);
             let low = y + 36.0;
             (
-                format!("M{:.1},{y:.1} C{:.1},{low:.1} {:.1},{low:.1} {:.1},{y:.1}", cx + 18.0, cx + 60.0, cx - 60.0, cx - 18.0),
+                format!(
+                    "M{:.1},{y:.1} C{:.1},{low:.1} {:.1},{low:.1} {:.1},{y:.1}",
+                    cx + 18.0,
+                    cx + 60.0,
+                    cx - 60.0,
+                    cx - 18.0
+                ),
                 cx,
                 low + 6.0,
             )
@@ -283,7 +310,11 @@ pub fn svg(spec: &Spec) -> String {
             let (x1, y1) = (a.x + a.width / 2.0, a.y + a.height);
             let (x2, y2) = (b.x + b.width / 2.0, b.y + b.height);
             let low = bottom + 30.0 + 12.0 * (k % 3) as f64;
-            (format!("M{x1:.1},{y1:.1} C{x1:.1},{low:.1} {x2:.1},{low:.1} {x2:.1},{y2:.1}"), (x1 + x2) / 2.0, low - 4.0)
+            (
+                format!("M{x1:.1},{y1:.1} C{x1:.1},{low:.1} {x2:.1},{low:.1} {x2:.1},{y2:.1}"),
+                (x1 + x2) / 2.0,
+                low - 4.0,
+            )
         } else {
             let (x1, y1) = (a.x + a.width, a.y + a.height / 2.0 + offset * 8.0);
             let (x2, y2) = (b.x, b.y + b.height / 2.0 + offset * 8.0);
@@ -293,7 +324,12 @@ pub fn svg(spec: &Spec) -> String {
             let mut label = None;
             for &(left, right, y) in &layout.lanes[k] {
                 let bend = (left - px) / 2.0;
-                let _ = write!(path, " C{:.1},{py:.1} {:.1},{y:.1} {left:.1},{y:.1} L{right:.1},{y:.1}", px + bend, left - bend);
+                let _ = write!(
+                    path,
+                    " C{:.1},{py:.1} {:.1},{y:.1} {left:.1},{y:.1} L{right:.1},{y:.1}",
+                    px + bend,
+                    left - bend
+                );
                 label.get_or_insert(((px + left) / 2.0, (py + y) / 2.0));
                 (px, py) = (right, y);
             }
@@ -310,8 +346,9 @@ pub fn svg(spec: &Spec) -> String {
             escape(&spec.processes[to].name)
         );
         let (name, policy) = edge_label(edge);
-        let lines: Vec<(String, f64)> =
-            std::iter::once((name, FONT - 1.0)).chain((!policy.is_empty()).then_some((policy, FONT - 2.0))).collect();
+        let lines: Vec<(String, f64)> = std::iter::once((name, FONT - 1.0))
+            .chain((!policy.is_empty()).then_some((policy, FONT - 2.0)))
+            .collect();
         let w = lines.iter().map(|(t, s)| text_width(t, *s)).fold(0.0, f64::max) + 8.0;
         let h = lines.len() as f64 * FONT + 4.0;
         // Moved down past the labels already placed that it would cover.
@@ -380,7 +417,8 @@ pub fn svg(spec: &Spec) -> String {
     let mut x = MARGIN;
     let y = layout.height - MARGIN - 8.0;
     for (name, colour, host) in &legend {
-        let (fill, stroke, stroke_width) = if *host { ("#ffffff", *colour, 2.5) } else { (*colour, "#6b7280", 1.0) };
+        let (fill, stroke, stroke_width) =
+            if *host { ("#ffffff", *colour, 2.5) } else { (*colour, "#6b7280", 1.0) };
         let _ = writeln!(
             out,
             r#"<rect x="{x:.1}" y="{:.1}" width="14" height="14" fill="{fill}" stroke="{stroke}" stroke-width="{stroke_width}"/><text x="{:.1}" y="{y:.1}" font-size="{}">{}</text>"#,

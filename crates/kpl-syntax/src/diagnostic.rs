@@ -195,7 +195,14 @@ impl Diagnostic {
             .map(|m| {
                 let (line, column) = index.line_col(source, m.span.start);
                 let (end_line, end_column) = index.line_col(source, m.span.end);
-                JsonLabel { line, column, end_line, end_column, primary: m.primary, message: m.label.to_string() }
+                JsonLabel {
+                    line,
+                    column,
+                    end_line,
+                    end_column,
+                    primary: m.primary,
+                    message: m.label.to_string(),
+                }
             })
             .collect();
         JsonDiagnostic {
@@ -271,7 +278,12 @@ impl Diagnostic {
         // Rendering only fails on spans outside the file, which `Excerpt::range` rules out; the
         // header alone is still better than nothing.
         rendered.unwrap_or_else(|_| {
-            format!("{}[{}]: {}\n --> {file}:{line}:{column}\n", self.severity.as_str(), self.code, self.message)
+            format!(
+                "{}[{}]: {}\n --> {file}:{line}:{column}\n",
+                self.severity.as_str(),
+                self.code,
+                self.message
+            )
         })
     }
 }
@@ -369,10 +381,11 @@ impl<'a> codespan_reporting::files::Files<'a> for Excerpt<'_> {
         (): (),
         line_index: usize,
     ) -> Result<std::ops::Range<usize>, codespan_reporting::files::Error> {
-        let start = *self.line_starts.get(line_index).ok_or(codespan_reporting::files::Error::LineTooLarge {
-            given: line_index,
-            max: self.line_starts.len() - 1,
-        })?;
+        let start =
+            *self.line_starts.get(line_index).ok_or(codespan_reporting::files::Error::LineTooLarge {
+                given: line_index,
+                max: self.line_starts.len() - 1,
+            })?;
         let end = self.line_starts.get(line_index + 1).copied().unwrap_or(self.text.len());
         Ok(start..end)
     }

@@ -71,7 +71,8 @@ fn the_pages_cargo_toml_resolves_outside_the_repository() {
     let metadata: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let root = metadata["resolve"]["root"].as_str().unwrap();
     assert!(root.contains("my-units"), "{root}");
-    let names: Vec<&str> = metadata["packages"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    let names: Vec<&str> =
+        metadata["packages"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
     for needed in ["kpl", "kpl-core", "kpl-runtime", "kpl-semantic"] {
         assert!(names.contains(&needed), "{needed} not resolved: {names:?}");
     }
@@ -83,7 +84,9 @@ fn the_pages_commands_run_as_written() {
     // `cargo run -- ARGS` in the new crate is this crate's binary with ARGS.
     let dir = fresh("run");
     std::fs::copy(here().join("accumulate.kpl"), dir.join("accumulate.kpl")).unwrap();
-    let kpl = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_custom-unit")).args(args).current_dir(&dir).output().unwrap();
+    let kpl = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_custom-unit")).args(args).current_dir(&dir).output().unwrap()
+    };
     let list = kpl(&["list"]);
     assert!(String::from_utf8_lossy(&list.stdout).contains("demo.accumulate"));
     assert_eq!(kpl(&["check", "accumulate.kpl"]).status.code(), Some(0));

@@ -10,9 +10,7 @@ use kpl_semantic::registry::{EntryKind, Inputs, Registry};
 use crate::report::OutputFormat;
 
 #[derive(Debug, ClapArgs)]
-#[command(
-    after_help = "Examples:\n  kpl list\n  kpl list --format json > registry.json"
-)]
+#[command(after_help = "Examples:\n  kpl list\n  kpl list --format json > registry.json")]
 pub struct Args {
     /// Output format: text, or the registry as JSON ({entries, functions}).
     #[arg(long, value_enum, default_value = "text")]
@@ -21,7 +19,6 @@ pub struct Args {
     #[arg(long, hide = true)]
     pub json: bool,
 }
-
 
 pub fn run(args: Args) -> ExitCode {
     let runtime_registry = crate::registry::registry();

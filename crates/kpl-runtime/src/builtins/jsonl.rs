@@ -261,7 +261,10 @@ mod tests {
         let err = decode_line("{", &ValueType::Any).unwrap_err();
         assert_eq!(err, "the line ends inside a JSON value (column 1)");
         let err = decode_line("this is not json", &ValueType::Any).unwrap_err();
-        assert!(err.starts_with("the line is not JSON (unexpected text at column 2); a sample line is"), "{err}");
+        assert!(
+            err.starts_with("the line is not JSON (unexpected text at column 2); a sample line is"),
+            "{err}"
+        );
         for (line, says) in [
             ("[1, 2]", "the line is not a JSON object"),
             (r#"{"value": 1}"#, "the line has no `valid` time"),
