@@ -97,16 +97,24 @@ impl Report {
             if a.extra > 0 {
                 notes.push(format!("{name}: {} snapshots at times without ground truth left out", a.extra));
             }
-            match a.measured {
-                MeasuredFilter::NotAvailable => notes.push(format!(
-                    "{name}: its records have no `measured` field, so every state was scored (--measured-only \
-                     applies to streams that say which states were measured)"
-                )),
-                MeasuredFilter::Applied { left_out } if left_out > 0 => {
-                    notes.push(format!("{name}: {left_out} predicted states left out"))
-                }
-                _ => {}
+            if let MeasuredFilter::Applied { left_out } = a.measured
+                && left_out > 0
+            {
+                notes.push(format!("{name}: {left_out} predicted states left out"));
             }
+        }
+        let unfiltered: Vec<&str> = self
+            .streams
+            .iter()
+            .filter(|s| s.alignment.measured == MeasuredFilter::NotAvailable)
+            .map(|s| s.stream.as_str())
+            .collect();
+        if !unfiltered.is_empty() {
+            notes.push(format!(
+                "--measured-only: {} say nothing about which states were measured (no `measured` field), so every \
+                 state of theirs was scored",
+                unfiltered.join(", ")
+            ));
         }
         notes
     }
