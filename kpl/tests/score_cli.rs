@@ -86,7 +86,8 @@ fn every_link_stream_of_the_bridge_run_gets_sane_scores() {
     let report = score_json(&[tracks.to_str().unwrap()]);
     assert_eq!(report["truth"], "tracker.truth");
     assert_eq!(f(&report["max_distance"]), 3.0);
-    let names: Vec<&str> = report["streams"].as_array().unwrap().iter().map(|s| s["stream"].as_str().unwrap()).collect();
+    let names: Vec<&str> =
+        report["streams"].as_array().unwrap().iter().map(|s| s["stream"].as_str().unwrap()).collect();
     assert_eq!(names, ["onroad_car", "tracker", "vision_world", "world_onroad"]);
     for name in names {
         let s = stream(&report, name);
@@ -95,8 +96,18 @@ fn every_link_stream_of_the_bridge_run_gets_sane_scores() {
         assert!(n(&s["alignment"]["frames"]) >= 590, "{name}: {}", s["alignment"]);
         assert_eq!(n(&c["objects"]), 4 * n(&c["frames"]), "{name}: four cars in every frame");
         assert_eq!(n(&c["matches"]) + n(&c["switches"]) + n(&c["misses"]), n(&c["objects"]), "{name}");
-        assert_eq!(n(&c["matches"]) + n(&c["switches"]) + n(&c["false_positives"]), n(&c["predictions"]), "{name}");
-        for (field, v) in [("mota", &c["mota"]), ("idf1", &i["idf1"]), ("hota", &h["hota"]), ("det_a", &h["det_a"]), ("ass_a", &h["ass_a"])] {
+        assert_eq!(
+            n(&c["matches"]) + n(&c["switches"]) + n(&c["false_positives"]),
+            n(&c["predictions"]),
+            "{name}"
+        );
+        for (field, v) in [
+            ("mota", &c["mota"]),
+            ("idf1", &i["idf1"]),
+            ("hota", &h["hota"]),
+            ("det_a", &h["det_a"]),
+            ("ass_a", &h["ass_a"]),
+        ] {
             let v = f(v);
             assert!(v > 0.2 && v < 1.0, "{name}: {field} = {v}");
         }
@@ -112,7 +123,10 @@ fn every_link_stream_of_the_bridge_run_gets_sane_scores() {
     // World objects persist through the bridge: most of each car's frames have its one world object.
     let world = stream(&report, "vision_world");
     assert!(f(&world["identity"]["idr"]) > 0.85, "{}", world["identity"]);
-    assert!(f(&world["identity"]["idr"]) > f(&tracker["identity"]["idr"]), "anchoring keeps identities the tracker loses");
+    assert!(
+        f(&world["identity"]["idr"]) > f(&tracker["identity"]["idr"]),
+        "anchoring keeps identities the tracker loses"
+    );
 }
 
 #[test]
@@ -120,8 +134,14 @@ fn a_table_by_default() {
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--stream", "onroad_car", "--stream", "tracker"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8(o.stdout).unwrap();
-    assert!(text.starts_with("scored against `tracker.truth`; gate 3 m; HOTA similarity max(0, 1 - d / 6 m)"), "{text}");
-    for header in ["MOTA", "MOTP m", "IDF1", "IDP", "IDR", "HOTA", "DetA", "AssA", "LocA", "IDsw", "Frag", "MT", "PT", "ML"] {
+    assert!(
+        text.starts_with("scored against `tracker.truth`; gate 3 m; HOTA similarity max(0, 1 - d / 6 m)"),
+        "{text}"
+    );
+    for header in [
+        "MOTA", "MOTP m", "IDF1", "IDP", "IDR", "HOTA", "DetA", "AssA", "LocA", "IDsw", "Frag", "MT", "PT",
+        "ML",
+    ] {
         assert!(text.contains(header), "{header} in\n{text}");
     }
     let rows = text.lines().filter(|l| l.starts_with("onroad_car ") || l.starts_with("tracker ")).count();
@@ -145,7 +165,11 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     // (absent percepts are left out); predicted world objects no longer count as false positives.
     let measured = score_json(&[bridge_run().to_str().unwrap(), "--measured-only"]);
     for part in ["clear", "identity", "hota"] {
-        assert_eq!(stream(&measured, "world[VisionPercept]")[part], stream(&measured, "tracker")[part], "{part}");
+        assert_eq!(
+            stream(&measured, "world[VisionPercept]")[part],
+            stream(&measured, "tracker")[part],
+            "{part}"
+        );
     }
     let (all, only) = (stream(&report, "world[WorldObject]"), stream(&measured, "world[WorldObject]"));
     assert_eq!(all["alignment"]["measured"], "off");
@@ -157,7 +181,10 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     assert_eq!(stream(&measured, "vision_world")["alignment"]["measured"], "not_available");
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "vision_world"]);
     let text = String::from_utf8(o.stdout).unwrap();
-    assert!(text.contains("--measured-only: vision_world say nothing about which states were measured"), "{text}");
+    assert!(
+        text.contains("--measured-only: vision_world say nothing about which states were measured"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -170,7 +197,13 @@ fn the_export_scores_the_same_in_py_motmetrics_and_trackeval() {
     };
     let dir = scratch("export");
     let export = dir.join("mot");
-    let report = score_json(&[tracks().to_str().unwrap(), "--max-distance", "2.5", "--export", export.to_str().unwrap()]);
+    let report = score_json(&[
+        tracks().to_str().unwrap(),
+        "--max-distance",
+        "2.5",
+        "--export",
+        export.to_str().unwrap(),
+    ]);
     let streams = ["tracker", "vision_world", "world_onroad", "onroad_car"];
     let batch = serde_json::json!({"cases": streams.iter().map(|s| serde_json::json!({
         "folder": export.join(s), "max_distance": 2.5, "zero_distance": 5.0
@@ -209,7 +242,11 @@ fn the_export_scores_the_same_in_py_motmetrics_and_trackeval() {
             ("AssA", &ours["hota"]["ass_a"]),
             ("LocA", &ours["hota"]["loc_a"]),
         ] {
-            assert!((f(mine) - f(&theirs[field])).abs() < 1e-9, "{name}: {field}: ours {mine}, theirs {}", theirs[field]);
+            assert!(
+                (f(mine) - f(&theirs[field])).abs() < 1e-9,
+                "{name}: {field}: ours {mine}, theirs {}",
+                theirs[field]
+            );
         }
     }
     // The mapping file says which symbol was which car, and when.
@@ -251,7 +288,11 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
     // A typo, a stream that is not objects, no ground truth.
     let o = kpl(&["score", tracks().to_str().unwrap(), "--stream", "onroad_cars"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("no stream `onroad_cars` in the recording; did you mean `onroad_car`?"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no stream `onroad_cars` in the recording; did you mean `onroad_car`?"),
+        "{}",
+        stderr(&o)
+    );
     let changes = bridge_run().join("bridge/changes.jsonl");
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--stream", "onroad_car.changes"]);
     assert_eq!(o.status.code(), Some(1));
@@ -261,11 +302,19 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
     assert!(stderr(&o).contains("no ground-truth stream in the recording"), "{}", stderr(&o));
     let o = kpl(&["score", tracks().to_str().unwrap(), "--truth", "tracker.truht"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("no stream `tracker.truht` in the recording; did you mean `tracker.truth`?"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no stream `tracker.truht` in the recording; did you mean `tracker.truth`?"),
+        "{}",
+        stderr(&o)
+    );
 
     // Malformed lines are counted and reported; the scoring goes on.
     let bad_path = dir.join("bad.jsonl");
-    std::fs::write(&bad_path, format!("{text}not json\n{{\"stream\":\"tracker\",\"valid\":1,\"value\":[{{\"id\":\"vp1\"}}]}}\n")).unwrap();
+    std::fs::write(
+        &bad_path,
+        format!("{text}not json\n{{\"stream\":\"tracker\",\"valid\":1,\"value\":[{{\"id\":\"vp1\"}}]}}\n"),
+    )
+    .unwrap();
     let o = kpl(&["score", "--format", "json", bad_path.to_str().unwrap(), "--missing", "skip"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let report: Value = serde_json::from_slice(&o.stdout).unwrap();

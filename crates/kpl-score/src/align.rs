@@ -78,9 +78,15 @@ pub struct Aligned {
 const FIRST: usize = 5;
 
 /// Aligns `stream` with `truth` (both in increasing valid time, as [`crate::Recording`] gives them).
-pub fn align(truth: &ObjectStream, stream: &ObjectStream, options: &AlignOptions) -> Result<Aligned, AlignError> {
+pub fn align(
+    truth: &ObjectStream,
+    stream: &ObjectStream,
+    options: &AlignOptions,
+) -> Result<Aligned, AlignError> {
     let span = |s: &ObjectStream| Some((s.snapshots.first()?.time, s.snapshots.last()?.time));
-    let Some(stream_span) = span(stream) else { return Err(AlignError::Empty { stream: stream.name.clone() }) };
+    let Some(stream_span) = span(stream) else {
+        return Err(AlignError::Empty { stream: stream.name.clone() });
+    };
     let Some(truth_span) = span(truth) else { return Err(AlignError::Empty { stream: truth.name.clone() }) };
     let from = stream_span.0.max(truth_span.0);
     let to = stream_span.1.min(truth_span.1);

@@ -38,7 +38,8 @@ pub fn min_cost(cost: &[f64], rows: usize, cols: usize) -> Vec<(usize, usize)> {
             transposed[c * rows + r] = cost[r * cols + c];
         }
     }
-    let mut pairs: Vec<(usize, usize)> = solve(&transposed, cols, rows).into_iter().map(|(c, r)| (r, c)).collect();
+    let mut pairs: Vec<(usize, usize)> =
+        solve(&transposed, cols, rows).into_iter().map(|(c, r)| (r, c)).collect();
     pairs.sort_unstable();
     pairs
 }
@@ -266,10 +267,12 @@ mod tests {
         for rows in 1..=5 {
             for cols in 1..=5 {
                 for _ in 0..20 {
-                    let cost: Vec<f64> = (0..rows * cols).map(|_| (lcg(&mut seed) * 20.0).round() - 5.0).collect();
+                    let cost: Vec<f64> =
+                        (0..rows * cols).map(|_| (lcg(&mut seed) * 20.0).round() - 5.0).collect();
                     let got = min_cost(&cost, rows, cols);
                     assert_eq!(got.len(), rows.min(cols));
-                    let total = |a: &[(usize, usize)]| a.iter().map(|&(r, c)| cost[r * cols + c]).sum::<f64>();
+                    let total =
+                        |a: &[(usize, usize)]| a.iter().map(|&(r, c)| cost[r * cols + c]).sum::<f64>();
                     let best = all_assignments(rows, cols)
                         .iter()
                         .filter(|a| a.len() == rows.min(cols))
@@ -338,7 +341,14 @@ mod tests {
 
     /// Every set of pairs with distinct rows and columns.
     fn all_partial(rows: usize, cols: usize) -> Vec<Vec<(usize, usize)>> {
-        fn go(row: usize, rows: usize, cols: usize, used: u32, cur: &mut Vec<(usize, usize)>, out: &mut Vec<Vec<(usize, usize)>>) {
+        fn go(
+            row: usize,
+            rows: usize,
+            cols: usize,
+            used: u32,
+            cur: &mut Vec<(usize, usize)>,
+            out: &mut Vec<Vec<(usize, usize)>>,
+        ) {
             if row == rows {
                 out.push(cur.clone());
                 return;

@@ -145,17 +145,23 @@ impl Clear {
             if let Ok(k) = pairs.binary_search_by_key(&j, |p| p.hypothesis) {
                 truth_taken[i] = true;
                 hypothesis_taken[j] = true;
-                out.push(Match { truth: t.id, hypothesis: previous, distance: pairs[k].distance, switch: false });
+                out.push(Match {
+                    truth: t.id,
+                    hypothesis: previous,
+                    distance: pairs[k].distance,
+                    switch: false,
+                });
             }
         }
 
         // 2. The most pairs with the least total distance among the rest.
         self.edges.clear();
         self.edges.extend(
-            gated
-                .iter()
-                .filter(|p| !truth_taken[p.truth] && !hypothesis_taken[p.hypothesis])
-                .map(|p| Edge { row: p.truth, col: p.hypothesis, value: p.distance }),
+            gated.iter().filter(|p| !truth_taken[p.truth] && !hypothesis_taken[p.hypothesis]).map(|p| Edge {
+                row: p.truth,
+                col: p.hypothesis,
+                value: p.distance,
+            }),
         );
         for (i, j) in assign::gated(frame.truth.len(), frame.hypotheses.len(), &self.edges) {
             let (t, h) = (frame.truth[i].id, frame.hypotheses[j].id);

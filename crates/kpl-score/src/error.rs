@@ -64,7 +64,10 @@ pub enum SelectError {
     UnknownStream { name: String, suggestion: Option<String>, known: Vec<String> },
     #[error("`{name}` is not an object stream (its values are not lists of records with `id` and `pos`)")]
     NotObjects { name: String },
-    #[error("no object streams besides the ground truth `{truth}` to score{}", listing("other streams", others))]
+    #[error(
+        "no object streams besides the ground truth `{truth}` to score{}",
+        listing("other streams", others)
+    )]
     NothingToScore { truth: String, others: Vec<String> },
 }
 

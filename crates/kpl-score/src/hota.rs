@@ -154,7 +154,8 @@ impl HotaFrames {
             for &(i, j, s) in sims {
                 let denominator = col_sum[j as usize] + row_sum[i as usize] - s;
                 if denominator > f64::EPSILON {
-                    *potential.entry((truth[i as usize], hypotheses[j as usize])).or_default() += s / denominator;
+                    *potential.entry((truth[i as usize], hypotheses[j as usize])).or_default() +=
+                        s / denominator;
                 }
             }
             for &t in truth {
@@ -229,7 +230,8 @@ impl HotaFrames {
             ass_re[a] = sum_re / positives;
             ass_pr[a] = sum_pr / positives;
         }
-        let loc_a: [f64; ALPHA_COUNT] = std::array::from_fn(|a| loc[a].max(1e-10) / (tp[a] as f64).max(1e-10));
+        let loc_a: [f64; ALPHA_COUNT] =
+            std::array::from_fn(|a| loc[a].max(1e-10) / (tp[a] as f64).max(1e-10));
         finish(&alphas, tp, fn_, fp, ass_a, ass_re, ass_pr, loc_a)
     }
 }

@@ -40,9 +40,10 @@ pub fn export(sequence: &Sequence, mapping: Option<&Mapping>) -> Vec<ExportFile>
         lines(&mut tracks, number, &frame.hypotheses, &hypothesis_numbers);
     }
     let mut ids = String::from("file,id,name\n");
-    for (file, side, numbers) in
-        [("gt.txt", sequence.truth_ids(), &truth_numbers), ("tracks.txt", sequence.hypothesis_ids(), &hypothesis_numbers)]
-    {
+    for (file, side, numbers) in [
+        ("gt.txt", sequence.truth_ids(), &truth_numbers),
+        ("tracks.txt", sequence.hypothesis_ids(), &hypothesis_numbers),
+    ] {
         for (k, name) in side.names().iter().enumerate() {
             let _ = writeln!(ids, "{file},{},{}", numbers[k], csv_field(name));
         }
@@ -103,7 +104,11 @@ fn numbers(ids: &Ids) -> Vec<u64> {
 
 /// A CSV field, quoted when it has to be.
 fn csv_field(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) { format!("\"{}\"", text.replace('"', "\"\"")) } else { text.to_string() }
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
 }
 
 #[cfg(test)]
@@ -117,7 +122,10 @@ mod tests {
         s.push_frame(100_000, [("car1", [2.5, -2.0]), ("car12", [0.1, 0.2])], []).unwrap();
         let files = export(&s, None);
         let file = |n: &str| &files.iter().find(|f| f.name == n).unwrap().contents;
-        assert_eq!(file("gt.txt"), "1,1,-1,-1,-1,-1,1,1.5,-2,0\n2,1,-1,-1,-1,-1,1,2.5,-2,0\n2,12,-1,-1,-1,-1,1,0.1,0.2,0\n");
+        assert_eq!(
+            file("gt.txt"),
+            "1,1,-1,-1,-1,-1,1,1.5,-2,0\n2,1,-1,-1,-1,-1,1,2.5,-2,0\n2,12,-1,-1,-1,-1,1,0.1,0.2,0\n"
+        );
         assert_eq!(file("tracks.txt"), "1,7,-1,-1,-1,-1,1,1.25,-2,0\n1,9,-1,-1,-1,-1,1,10,3,0\n");
         assert_eq!(file("frames.csv"), "frame,valid_us\n1,0\n2,100000\n");
         assert!(file("ids.csv").contains("gt.txt,12,car12\n"));

@@ -119,7 +119,8 @@ impl Recording {
         }
         let mut files = Vec::new();
         for path in paths {
-            let meta = std::fs::metadata(path).map_err(|source| ReadError::Io { path: path.clone(), source })?;
+            let meta =
+                std::fs::metadata(path).map_err(|source| ReadError::Io { path: path.clone(), source })?;
             if meta.is_dir() {
                 let before = files.len();
                 collect(path, 0, &mut files)?;
@@ -132,7 +133,8 @@ impl Recording {
         }
         let mut reader = RecordingReader::default();
         for file in &files {
-            let f = std::fs::File::open(file).map_err(|source| ReadError::Io { path: file.clone(), source })?;
+            let f =
+                std::fs::File::open(file).map_err(|source| ReadError::Io { path: file.clone(), source })?;
             reader.read(file, BufReader::new(f))?;
         }
         Ok(reader.finish(files))
@@ -182,11 +184,14 @@ impl Recording {
         }
         let by_name: Vec<&ObjectStream> =
             self.streams().filter(|s| s.name == "truth" || s.name.ends_with(".truth")).collect();
-        let candidates = if by_name.is_empty() { self.streams().filter(|s| s.has_seen_as).collect() } else { by_name };
+        let candidates =
+            if by_name.is_empty() { self.streams().filter(|s| s.has_seen_as).collect() } else { by_name };
         match candidates.as_slice() {
             [one] => Ok(one),
             [] => Err(SelectError::NoTruth { object_streams: self.streams.keys().cloned().collect() }),
-            many => Err(SelectError::AmbiguousTruth { candidates: many.iter().map(|s| s.name.clone()).collect() }),
+            many => {
+                Err(SelectError::AmbiguousTruth { candidates: many.iter().map(|s| s.name.clone()).collect() })
+            }
         }
     }
 
@@ -308,7 +313,11 @@ impl RecordingReader {
         let (Some(stream), Some(valid), Some(value)) =
             (json.get("stream").and_then(Json::as_str), json.get("valid"), json.get("value"))
         else {
-            return self.problems.add(path, line, "not a sample (an object with `stream`, `valid` and `value`)");
+            return self.problems.add(
+                path,
+                line,
+                "not a sample (an object with `stream`, `valid` and `value`)",
+            );
         };
         let Some(time) = valid.as_i64() else {
             return self.problems.add(path, line, "`valid` is not an integer number of microseconds");
@@ -347,7 +356,8 @@ impl RecordingReader {
             };
             if reading.kind == Kind::Objects {
                 // The empty snapshots seen so far belong to it.
-                let empty = reading.times.drain(..).map(|(time, line)| Snapshot { time, line, objects: Vec::new() });
+                let empty =
+                    reading.times.drain(..).map(|(time, line)| Snapshot { time, line, objects: Vec::new() });
                 reading.snapshots.entry(stream.to_string()).or_default().extend(empty);
             }
         }
@@ -361,7 +371,11 @@ impl RecordingReader {
             }
             Kind::Objects => {
                 let objects = objects(stream, reading, &mut self.problems, path, line, items.iter());
-                reading.snapshots.entry(stream.to_string()).or_default().push(Snapshot { time, line, objects });
+                reading.snapshots.entry(stream.to_string()).or_default().push(Snapshot {
+                    time,
+                    line,
+                    objects,
+                });
             }
         }
     }
@@ -382,7 +396,11 @@ impl RecordingReader {
                 }
                 Kind::Undecided => {
                     // Only empty lists: an object stream that never had an object.
-                    let snapshots = reading.times.iter().map(|&(time, line)| Snapshot { time, line, objects: Vec::new() });
+                    let snapshots = reading.times.iter().map(|&(time, line)| Snapshot {
+                        time,
+                        line,
+                        objects: Vec::new(),
+                    });
                     let snapshots = ordered(&name, &reading.file, snapshots.collect(), &mut self.problems);
                     recording.streams.insert(name.clone(), stream(name, &reading, snapshots));
                 }
@@ -394,7 +412,8 @@ impl RecordingReader {
                 Kind::WorldModel => {
                     // Every type gets a snapshot at every time of the world model.
                     for (sub, per_type) in std::mem::take(&mut reading.snapshots) {
-                        let mut by_line: BTreeMap<usize, Snapshot> = per_type.into_iter().map(|s| (s.line, s)).collect();
+                        let mut by_line: BTreeMap<usize, Snapshot> =
+                            per_type.into_iter().map(|s| (s.line, s)).collect();
                         let all = reading
                             .times
                             .iter()
@@ -467,7 +486,11 @@ fn objects<'a>(
                 if ids.insert(object.id.clone()) {
                     out.push(object);
                 } else {
-                    problems.add(path, line, format_args!("`{stream}` lists `{}` twice; the first is scored", object.id));
+                    problems.add(
+                        path,
+                        line,
+                        format_args!("`{stream}` lists `{}` twice; the first is scored", object.id),
+                    );
                 }
             }
             Err(what) => problems.add(path, line, format_args!("`{stream}`, object {k}: {what}")),
@@ -499,7 +522,11 @@ fn world_model(
             Ok(object) => {
                 reading.has_measured |= object.measured.is_some();
                 if objects.iter().any(|o| o.id == object.id) {
-                    problems.add(path, line, format_args!("`{stream}` lists `{}` twice; the first is scored", object.id));
+                    problems.add(
+                        path,
+                        line,
+                        format_args!("`{stream}` lists `{}` twice; the first is scored", object.id),
+                    );
                 } else {
                     objects.push(object);
                 }
@@ -508,7 +535,11 @@ fn world_model(
         }
     }
     for (ty, objects) in by_type {
-        reading.snapshots.entry(format!("{stream}[{ty}]")).or_default().push(Snapshot { time, line, objects });
+        reading.snapshots.entry(format!("{stream}[{ty}]")).or_default().push(Snapshot {
+            time,
+            line,
+            objects,
+        });
     }
 }
 

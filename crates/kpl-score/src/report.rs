@@ -82,7 +82,10 @@ impl Report {
                 ));
             }
             if a.stream_outside > 0 {
-                notes.push(format!("{name}: {} snapshots outside the ground truth's span not scored", a.stream_outside));
+                notes.push(format!(
+                    "{name}: {} snapshots outside the ground truth's span not scored",
+                    a.stream_outside
+                ));
             }
             match a.missing_as {
                 Missing::Empty if a.missing > 0 => notes.push(format!(
@@ -186,7 +189,8 @@ impl Report {
             }
         }
         if self.problems.count > 0 {
-            let _ = writeln!(out, "\n{} lines or records of the recording were left out:", self.problems.count);
+            let _ =
+                writeln!(out, "\n{} lines or records of the recording were left out:", self.problems.count);
             for e in &self.problems.examples {
                 let _ = writeln!(out, "  {e}");
             }

@@ -31,7 +31,7 @@ impl Config {
     /// A true object and a hypothesis at most `max_distance` metres apart may be matched (CLEAR
     /// MOT and identity measures); HOTA's similarity reaches zero at twice that distance.
     pub fn new(max_distance: f64) -> Result<Config, ConfigError> {
-        if !(max_distance.is_finite() && max_distance > 0.0) {
+        if !max_distance.is_finite() || max_distance <= 0.0 {
             return Err(ConfigError::MaxDistance(max_distance));
         }
         Ok(Config { max_distance, hota_zero_distance: 2.0 * max_distance })
@@ -39,7 +39,7 @@ impl Config {
 
     /// HOTA's similarity `max(0, 1 − d / zero_distance)` with another zero distance.
     pub fn with_hota_zero_distance(self, zero_distance: f64) -> Result<Config, ConfigError> {
-        if !(zero_distance.is_finite() && zero_distance > 0.0) {
+        if !zero_distance.is_finite() || zero_distance <= 0.0 {
             return Err(ConfigError::ZeroDistance(zero_distance));
         }
         Ok(Config { hota_zero_distance: zero_distance, ..self })

@@ -194,7 +194,7 @@ impl Frame {
         if self.truth.is_empty() || self.hypotheses.is_empty() {
             return;
         }
-        if self.truth.len() * self.hypotheses.len() <= BRUTE_FORCE_PAIRS || !(radius > 0.0) {
+        if self.truth.len() * self.hypotheses.len() <= BRUTE_FORCE_PAIRS || radius.is_nan() || radius <= 0.0 {
             for (i, t) in self.truth.iter().enumerate() {
                 for (j, h) in self.hypotheses.iter().enumerate() {
                     let distance = distance(t.pos, h.pos);

@@ -25,7 +25,9 @@ fn python() -> Option<String> {
         _ => {
             let required = std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1");
             assert!(!required, "KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set: run scripts/test");
-            eprintln!("skipped: KPL_PYTHON is not set (scripts/test sets it up with py-motmetrics and TrackEval)");
+            eprintln!(
+                "skipped: KPL_PYTHON is not set (scripts/test sets it up with py-motmetrics and TrackEval)"
+            );
             None
         }
     }
@@ -55,7 +57,12 @@ fn oracle(python: &str, dir: &Path, cases: &[(PathBuf, Config)]) -> Vec<Value> {
         .arg(&results_path)
         .output()
         .unwrap();
-    assert!(output.status.success(), "{python} {} failed:\n{}", script.display(), String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{python} {} failed:\n{}",
+        script.display(),
+        String::from_utf8_lossy(&output.stderr)
+    );
     let results: Value = serde_json::from_str(&std::fs::read_to_string(&results_path).unwrap()).unwrap();
     results["results"].as_array().unwrap().clone()
 }
@@ -124,7 +131,8 @@ fn compare(name: &str, ours: &Evaluation, theirs: &Value) {
             Some(t) => assert!((ours - t).abs() <= 1e-9, "{name}: {field}: ours {ours}, theirs {t}"),
         }
     }
-    let per_alpha: Vec<f64> = theirs["HOTA_per_alpha"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let per_alpha: Vec<f64> =
+        theirs["HOTA_per_alpha"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert_eq!(per_alpha.len(), h.per_alpha.hota.len(), "{name}: thresholds");
     for (a, (o, t)) in h.per_alpha.hota.iter().zip(&per_alpha).enumerate() {
         assert!((o - t).abs() <= 1e-9, "{name}: HOTA at threshold {a}: ours {o}, theirs {t}");
@@ -146,7 +154,11 @@ fn the_metrics_agree_with_py_motmetrics_and_trackeval() {
         let sequence = case.sequence();
         let config = Config::new(case.max_distance).unwrap();
         // One case in four with another zero distance for HOTA.
-        let config = if seed % 4 == 3 { config.with_hota_zero_distance(case.max_distance * 1.3).unwrap() } else { config };
+        let config = if seed % 4 == 3 {
+            config.with_hota_zero_distance(case.max_distance * 1.3).unwrap()
+        } else {
+            config
+        };
         let folder = dir.join(format!("case{seed}"));
         write_export(&folder, &sequence);
         evaluations.push((format!("case {seed}"), evaluate(&sequence, &config)));
@@ -154,7 +166,9 @@ fn the_metrics_agree_with_py_motmetrics_and_trackeval() {
     }
     // Edge cases: no hypotheses at all, no true objects at all, nothing at all.
     let base = common::case(7);
-    for (label, keep_truth, keep_hyps) in [("no hypotheses", true, false), ("no truth", false, true), ("empty", false, false)] {
+    for (label, keep_truth, keep_hyps) in
+        [("no hypotheses", true, false), ("no truth", false, true), ("empty", false, false)]
+    {
         let mut case = base.clone();
         for (truth, hyps) in &mut case.frames {
             if !keep_truth {

@@ -161,7 +161,8 @@ fn a_switch_and_a_fragmentation_by_hand() {
     // car1 is seen as a, missed, seen as a again (a fragmentation), then as b (a switch);
     // c is a false positive far away.
     let mut s = Sequence::new();
-    let frames: [(&[(&str, [f64; 2])], &[(&str, [f64; 2])]); 5] = [
+    type Objects<'a> = &'a [(&'a str, [f64; 2])];
+    let frames: [(Objects, Objects); 5] = [
         (&[("car1", [0.0, 0.0])], &[("a", [0.5, 0.0])]),
         (&[("car1", [1.0, 0.0])], &[]),
         (&[("car1", [2.0, 0.0])], &[("a", [2.0, 1.0])]),

@@ -113,7 +113,11 @@ pub fn run(args: Args) -> ExitCode {
     };
     if let Some(dir) = &args.export {
         match export(dir, &scored.streams) {
-            Ok(()) => eprintln!("wrote MOTChallenge-style files of {} streams to {}", scored.streams.len(), dir.display()),
+            Ok(()) => eprintln!(
+                "wrote MOTChallenge-style files of {} streams to {}",
+                scored.streams.len(),
+                dir.display()
+            ),
             Err(e) => {
                 eprintln!("error: {e}");
                 return ExitCode::from(2);
@@ -176,7 +180,9 @@ fn export(dir: &Path, streams: &[ScoredStream]) -> Result<(), String> {
 
 /// A stream name as a folder name: `world[Car]` -> `world_Car_` (never `.` or `..`).
 fn folder_name(stream: &str) -> String {
-    let name: String =
-        stream.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
+    let name: String = stream
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' })
+        .collect();
     if name.chars().all(|c| c == '.') { name.replace('.', "_") + "_" } else { name }
 }

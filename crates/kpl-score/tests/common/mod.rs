@@ -85,7 +85,8 @@ pub fn case(seed: u64) -> Case {
     for f in 0..frames {
         let mut truth = Vec::new();
         let mut hyps = Vec::new();
-        let alive: Vec<usize> = (0..truths.len()).filter(|&k| truths[k].start <= f && f < truths[k].end).collect();
+        let alive: Vec<usize> =
+            (0..truths.len()).filter(|&k| truths[k].start <= f && f < truths[k].end).collect();
         if alive.len() >= 2 && rng.random_bool(p_swap) {
             let a = alive[rng.random_range(0..alive.len())];
             let b = alive[rng.random_range(0..alive.len())];
@@ -116,15 +117,25 @@ pub fn case(seed: u64) -> Case {
                 t.hypothesis = next_hypothesis;
                 next_hypothesis += 1;
             }
-            hyps.push((format!("h{}", t.hypothesis), [pos[0] + sigma * normal(&mut rng), pos[1] + sigma * normal(&mut rng)]));
+            hyps.push((
+                format!("h{}", t.hypothesis),
+                [pos[0] + sigma * normal(&mut rng), pos[1] + sigma * normal(&mut rng)],
+            ));
         }
         let new_ghosts = (fp_rate * rng.random::<f64>() * 2.0).floor() as usize;
         for _ in 0..new_ghosts {
-            ghosts.push((next_hypothesis, [rng.random_range(0.0..area), rng.random_range(0.0..area)], rng.random_range(1..8)));
+            ghosts.push((
+                next_hypothesis,
+                [rng.random_range(0.0..area), rng.random_range(0.0..area)],
+                rng.random_range(1..8),
+            ));
             next_hypothesis += 1;
         }
         for g in &mut ghosts {
-            hyps.push((format!("h{}", g.0), [g.1[0] + 0.2 * normal(&mut rng), g.1[1] + 0.2 * normal(&mut rng)]));
+            hyps.push((
+                format!("h{}", g.0),
+                [g.1[0] + 0.2 * normal(&mut rng), g.1[1] + 0.2 * normal(&mut rng)],
+            ));
             g.2 -= 1;
         }
         ghosts.retain(|g| g.2 > 0);
