@@ -35,6 +35,8 @@ pub enum ReadError {
     Io { path: PathBuf, source: std::io::Error },
     #[error("{}:{line}: a line longer than {limit} MiB; is this a JSON-lines recording?", path.display(), limit = crate::recording::MAX_LINE_BYTES >> 20)]
     LineTooLong { path: PathBuf, line: usize },
+    #[error("{}: not a file or a folder (a device?); give a run's output folder or recorded `.jsonl` files", path.display())]
+    NotAFile { path: PathBuf },
     #[error("{}: no recordings (`*.jsonl` files) in this folder", path.display())]
     EmptyFolder { path: PathBuf },
     #[error("{}: folders nested deeper than {limit} levels", path.display(), limit = crate::recording::MAX_DEPTH)]
@@ -46,7 +48,10 @@ pub enum ReadError {
 impl ReadError {
     /// Something the user must fix in the data (as opposed to the file system).
     pub fn is_data_error(&self) -> bool {
-        matches!(self, ReadError::LineTooLong { .. } | ReadError::EmptyFolder { .. })
+        matches!(
+            self,
+            ReadError::LineTooLong { .. } | ReadError::EmptyFolder { .. } | ReadError::NotAFile { .. }
+        )
     }
 }
 

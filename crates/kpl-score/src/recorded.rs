@@ -44,6 +44,9 @@ pub fn score_recording(recording: &Recording, options: &Options) -> Result<Score
     let mut streams = Vec::new();
     for stream in chosen {
         if stream.name == truth.name {
+            report
+                .notes
+                .push(format!("`{}` is the ground truth; it is not scored against itself", truth.name));
             continue;
         }
         match align(truth, stream, &options.align) {

@@ -127,10 +127,15 @@ impl Recording {
                 if files.len() == before {
                     return Err(ReadError::EmptyFolder { path: path.clone() });
                 }
-            } else {
+            } else if meta.is_file() || is_pipe(&meta) {
                 files.push(path.clone());
+            } else {
+                return Err(ReadError::NotAFile { path: path.clone() });
             }
         }
+        // A file named twice (a folder and a file in it) is read once.
+        let mut seen = HashSet::new();
+        files.retain(|f| seen.insert(std::fs::canonicalize(f).unwrap_or_else(|_| f.clone())));
         let mut reader = RecordingReader::default();
         for file in &files {
             let f =
@@ -249,6 +254,17 @@ fn closest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
         .filter(|(distance, _)| *distance <= limit)
         .min()
         .map(|(_, c)| c)
+}
+
+/// A named pipe (`kpl score <(...)`): read like a file.
+#[cfg(unix)]
+fn is_pipe(meta: &std::fs::Metadata) -> bool {
+    std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type())
+}
+
+#[cfg(not(unix))]
+fn is_pipe(_: &std::fs::Metadata) -> bool {
+    false
 }
 
 /// Every `*.jsonl` below `dir`, in name order.
