@@ -128,10 +128,6 @@ impl HotaFrames {
         let alphas = alphas();
         let truth_dets: usize = self.frames.iter().map(|f| f.0.len()).sum();
         let hypothesis_dets: usize = self.frames.iter().map(|f| f.1.len()).sum();
-        let mut tp = [0usize; ALPHA_COUNT];
-        let mut fn_ = [0usize; ALPHA_COUNT];
-        let mut fp = [0usize; ALPHA_COUNT];
-        let mut loc = [0.0f64; ALPHA_COUNT];
         // TrackEval returns early: everything 0 but the misses or false positives, LocA 1.
         if hypothesis_dets == 0 {
             return empty(&alphas, truth_dets, 0);
@@ -139,12 +135,26 @@ impl HotaFrames {
         if truth_dets == 0 {
             return empty(&alphas, 0, hypothesis_dets);
         }
+        let ids = IdAlignment::new(self);
+        let counts = Counts::new(self, &ids, &alphas);
+        finish(&alphas, &counts.per_threshold(&ids))
+    }
+}
 
-        // First pass: global alignment of ids.
-        let mut truth_count = vec![0usize; self.truth_ids];
-        let mut hypothesis_count = vec![0usize; self.hypothesis_ids];
+/// The first pass: how well each pair of ids aligns over the whole sequence.
+struct IdAlignment {
+    truth_count: Vec<usize>,
+    hypothesis_count: Vec<usize>,
+    /// Per pair, the sum over frames of S / (row sum + column sum − S).
+    potential: HashMap<(u32, u32), f64>,
+}
+
+impl IdAlignment {
+    fn new(h: &HotaFrames) -> IdAlignment {
+        let mut truth_count = vec![0usize; h.truth_ids];
+        let mut hypothesis_count = vec![0usize; h.hypothesis_ids];
         let mut potential: HashMap<(u32, u32), f64> = HashMap::new();
-        for (truth, hypotheses, sims) in &self.frames {
+        for (truth, hypotheses, sims) in &h.frames {
             let mut row_sum = vec![0.0; truth.len()];
             let mut col_sum = vec![0.0; hypotheses.len()];
             for &(i, j, s) in sims {
@@ -165,26 +175,49 @@ impl HotaFrames {
                 hypothesis_count[h as usize] += 1;
             }
         }
-        let alignment = |t: u32, h: u32| -> f64 {
-            let p = potential.get(&(t, h)).copied().unwrap_or(0.0);
-            p / (truth_count[t as usize] as f64 + hypothesis_count[h as usize] as f64 - p)
-        };
+        IdAlignment { truth_count, hypothesis_count, potential }
+    }
 
-        // Second pass: match each frame, count per threshold.
-        let mut matched: HashMap<(u32, u32), [usize; ALPHA_COUNT]> = HashMap::new();
+    /// The global alignment score of a pair of ids (a Jaccard index of weighted frames).
+    fn score(&self, t: u32, h: u32) -> f64 {
+        let p = self.potential.get(&(t, h)).copied().unwrap_or(0.0);
+        p / (self.truth_count[t as usize] as f64 + self.hypothesis_count[h as usize] as f64 - p)
+    }
+}
+
+/// The second pass: each frame matched, counted at each threshold.
+struct Counts {
+    tp: [usize; ALPHA_COUNT],
+    fn_: [usize; ALPHA_COUNT],
+    fp: [usize; ALPHA_COUNT],
+    /// Sum of the similarities of the true positives.
+    similarity: [f64; ALPHA_COUNT],
+    /// Per pair of ids, its true positives at each threshold.
+    matched: HashMap<(u32, u32), [usize; ALPHA_COUNT]>,
+}
+
+impl Counts {
+    fn new(h: &HotaFrames, ids: &IdAlignment, alphas: &[f64; ALPHA_COUNT]) -> Counts {
+        let mut c = Counts {
+            tp: [0; ALPHA_COUNT],
+            fn_: [0; ALPHA_COUNT],
+            fp: [0; ALPHA_COUNT],
+            similarity: [0.0; ALPHA_COUNT],
+            matched: HashMap::new(),
+        };
         let mut edges = Vec::new();
-        for (truth, hypotheses, sims) in &self.frames {
+        for (truth, hypotheses, sims) in &h.frames {
             if truth.is_empty() || hypotheses.is_empty() {
                 for a in 0..ALPHA_COUNT {
-                    fn_[a] += truth.len();
-                    fp[a] += hypotheses.len();
+                    c.fn_[a] += truth.len();
+                    c.fp[a] += hypotheses.len();
                 }
                 continue;
             }
             edges.clear();
             let mut similarity: HashMap<(usize, usize), f64> = HashMap::with_capacity(sims.len());
             for &(i, j, s) in sims {
-                let score = alignment(truth[i as usize], hypotheses[j as usize]) * s;
+                let score = ids.score(truth[i as usize], hypotheses[j as usize]) * s;
                 if score > 0.0 {
                     edges.push(Edge { row: i as usize, col: j as usize, value: score });
                 }
@@ -197,43 +230,62 @@ impl HotaFrames {
                     let s = similarity[&(i, j)];
                     if s >= alpha - f64::EPSILON {
                         n += 1;
-                        loc[a] += s;
-                        matched.entry((truth[i], hypotheses[j])).or_insert([0; ALPHA_COUNT])[a] += 1;
+                        c.similarity[a] += s;
+                        c.matched.entry((truth[i], hypotheses[j])).or_insert([0; ALPHA_COUNT])[a] += 1;
                     }
                 }
-                tp[a] += n;
-                fn_[a] += truth.len() - n;
-                fp[a] += hypotheses.len() - n;
+                c.tp[a] += n;
+                c.fn_[a] += truth.len() - n;
+                c.fp[a] += hypotheses.len() - n;
             }
         }
+        c
+    }
 
-        // Association per threshold.
-        let mut ass_a = [0.0; ALPHA_COUNT];
-        let mut ass_re = [0.0; ALPHA_COUNT];
-        let mut ass_pr = [0.0; ALPHA_COUNT];
-        let mut keys: Vec<&(u32, u32)> = matched.keys().collect();
+    /// Association and localisation at each threshold.
+    fn per_threshold(&self, ids: &IdAlignment) -> PerThreshold {
+        let mut p = PerThreshold {
+            tp: self.tp,
+            fn_: self.fn_,
+            fp: self.fp,
+            ass_a: [0.0; ALPHA_COUNT],
+            ass_re: [0.0; ALPHA_COUNT],
+            ass_pr: [0.0; ALPHA_COUNT],
+            loc_a: std::array::from_fn(|a| self.similarity[a].max(1e-10) / (self.tp[a] as f64).max(1e-10)),
+        };
+        let mut keys: Vec<&(u32, u32)> = self.matched.keys().collect();
         keys.sort_unstable();
         for a in 0..ALPHA_COUNT {
             let (mut sum_a, mut sum_re, mut sum_pr) = (0.0, 0.0, 0.0);
             for key in &keys {
-                let m = matched[*key][a] as f64;
+                let m = self.matched[*key][a] as f64;
                 if m == 0.0 {
                     continue;
                 }
-                let (gt, tr) = (truth_count[key.0 as usize] as f64, hypothesis_count[key.1 as usize] as f64);
+                let gt = ids.truth_count[key.0 as usize] as f64;
+                let tr = ids.hypothesis_count[key.1 as usize] as f64;
                 sum_a += m * (m / (gt + tr - m).max(1.0));
                 sum_re += m * (m / gt.max(1.0));
                 sum_pr += m * (m / tr.max(1.0));
             }
-            let positives = (tp[a] as f64).max(1.0);
-            ass_a[a] = sum_a / positives;
-            ass_re[a] = sum_re / positives;
-            ass_pr[a] = sum_pr / positives;
+            let positives = (self.tp[a] as f64).max(1.0);
+            p.ass_a[a] = sum_a / positives;
+            p.ass_re[a] = sum_re / positives;
+            p.ass_pr[a] = sum_pr / positives;
         }
-        let loc_a: [f64; ALPHA_COUNT] =
-            std::array::from_fn(|a| loc[a].max(1e-10) / (tp[a] as f64).max(1e-10));
-        finish(&alphas, tp, fn_, fp, ass_a, ass_re, ass_pr, loc_a)
+        p
     }
+}
+
+/// The counts and averages at each threshold, from which the rest follows.
+struct PerThreshold {
+    tp: [usize; ALPHA_COUNT],
+    fn_: [usize; ALPHA_COUNT],
+    fp: [usize; ALPHA_COUNT],
+    ass_a: [f64; ALPHA_COUNT],
+    ass_re: [f64; ALPHA_COUNT],
+    ass_pr: [f64; ALPHA_COUNT],
+    loc_a: [f64; ALPHA_COUNT],
 }
 
 /// TrackEval's early result for a sequence without hypotheses or without true objects.
@@ -271,47 +323,38 @@ fn empty(alphas: &[f64; ALPHA_COUNT], misses: usize, false_positives: usize) -> 
 }
 
 /// The fields that follow from the counts (TrackEval's `_compute_final_fields`), and the means.
-#[allow(clippy::too_many_arguments)] // the per-threshold arrays of one computation
-fn finish(
-    alphas: &[f64; ALPHA_COUNT],
-    tp: [usize; ALPHA_COUNT],
-    fn_: [usize; ALPHA_COUNT],
-    fp: [usize; ALPHA_COUNT],
-    ass_a: [f64; ALPHA_COUNT],
-    ass_re: [f64; ALPHA_COUNT],
-    ass_pr: [f64; ALPHA_COUNT],
-    loc_a: [f64; ALPHA_COUNT],
-) -> Hota {
+fn finish(alphas: &[f64; ALPHA_COUNT], p: &PerThreshold) -> Hota {
+    let (tp, fn_, fp) = (&p.tp, &p.fn_, &p.fp);
     let per = |f: &dyn Fn(usize) -> f64| -> Vec<f64> { (0..ALPHA_COUNT).map(f).collect() };
     let det_re = per(&|a| tp[a] as f64 / ((tp[a] + fn_[a]) as f64).max(1.0));
     let det_pr = per(&|a| tp[a] as f64 / ((tp[a] + fp[a]) as f64).max(1.0));
     let det_a = per(&|a| tp[a] as f64 / ((tp[a] + fn_[a] + fp[a]) as f64).max(1.0));
-    let hota = per(&|a| (det_a[a] * ass_a[a]).sqrt());
-    let owta = per(&|a| (det_re[a] * ass_a[a]).sqrt());
+    let hota = per(&|a| (det_a[a] * p.ass_a[a]).sqrt());
+    let owta = per(&|a| (det_re[a] * p.ass_a[a]).sqrt());
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     Hota {
         hota: mean(&hota),
         det_a: mean(&det_a),
-        ass_a: mean(&ass_a),
-        loc_a: mean(&loc_a),
+        ass_a: mean(&p.ass_a),
+        loc_a: mean(&p.loc_a),
         det_re: mean(&det_re),
         det_pr: mean(&det_pr),
-        ass_re: mean(&ass_re),
-        ass_pr: mean(&ass_pr),
+        ass_re: mean(&p.ass_re),
+        ass_pr: mean(&p.ass_pr),
         owta: mean(&owta),
         hota_0: hota[0],
-        loc_a_0: loc_a[0],
-        hota_loc_a_0: hota[0] * loc_a[0],
+        loc_a_0: p.loc_a[0],
+        hota_loc_a_0: hota[0] * p.loc_a[0],
         per_alpha: PerAlpha {
             alpha: alphas.to_vec(),
             hota,
             det_a,
-            ass_a: ass_a.to_vec(),
-            loc_a: loc_a.to_vec(),
+            ass_a: p.ass_a.to_vec(),
+            loc_a: p.loc_a.to_vec(),
             det_re,
             det_pr,
-            ass_re: ass_re.to_vec(),
-            ass_pr: ass_pr.to_vec(),
+            ass_re: p.ass_re.to_vec(),
+            ass_pr: p.ass_pr.to_vec(),
             owta,
             tp: tp.to_vec(),
             fn_: fn_.to_vec(),
