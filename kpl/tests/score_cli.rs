@@ -252,6 +252,38 @@ fn the_export_scores_the_same_in_py_motmetrics_and_trackeval() {
     // The mapping file says which symbol was which car, and when.
     let mapping = std::fs::read_to_string(export.join("onroad_car/mapping.csv")).unwrap();
     assert!(mapping.starts_with("hypothesis,truth,from_us,to_us,frames\nco1,car"), "{mapping}");
+
+    // For the percepts, the simulator knows the answer: the ground truth says which percept sees
+    // each car (`seen_as`). The mapping agrees with it, but for the few percepts whose noise put
+    // them beyond the gate.
+    let mapping = std::fs::read_to_string(export.join("tracker/mapping.csv")).unwrap();
+    let intervals: Vec<(String, String, i64, i64)> = mapping
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[0].to_string(), f[1].to_string(), f[2].parse().unwrap(), f[3].parse().unwrap())
+        })
+        .collect();
+    let (mut agree, mut seen) = (0, 0);
+    for line in std::fs::read_to_string(tracks()).unwrap().lines() {
+        let sample: Value = serde_json::from_str(line).unwrap();
+        if sample["stream"] != "tracker.truth" {
+            continue;
+        }
+        let t = sample["valid"].as_i64().unwrap();
+        for car in sample["value"].as_array().unwrap() {
+            let percept = car["seen_as"].as_str().unwrap();
+            if percept.is_empty() {
+                continue;
+            }
+            seen += 1;
+            let mapped = intervals.iter().find(|(h, _, from, to)| h == percept && *from <= t && t <= *to);
+            agree += usize::from(mapped.is_some_and(|(_, truth, _, _)| car["id"] == truth.as_str()));
+        }
+    }
+    assert!(seen > 2000, "{seen}");
+    assert!(agree as f64 > 0.93 * seen as f64, "the mapping agrees with seen_as {agree} times of {seen}");
 }
 
 #[test]
