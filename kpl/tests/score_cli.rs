@@ -284,6 +284,7 @@ fn the_export_scores_the_same_in_py_motmetrics_and_trackeval() {
     }
     assert!(seen > 2000, "{seen}");
     assert!(agree as f64 > 0.93 * seen as f64, "the mapping agrees with seen_as {agree} times of {seen}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -366,4 +367,6 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
     let o = kpl(&["score", empty_dir.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no recordings (`*.jsonl` files) in this folder"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&empty_dir);
 }
