@@ -307,7 +307,7 @@ fn a_run_lists_its_outputs_and_what_the_links_achieved() {
     assert!(result.status.success());
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains(&format!("outputs in {}:", out.display())), "{stderr}");
-    for file in ["cars.jsonl", "changes.jsonl", "summary.json"] {
+    for file in ["tracks.jsonl", "changes.jsonl", "summary.json"] {
         assert!(stderr.lines().any(|l| l.trim_start().starts_with(file)), "{file} listed:\n{stderr}");
         assert!(out.join(file).exists());
     }

@@ -256,7 +256,7 @@ fn every_command_of_the_readme_tour_runs_as_written() {
     // What the tour promises is there: the picture, and the run's outputs straight under out/NAME.
     let svg = std::fs::read_to_string(dir.join("overview.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("vision_world"));
-    assert!(dir.join("out/bridge/cars.jsonl").exists() && !dir.join("out/bridge/bridge").exists());
+    assert!(dir.join("out/bridge/tracks.jsonl").exists() && !dir.join("out/bridge/bridge").exists());
 }
 
 #[test]
