@@ -48,9 +48,9 @@ fn generate_then_eval_reports_table_one_and_aapa_wins() {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("% contained") && stderr.contains("snitch is contained in"), "{stderr}");
-    let beside = std::fs::read_dir(data.join("scenes")).unwrap().filter(|e| {
-        e.as_ref().unwrap().file_name().to_str().unwrap().ends_with("_bb.json")
-    });
+    let beside = std::fs::read_dir(data.join("scenes"))
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().file_name().to_str().unwrap().ends_with("_bb.json"));
     assert_eq!(beside.count(), 8);
     for perception in ["perfect", "detector"] {
         let aapa = eval_json(&data, "aapa", perception, &dir);
@@ -77,15 +77,38 @@ fn generate_then_eval_reports_table_one_and_aapa_wins() {
 fn a_split_and_per_video_results() {
     let dir = scratch("split");
     let data = dir.join("data");
-    assert!(kpl(&["cater", "generate", "--videos", "3", "--seed", "2", "--motion", "all", "--out", data.to_str().unwrap()])
+    assert!(
+        kpl(&[
+            "cater",
+            "generate",
+            "--videos",
+            "3",
+            "--seed",
+            "2",
+            "--motion",
+            "all",
+            "--out",
+            data.to_str().unwrap()
+        ])
         .status
-        .success());
+        .success()
+    );
     let list = dir.join("samples.txt");
     std::fs::write(&list, "videos/CATER_new_000002.avi\nCATER_new_000000\n").unwrap();
     let csv = dir.join("per-video.csv");
     let output = kpl(&[
-        "cater", "eval", "--data", data.to_str().unwrap(), "--model", "heuristic", "--videos", list.to_str().unwrap(),
-        "--frames", "from-first-detection", "--per-video", csv.to_str().unwrap(),
+        "cater",
+        "eval",
+        "--data",
+        data.to_str().unwrap(),
+        "--model",
+        "heuristic",
+        "--videos",
+        list.to_str().unwrap(),
+        "--frames",
+        "from-first-detection",
+        "--per-video",
+        csv.to_str().unwrap(),
     ]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -117,7 +140,10 @@ fn bad_videos_are_skipped_and_reported_strict_exits_1_missing_data_exits_2() {
     let output = run(&data, &[]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(0), "{stderr}");
-    assert!(stderr.contains("skipped CATER_new_000001:") && stderr.contains("CATER_new_000001.json"), "{stderr}");
+    assert!(
+        stderr.contains("skipped CATER_new_000001:") && stderr.contains("CATER_new_000001.json"),
+        "{stderr}"
+    );
     assert!(stderr.contains("evaluated 1 videos (1 skipped)"), "{stderr}");
     assert_eq!(run(&data, &["--strict"]).status.code(), Some(1));
     // No video left to score: bad data.

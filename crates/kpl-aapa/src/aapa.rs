@@ -32,8 +32,8 @@ use crate::geometry::{
 };
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
-    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation, Symbol,
-    WorldState,
+    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
+    Symbol, WorldState,
 };
 
 /// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
@@ -346,13 +346,21 @@ impl Aapa {
                         onset: None,
                     })
                     .collect();
-                bindings.push(Binding { action: action.clone(), started: time, candidates, bound: None, completed: false });
+                bindings.push(Binding {
+                    action: action.clone(),
+                    started: time,
+                    candidates,
+                    bound: None,
+                    completed: false,
+                });
             }
             ActionPhase::Completed => {
                 let open = bindings
                     .iter()
                     .enumerate()
-                    .filter(|(_, b)| !b.completed && b.action.name == action.name && b.action.args == action.args)
+                    .filter(|(_, b)| {
+                        !b.completed && b.action.name == action.name && b.action.args == action.args
+                    })
                     .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
                     .map(|(i, _)| i);
                 let actor = match open {
@@ -363,7 +371,10 @@ impl Aapa {
                                 let taken = bound_symbols(bindings);
                                 let symbol = near_other(action, &bindings[i], work, theta_anch, &taken)
                                     .or_else(|| first_mover(&bindings[i], work, &taken, 0.0))
-                                    .or_else(|| resolve(&action.args[0], work, theta_anch).map(|k| work[k].anchor.symbol.clone()));
+                                    .or_else(|| {
+                                        resolve(&action.args[0], work, theta_anch)
+                                            .map(|k| work[k].anchor.symbol.clone())
+                                    });
                                 if let Some(symbol) = &symbol {
                                     let started = bindings[i].action.clone();
                                     self.apply_bound(&started, symbol, time, work, notes);
@@ -379,14 +390,23 @@ impl Aapa {
                 };
                 match actor {
                     Some(symbol) => self.apply_bound(action, &symbol, time, work, notes),
-                    None => notes.push(format!("action `{}`: no anchor for `{}`", action.name, action.args[0])),
+                    None => {
+                        notes.push(format!("action `{}`: no anchor for `{}`", action.name, action.args[0]))
+                    }
                 }
             }
         }
     }
 
     /// Applies an action's rules with its moving object named by symbol.
-    fn apply_bound(&self, action: &Action, symbol: &Symbol, time: Time, work: &mut [Work], notes: &mut Vec<String>) {
+    fn apply_bound(
+        &self,
+        action: &Action,
+        symbol: &Symbol,
+        time: Time,
+        work: &mut [Work],
+        notes: &mut Vec<String>,
+    ) {
         let mut bound = action.clone();
         bound.args[0] = symbol.clone();
         for rule in self.rules_for(&bound) {
@@ -396,7 +416,13 @@ impl Aapa {
 
     /// Notes which candidates started moving, decides the open bindings (oldest first) whose
     /// moving object now shows, and applies their started effects.
-    fn decide_bindings(&self, bindings: &mut [Binding], time: Time, work: &mut [Work], notes: &mut Vec<String>) {
+    fn decide_bindings(
+        &self,
+        bindings: &mut [Binding],
+        time: Time,
+        work: &mut [Work],
+        notes: &mut Vec<String>,
+    ) {
         for binding in bindings.iter_mut().filter(|b| b.bound.is_none()) {
             for c in binding.candidates.iter_mut().filter(|c| c.onset.is_none()) {
                 if displacement(c, work).is_some_and(|d| d >= ONSET_PX) {
@@ -414,7 +440,10 @@ impl Aapa {
             // Two actions on the type started together: the order of motion cannot tell which is
             // which; wait for their completion.
             let twin = bindings.iter().enumerate().any(|(j, o)| {
-                j != k && o.bound.is_none() && o.started == b.started && o.action.args.first() == b.action.args.first()
+                j != k
+                    && o.bound.is_none()
+                    && o.started == b.started
+                    && o.action.args.first() == b.action.args.first()
             });
             if twin {
                 continue;
@@ -766,9 +795,11 @@ const MAX_BINDINGS: usize = 64;
 /// [`ESTABLISHED`]) if there are any, else all. A short-lived false detection of the type is then no
 /// rival to the object that has been there all along.
 fn candidates(object_type: &str, work: &[Work]) -> Vec<usize> {
-    let all: Vec<usize> =
-        (0..work.len()).filter(|&i| !work[i].removed && &*work[i].anchor.object_type == object_type).collect();
-    let established: Vec<usize> = all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+    let all: Vec<usize> = (0..work.len())
+        .filter(|&i| !work[i].removed && &*work[i].anchor.object_type == object_type)
+        .collect();
+    let established: Vec<usize> =
+        all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
     if established.is_empty() { all } else { established }
 }
 
@@ -837,9 +868,16 @@ fn names_single_other(action: &Action, work: &[Work]) -> bool {
 }
 
 /// For an action that names another, single object: the candidate nearest it.
-fn near_other(action: &Action, binding: &Binding, work: &[Work], theta_anch: f64, taken: &[Symbol]) -> Option<Symbol> {
+fn near_other(
+    action: &Action,
+    binding: &Binding,
+    work: &[Work],
+    theta_anch: f64,
+    taken: &[Symbol],
+) -> Option<Symbol> {
     let other = action.args.iter().skip(1).find_map(|arg| {
-        let single = work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1;
+        let single =
+            work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1;
         if single { resolve(arg, work, theta_anch) } else { None }
     })?;
     let target = bottom_centre(&work[other].anchor.bbox);
@@ -860,13 +898,19 @@ fn near_other(action: &Action, binding: &Binding, work: &[Work], theta_anch: f64
 /// [`MAX_BINDINGS`].
 fn forget_stale_bindings(bindings: &mut Vec<Binding>, time: Time, notes: &mut Vec<String>) {
     // A completed binding is kept only while an undecided action on its type is open.
-    let undecided: Vec<Symbol> =
-        bindings.iter().filter(|b| b.bound.is_none()).filter_map(|b| b.action.args.first().cloned()).collect();
+    let undecided: Vec<Symbol> = bindings
+        .iter()
+        .filter(|b| b.bound.is_none())
+        .filter_map(|b| b.action.args.first().cloned())
+        .collect();
     bindings.retain(|b| !b.completed || b.action.args.first().is_some_and(|t| undecided.contains(t)));
     bindings.retain(|b| {
         let stale = b.action.expected_end.is_some_and(|end| time > end.saturating_add(1_000_000));
         if stale {
-            notes.push(format!("action `{}` started at {} never completed; forgotten", b.action.name, b.started));
+            notes.push(format!(
+                "action `{}` started at {} never completed; forgotten",
+                b.action.name, b.started
+            ));
         }
         !stale
     });
@@ -905,7 +949,10 @@ fn apply_rule(
         let arg = action.args.get(k)?;
         let near = if k == 0 { None } else { action.args.first().and_then(|a| resolve(a, work, theta_anch)) };
         let found = match near {
-            Some(actor) if candidates(arg, work).len() > 1 && !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) => {
+            Some(actor)
+                if candidates(arg, work).len() > 1
+                    && !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) =>
+            {
                 nearest(arg, actor, work)
             }
             _ => resolve(arg, work, theta_anch),

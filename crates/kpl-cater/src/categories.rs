@@ -64,8 +64,10 @@ fn containments(scene: &Scene, open_end: i64) -> Vec<(&str, &str, i64, i64, usiz
         }
         for (k, m) in moves.iter().enumerate() {
             let (Some(MovementKind::Contain), Some(other)) = (m.kind(), m.other.as_deref()) else { continue };
-            let release =
-                moves[k..].iter().find(|n| n.kind() == Some(MovementKind::PickPlace)).map_or(open_end, |n| n.start);
+            let release = moves[k..]
+                .iter()
+                .find(|n| n.kind() == Some(MovementKind::PickPlace))
+                .map_or(open_end, |n| n.start);
             out.push((cone.as_str(), other, m.end, release, k));
         }
     }
@@ -129,7 +131,8 @@ pub fn visible_frames(
 ) -> Result<Vec<bool>, VisibilityError> {
     let threshold = 1.0 - ratio;
     // Objects left out as contained: by class, over [contain end, next pick-up start or 300].
-    let class_of: HashMap<&str, String> = scene.objects.iter().map(|o| (o.instance.as_str(), o.class())).collect();
+    let class_of: HashMap<&str, String> =
+        scene.objects.iter().map(|o| (o.instance.as_str(), o.class())).collect();
     let mut hidden_classes: HashMap<String, Vec<(i64, i64)>> = HashMap::new();
     for (_, other, from, to, _) in containments(scene, 300) {
         if let Some(class) = class_of.get(other) {
@@ -154,12 +157,17 @@ pub fn visible_frames(
         objects.push(Object { class: o.class(), boxes, locations: &o.locations.0 });
     }
     let distance = |p: [f64; 3]| {
-        ((OPNET_CAMERA[0] - p[0]).powi(2) + (OPNET_CAMERA[1] - p[1]).powi(2) + (OPNET_CAMERA[2] - p[2]).powi(2)).sqrt()
+        ((OPNET_CAMERA[0] - p[0]).powi(2)
+            + (OPNET_CAMERA[1] - p[1]).powi(2)
+            + (OPNET_CAMERA[2] - p[2]).powi(2))
+        .sqrt()
     };
     let mut out = vec![false; frames];
     for (f, visible) in out.iter_mut().enumerate() {
         let shown = |o: &Object| {
-            hidden_classes.get(&o.class).is_none_or(|ranges| ranges.iter().all(|&(a, b)| (f as i64) < a || (f as i64) > b))
+            hidden_classes
+                .get(&o.class)
+                .is_none_or(|ranges| ranges.iter().all(|&(a, b)| (f as i64) < a || (f as i64) > b))
         };
         let present: Vec<&Object> = objects.iter().filter(|o| shown(o)).collect();
         let Some(snitch_at) = present.iter().position(|o| o.class == SNITCH_CLASS) else { continue };
@@ -182,7 +190,9 @@ pub fn visible_frames(
 /// OPNet's `_check_if_obj_occluded` for the snitch (first box) against another object (second),
 /// boxes `[x, y, w, h]`.
 fn snitch_is_covered(a: [i32; 4], b: [i32; 4], distance_a: f64, distance_b: f64, threshold: f64) -> bool {
-    let xyxy = |[x, y, w, h]: [i32; 4]| [i64::from(x), i64::from(y), i64::from(x) + i64::from(w), i64::from(y) + i64::from(h)];
+    let xyxy = |[x, y, w, h]: [i32; 4]| {
+        [i64::from(x), i64::from(y), i64::from(x) + i64::from(w), i64::from(y) + i64::from(h)]
+    };
     let (a, b) = (xyxy(a), xyxy(b));
     let inter = (a[2].min(b[2]) - a[0].max(b[0]) + 1).max(0) * (a[3].min(b[3]) - a[1].max(b[1]) + 1).max(0);
     let area = |x: [i64; 4]| (x[2] - x[0] + 1) * (x[3] - x[1] + 1);

@@ -18,11 +18,12 @@ use crate::categories::{FrameCategories, carried_frames, contained_frames, visib
 use crate::detector::{DetectorNoise, detect_video, perfect};
 use crate::error::CaterError;
 use crate::formats::{
-    Annotations, CameraField, FRAMES, GroundTruth, PerceptionFile, Scene, read_json, write_annotation_file, write_json,
+    Annotations, CameraField, FRAMES, GroundTruth, PerceptionFile, Scene, read_json, write_annotation_file,
+    write_json,
 };
 use crate::layout::{
-    ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, ground_truth_path, perception_path,
-    scene_path,
+    ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, ground_truth_path,
+    perception_path, scene_path,
 };
 use crate::render::{Camera, Rendered, render};
 use crate::sim::{Motion, directions, simulate};
@@ -97,7 +98,8 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
     let name = video_name(index);
     let sim = simulate(&mut rng, config.motion);
     let camera = Camera::new(sim.camera);
-    let frames: Vec<Vec<Rendered>> = sim.states.iter().map(|states| render(&camera, &sim.objects, states)).collect();
+    let frames: Vec<Vec<Rendered>> =
+        sim.states.iter().map(|states| render(&camera, &sim.objects, states)).collect();
     let mut ground_truth = GroundTruth::default();
     for (i, object) in sim.objects.iter().enumerate() {
         ground_truth.objects.insert(object.info.key(), frames.iter().map(|f| f[i].ground_truth).collect());
@@ -118,7 +120,8 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
         .collect();
     let perfect_frames = frames.iter().map(|frame| perfect(frame, &object_class)).collect();
     let mut detector_classes = classes.clone();
-    let detector_frames = detect_video(&mut rng, &frames, &mut detector_classes, &object_class, &config.noise);
+    let detector_frames =
+        detect_video(&mut rng, &frames, &mut detector_classes, &object_class, &config.noise);
     let objects = sim
         .objects
         .iter()
@@ -145,7 +148,12 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
         carried: carried_frames(&scene, FRAMES),
     };
     GeneratedVideo {
-        perfect: PerceptionFile { video: name.clone(), perception: "perfect".into(), classes, frames: perfect_frames },
+        perfect: PerceptionFile {
+            video: name.clone(),
+            perception: "perfect".into(),
+            classes,
+            frames: perfect_frames,
+        },
         detector: PerceptionFile {
             video: name,
             perception: "detector".into(),
@@ -211,7 +219,8 @@ pub fn generate(
     }
     let categories = categories.into_inner().unwrap_or_default();
     let mut mix = FrameMix::default();
-    let (mut contained, mut carried, mut visible) = (Annotations::new(), Annotations::new(), Annotations::new());
+    let (mut contained, mut carried, mut visible) =
+        (Annotations::new(), Annotations::new(), Annotations::new());
     let mut redraws = 0;
     for (name, c, r) in categories.values() {
         mix.add(c);

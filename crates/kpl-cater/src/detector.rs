@@ -60,7 +60,10 @@ pub fn perfect(frame: &[Rendered], object_class: &[u32]) -> Vec<Detection> {
         .filter(|(_, r)| r.visible_fraction >= VISIBLE_FRACTION)
         .map(|(i, r)| {
             let [x, y, w, h] = r.ground_truth;
-            Detection { class: object_class[i], bbox: [f64::from(x), f64::from(y), f64::from(x + w), f64::from(y + h)] }
+            Detection {
+                class: object_class[i],
+                bbox: [f64::from(x), f64::from(y), f64::from(x + w), f64::from(y + h)],
+            }
         })
         .collect()
 }
@@ -127,9 +130,11 @@ pub fn detect_video(
         let mut detections = Vec::new();
         for (i, r) in frame.iter().enumerate() {
             let Some(whole) = r.bbox else { continue };
-            let ramp =
-                ((r.visible_fraction - VISIBLE_FRACTION) / (noise.full_visibility - VISIBLE_FRACTION)).clamp(0.0, 1.0);
-            if r.visible_fraction < VISIBLE_FRACTION || !rng.random_bool((noise.detect_probability * ramp).clamp(0.0, 1.0)) {
+            let ramp = ((r.visible_fraction - VISIBLE_FRACTION) / (noise.full_visibility - VISIBLE_FRACTION))
+                .clamp(0.0, 1.0);
+            if r.visible_fraction < VISIBLE_FRACTION
+                || !rng.random_bool((noise.detect_probability * ramp).clamp(0.0, 1.0))
+            {
                 continue;
             }
             let gain = 1.0 + noise.hidden_sigma_gain * (1.0 - r.visible_fraction);

@@ -14,11 +14,12 @@ use serde::{Deserialize, Serialize};
 use crate::categories::{FrameCategories, carried_frames, contained_frames, visible_frames};
 use crate::error::CaterError;
 use crate::formats::{
-    Annotations, GroundTruth, IntBox, PerceptionFile, SNITCH_CLASS, Scene, read_annotation_file, write_predictions,
+    Annotations, GroundTruth, IntBox, PerceptionFile, SNITCH_CLASS, Scene, read_annotation_file,
+    write_predictions,
 };
 use crate::layout::{
-    CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, annotations_dir, find_ground_truth, list_videos,
-    perception_path, pickle_path, scene_path,
+    CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, annotations_dir, find_ground_truth,
+    list_videos, perception_path, pickle_path, scene_path,
 };
 use crate::models::{Model, predict};
 use crate::score::{Category, CategoryTable, FramesScored, VideoScore, score_video};
@@ -43,7 +44,9 @@ impl PerceptionSource {
     pub fn load(&self, data: &Path, video: &str) -> Result<PerceptionFile, CaterError> {
         match self {
             PerceptionSource::Json(p) => PerceptionFile::read(&perception_path(data, video, *p)),
-            PerceptionSource::Pickles(dir) => PerceptionFile::read_pickle(&pickle_path(dir, video), video, "pickle"),
+            PerceptionSource::Pickles(dir) => {
+                PerceptionFile::read_pickle(&pickle_path(dir, video), video, "pickle")
+            }
         }
     }
 }
@@ -144,7 +147,11 @@ impl AnnotationSet {
             let path = dir.join(name);
             if path.is_file() { read_annotation_file(&path).map(Some) } else { Ok(None) }
         };
-        Ok(AnnotationSet { contained: read(CONTAINMENT_FILE)?, carried: read(CARRIED_FILE)?, visible: read(VISIBLE_FILE)? })
+        Ok(AnnotationSet {
+            contained: read(CONTAINMENT_FILE)?,
+            carried: read(CARRIED_FILE)?,
+            visible: read(VISIBLE_FILE)?,
+        })
     }
 
     pub fn is_empty(&self) -> bool {
@@ -200,12 +207,17 @@ pub fn categories_of(
     let visible = match visible {
         VisibleFrom::Opnet => match &annotations.visible {
             Some(a) => frames_of(a, name, frames, VISIBLE_FILE)?,
-            None => visible_frames(&video.scene, &video.ground_truth, frames, 0.0).map_err(|e| e.to_string())?,
+            None => {
+                visible_frames(&video.scene, &video.ground_truth, frames, 0.0).map_err(|e| e.to_string())?
+            }
         },
         VisibleFrom::Perception(source) => {
             let perception = source.load(data, name).map_err(|e| e.to_string())?;
             if perception.frames.len() != frames {
-                return Err(format!("{} frames of perception for visibility, {frames} of ground truth", perception.frames.len()));
+                return Err(format!(
+                    "{} frames of perception for visibility, {frames} of ground truth",
+                    perception.frames.len()
+                ));
             }
             (0..frames).map(|f| perception.has_class(f, SNITCH_CLASS)).collect()
         }
@@ -221,7 +233,10 @@ pub fn evaluate_video(
     params: &Params,
     frames_scored: FramesScored,
 ) -> Result<(VideoScore, Vec<IntBox>), String> {
-    let truth = video.ground_truth.snitch_boxes(Path::new("")).map_err(|_| "no snitch in the ground truth".to_owned())?;
+    let truth = video
+        .ground_truth
+        .snitch_boxes(Path::new(""))
+        .map_err(|_| "no snitch in the ground truth".to_owned())?;
     if video.scene.object(crate::formats::SNITCH_INSTANCE).is_none() {
         return Err("no snitch (`Spl_0`) among the scene's objects".into());
     }
@@ -231,7 +246,9 @@ pub fn evaluate_video(
     }
     let first_frame = match frames_scored {
         FramesScored::All => Some(0),
-        FramesScored::FromFirstDetection => (0..frames).find(|&f| video.perception.has_class(f, SNITCH_CLASS)),
+        FramesScored::FromFirstDetection => {
+            (0..frames).find(|&f| video.perception.has_class(f, SNITCH_CLASS))
+        }
     };
     let predictions = predict(model, params, &video.scene, &video.perception).map_err(|e| e.to_string())?;
     Ok((score_video(&predictions, &truth, categories, first_frame), predictions))
@@ -255,7 +272,9 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
             if set.is_empty() {
                 return Err(CaterError::invalid(
                     dir,
-                    format!("none of OPNet's annotation files ({CONTAINMENT_FILE}, {CARRIED_FILE}, {VISIBLE_FILE})"),
+                    format!(
+                        "none of OPNet's annotation files ({CONTAINMENT_FILE}, {CARRIED_FILE}, {VISIBLE_FILE})"
+                    ),
                 ));
             }
             set
@@ -279,7 +298,8 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
                     let outcome = load_video(&options.data, name, &options.perception)
                         .map_err(|e| e.to_string())
                         .and_then(|video| {
-                            let categories = categories_of(&options.data, &video, &annotations, &options.visible)?;
+                            let categories =
+                                categories_of(&options.data, &video, &annotations, &options.visible)?;
                             evaluate_video(&video, &categories, options.model, &params, options.frames)
                         });
                     let outcome = match (outcome, &options.predictions_dir) {

@@ -57,7 +57,8 @@ pub fn ground_truth_path(dir: &Path, video: &str) -> PathBuf {
 /// when none has, for the error message).
 pub fn find_ground_truth(dir: &Path, video: &str) -> PathBuf {
     let name = format!("{video}_bb.json");
-    let candidates = [dir.join("scenes").join(&name), dir.join("labels").join(&name), dir.join("bb").join(&name)];
+    let candidates =
+        [dir.join("scenes").join(&name), dir.join("labels").join(&name), dir.join("bb").join(&name)];
     candidates.iter().find(|p| p.is_file()).unwrap_or(&candidates[0]).clone()
 }
 
@@ -77,7 +78,8 @@ pub fn annotations_dir(dir: &Path) -> PathBuf {
 /// (`*_bb.json`), sorted.
 pub fn list_videos(dir: &Path) -> Result<Vec<String>, CaterError> {
     let scenes = dir.join("scenes");
-    let entries = std::fs::read_dir(&scenes).map_err(|source| CaterError::Io { path: scenes.clone(), source })?;
+    let entries =
+        std::fs::read_dir(&scenes).map_err(|source| CaterError::Io { path: scenes.clone(), source })?;
     let mut names = Vec::new();
     for entry in entries {
         let entry = entry.map_err(|source| CaterError::Io { path: scenes.clone(), source })?;
@@ -97,7 +99,8 @@ pub fn list_videos(dir: &Path) -> Result<Vec<String>, CaterError> {
 /// stem is the name; blank lines and lines starting with `#` are skipped. A name listed twice is a
 /// data error.
 pub fn read_video_list(path: &Path) -> Result<Vec<String>, CaterError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let text =
+        std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
     let mut names = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for (n, line) in text.lines().enumerate() {

@@ -57,7 +57,10 @@ impl Camera {
         if z <= 1e-6 {
             return None;
         }
-        Some([WIDTH / 2.0 + self.focal * dot(d, self.right) / z, HEIGHT / 2.0 + self.focal * dot(d, self.down) / z])
+        Some([
+            WIDTH / 2.0 + self.focal * dot(d, self.right) / z,
+            HEIGHT / 2.0 + self.focal * dot(d, self.down) / z,
+        ])
     }
 
     /// CLEVR's `pixel_coords`: rounded pixel position and depth along the view.
@@ -148,7 +151,8 @@ fn hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     if pts.len() < 3 {
         return pts;
     }
-    let turn = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let turn =
+        |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
     let mut lower: Vec<[f64; 2]> = Vec::new();
     for &p in &pts {
         while lower.len() >= 2 && turn(lower[lower.len() - 2], lower[lower.len() - 1], p) <= 0.0 {
@@ -222,7 +226,8 @@ pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) ->
         .map(|(i, (object, state))| {
             let projected: Vec<[f64; 2]> =
                 outline(object, state, camera).into_iter().filter_map(|p| camera.project(p)).collect();
-            let (mut x1, mut y1, mut x2, mut y2) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+            let (mut x1, mut y1, mut x2, mut y2) =
+                (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
             for p in &projected {
                 x1 = x1.min(p[0]);
                 y1 = y1.min(p[1]);
@@ -241,8 +246,11 @@ pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) ->
         .iter()
         .map(|d| {
             let finite = d.bbox.x1.is_finite();
-            let ground_truth =
-                if finite { ground_truth_box(d.bbox.x1, d.bbox.y1, d.bbox.x2, d.bbox.y2) } else { [0, 0, 0, 0] };
+            let ground_truth = if finite {
+                ground_truth_box(d.bbox.x1, d.bbox.y1, d.bbox.x2, d.bbox.y2)
+            } else {
+                [0, 0, 0, 0]
+            };
             let bbox = if finite { clip(d.bbox) } else { None };
             if !d.drawn {
                 return Rendered { ground_truth, bbox, visible_fraction: 0.0 };

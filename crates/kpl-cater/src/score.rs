@@ -26,7 +26,8 @@ pub fn iou(a: IntBox, b: IntBox) -> f64 {
 
 /// Distance of the box centres in pixels.
 pub fn centre_distance(a: IntBox, b: IntBox) -> f64 {
-    let c = |x: IntBox| [(f64::from(x[0]) + f64::from(x[2])) / 2.0, (f64::from(x[1]) + f64::from(x[3])) / 2.0];
+    let c =
+        |x: IntBox| [(f64::from(x[0]) + f64::from(x[2])) / 2.0, (f64::from(x[1]) + f64::from(x[3])) / 2.0];
     let (p, q) = (c(a), c(b));
     ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
 }

@@ -278,7 +278,14 @@ impl Generator<'_> {
 
     /// CATER's `_no_object_overlaps`: the positions over `start..=end`, then the last one held, never
     /// come near any of `others` at the same frame.
-    fn clear_of(&self, positions: &[[f64; 3]], size: f64, others: &[usize], start: usize, end: usize) -> bool {
+    fn clear_of(
+        &self,
+        positions: &[[f64; 3]],
+        size: f64,
+        others: &[usize],
+        start: usize,
+        end: usize,
+    ) -> bool {
         (start..KEYFRAMES).all(|f| {
             let p = if f <= end { positions[f - start] } else { positions[positions.len() - 1] };
             others.iter().all(|&o| !overlap(p, size, self.locations[o][f], self.sizes(o)))
@@ -288,8 +295,13 @@ impl Generator<'_> {
     /// CATER's `add_movements` for one stack; returns whether the stack splits (its top picked off).
     fn move_group(&mut self, g: usize, start: usize, end: usize) -> bool {
         let members = self.groups[g].clone();
-        let others: Vec<usize> =
-            self.groups.iter().enumerate().filter(|(i, _)| *i != g).flat_map(|(_, m)| m.iter().copied()).collect();
+        let others: Vec<usize> = self
+            .groups
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != g)
+            .flat_map(|(_, m)| m.iter().copied())
+            .collect();
         let top = members[0];
         let choices: &[(Act, bool)] = if members.len() > 1 {
             &[(Act::Slide, false), (Act::PickPlace, true)]
@@ -331,7 +343,14 @@ impl Generator<'_> {
     }
 
     /// The recorded positions of an act.
-    fn positions(&self, object: usize, act: Act, target: [f64; 2], start: usize, end: usize) -> Vec<[f64; 3]> {
+    fn positions(
+        &self,
+        object: usize,
+        act: Act,
+        target: [f64; 2],
+        start: usize,
+        end: usize,
+    ) -> Vec<[f64; 3]> {
         let from = self.current[object];
         match act {
             Act::Slide => move_to(from, [target[0], target[1], from[2]], start, end),
@@ -341,7 +360,15 @@ impl Generator<'_> {
     }
 
     /// Records an act and keyframes it as Blender would.
-    fn apply(&mut self, object: usize, act: Act, target: [f64; 2], start: usize, end: usize, positions: &[[f64; 3]]) {
+    fn apply(
+        &mut self,
+        object: usize,
+        act: Act,
+        target: [f64; 2],
+        start: usize,
+        end: usize,
+        positions: &[[f64; 3]],
+    ) {
         match act {
             Act::Slide => {
                 self.keyframe(object, start);
@@ -387,7 +414,12 @@ impl Generator<'_> {
     }
 
     /// CATER's `add_movements_singleObj`; returns the last frame a move ends in.
-    fn single_moves(&mut self, segment_start: usize, ignore: Option<usize>, max_motions: usize) -> Option<usize> {
+    fn single_moves(
+        &mut self,
+        segment_start: usize,
+        ignore: Option<usize>,
+        max_motions: usize,
+    ) -> Option<usize> {
         let mut order: Vec<usize> = (0..self.groups.len()).collect();
         order.shuffle(self.rng);
         order.retain(|g| Some(*g) != ignore);
@@ -436,7 +468,8 @@ impl Generator<'_> {
     /// no pair could contain.
     fn contain_and_moves(&mut self, segment_start: usize) -> Option<usize> {
         for _ in 0..100 {
-            let pair: Vec<usize> = (0..self.groups.len()).collect::<Vec<_>>().choose_multiple(self.rng, 2).copied().collect();
+            let pair: Vec<usize> =
+                (0..self.groups.len()).collect::<Vec<_>>().choose_multiple(self.rng, 2).copied().collect();
             let [g1, g2] = pair[..] else { return None };
             let (start, end) = self.draw_times(segment_start);
             if !self.can_contain(g1, g2, end) {
@@ -498,7 +531,8 @@ pub fn sample_camera(rng: &mut ChaCha8Rng) -> [f64; 3] {
 fn sample_objects(rng: &mut ChaCha8Rng) -> Vec<SimObject> {
     let count = rng.random_range(5..=10);
     let dirs = directions();
-    let cardinal: Vec<[f64; 3]> = ["left", "right", "front", "behind"].iter().filter_map(|d| dirs.get(*d).copied()).collect();
+    let cardinal: Vec<[f64; 3]> =
+        ["left", "right", "front", "behind"].iter().filter_map(|d| dirs.get(*d).copied()).collect();
     'restart: loop {
         let mut objects: Vec<SimObject> = Vec::with_capacity(count);
         for i in 0..count {

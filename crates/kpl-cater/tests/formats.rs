@@ -9,8 +9,8 @@ use kpl_cater::CaterError;
 use kpl_cater::classes::{SNITCH_INDEX, is_large_cone, opnet_class, opnet_classes, opnet_index, parse_class};
 use kpl_cater::dataset::{self, GeneratorConfig};
 use kpl_cater::formats::{
-    CameraField, GroundTruth, MovementKind, PerceptionFile, SNITCH_KEY, Scene, read_annotation_file, read_predictions,
-    write_predictions,
+    CameraField, GroundTruth, MovementKind, PerceptionFile, SNITCH_KEY, Scene, read_annotation_file,
+    read_predictions, write_predictions,
 };
 use kpl_cater::layout::{self, Perception};
 
@@ -96,7 +96,9 @@ fn generated_files_round_trip_and_lie_where_opnet_looks() {
         std::fs::rename(layout::find_ground_truth(&dir, name), &moved).unwrap();
         assert_eq!(layout::find_ground_truth(&dir, name), moved);
     }
-    let raw: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("bb").join(format!("{name}_bb.json"))).unwrap()).unwrap();
+    let raw: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("bb").join(format!("{name}_bb.json"))).unwrap())
+            .unwrap();
     assert!(raw[SNITCH_KEY][0].as_array().unwrap().iter().all(serde_json::Value::is_i64));
     let predictions = vec![[1, 2, 3, 4], [0, 0, 0, 0], [300, 200, 319, 239]];
     let path = dir.join("p_bb.json");
@@ -177,12 +179,21 @@ fn bad_data_is_an_error_that_says_what_is_wrong() {
         std::fs::write(&scene, format!(r#"{{{objects}, "movements": {movements}}}"#)).unwrap();
         expect_invalid(Scene::read(&scene), says);
     }
-    std::fs::write(&scene, format!(r#"{{{}, "movements": {{}}}}"#, objects.replace("Spl_0", "Cone_0"))).unwrap();
+    std::fs::write(&scene, format!(r#"{{{}, "movements": {{}}}}"#, objects.replace("Spl_0", "Cone_0")))
+        .unwrap();
     expect_invalid(Scene::read(&scene), "two objects are named `Cone_0`");
 
     let p = dir.join("p.json");
-    for (frames, says) in [("[[[3, 0, 0, 1, 1]]]", "class index 3"), ("[[[0, 5, 0, 1, 1]]]", "bad box"), ("[[[0, 0, 0, 3e9, 1]]]", "bad box")] {
-        std::fs::write(&p, format!(r#"{{"video": "v", "perception": "perfect", "classes": ["a"], "frames": {frames}}}"#)).unwrap();
+    for (frames, says) in [
+        ("[[[3, 0, 0, 1, 1]]]", "class index 3"),
+        ("[[[0, 5, 0, 1, 1]]]", "bad box"),
+        ("[[[0, 0, 0, 3e9, 1]]]", "bad box"),
+    ] {
+        std::fs::write(
+            &p,
+            format!(r#"{{"video": "v", "perception": "perfect", "classes": ["a"], "frames": {frames}}}"#),
+        )
+        .unwrap();
         expect_invalid(PerceptionFile::read(&p), says);
     }
     let a = dir.join("a.txt");

@@ -36,7 +36,10 @@ fn output_does_not_depend_on_the_thread_count() {
     assert_eq!(m1, m2);
     for video in layout::list_videos(&one).unwrap() {
         for path in [layout::scene_path, layout::ground_truth_path] {
-            assert_eq!(std::fs::read(path(&one, &video)).unwrap(), std::fs::read(path(&two, &video)).unwrap());
+            assert_eq!(
+                std::fs::read(path(&one, &video)).unwrap(),
+                std::fs::read(path(&two, &video)).unwrap()
+            );
         }
     }
     for file in [layout::CONTAINMENT_FILE, layout::CARRIED_FILE, layout::VISIBLE_FILE] {
@@ -108,8 +111,12 @@ fn cater_rules_hold() {
             let first: Vec<(String, String)> =
                 scene.objects[..3].iter().map(|o| (o.class(), o.instance.clone())).collect();
             assert_eq!((first[0].0.as_str(), first[0].1.as_str()), (SNITCH_CLASS, SNITCH_INSTANCE));
-            assert!(first[1].0.starts_with("medium_") && first[1].0.contains("_cone_") && first[1].1 == "Cone_0");
-            assert!(first[2].0.starts_with("large_") && first[2].0.contains("_cone_") && first[2].1 == "Cone_1");
+            assert!(
+                first[1].0.starts_with("medium_") && first[1].0.contains("_cone_") && first[1].1 == "Cone_0"
+            );
+            assert!(
+                first[2].0.starts_with("large_") && first[2].0.contains("_cone_") && first[2].1 == "Cone_1"
+            );
             let mut per_shape: BTreeMap<&str, usize> = BTreeMap::new();
             for o in &scene.objects {
                 let k = per_shape.entry(o.shape.as_str()).or_insert(0);
@@ -136,7 +143,9 @@ fn cater_rules_hold() {
                 for mv in moves {
                     let kind = mv.kind().unwrap();
                     let (start, end) = (mv.start as usize, mv.end as usize);
-                    assert!(end - start >= MOVEMENT_MIN && end - start <= MOVEMENT_MAX || end == KEYFRAMES - 1);
+                    assert!(
+                        end - start >= MOVEMENT_MIN && end - start <= MOVEMENT_MAX || end == KEYFRAMES - 1
+                    );
                     match kind {
                         MovementKind::Rotate => assert!(!["cone", "sphere"].contains(&object.shape.as_str())),
                         MovementKind::Contain => {
@@ -150,10 +159,16 @@ fn cater_rules_hold() {
                         MovementKind::Slide | MovementKind::PickPlace => {
                             // A stack's contents get records of the same frames: a slide for a
                             // slide, `_no_op` for a pick-up.
-                            let want = if kind == MovementKind::Slide { MovementKind::Slide } else { MovementKind::NoOp };
+                            let want = if kind == MovementKind::Slide {
+                                MovementKind::Slide
+                            } else {
+                                MovementKind::NoOp
+                            };
                             for inside in contents(&held, instance, start) {
                                 assert!(
-                                    scene.movements[&inside].iter().any(|n| n.kind() == Some(want) && n.start == mv.start && n.end == mv.end),
+                                    scene.movements[&inside].iter().any(|n| n.kind() == Some(want)
+                                        && n.start == mv.start
+                                        && n.end == mv.end),
                                     "{}: {inside} inside {instance} has no {} for {mv:?}",
                                     scene.video,
                                     want.name()
@@ -181,7 +196,8 @@ fn cater_rules_hold() {
                 for b in &scene.objects[i + 1..] {
                     for f in 0..KEYFRAMES {
                         let (p, q) = (a.locations.0[f], b.locations.0[f]);
-                        let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                        let d =
+                            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
                         let together = contents(&held, &a.instance, f).contains(&b.instance)
                             || contents(&held, &b.instance, f).contains(&a.instance);
                         assert!(

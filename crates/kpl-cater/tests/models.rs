@@ -119,7 +119,8 @@ fn handmade_categories(video: &VideoData) -> FrameCategories {
 fn aapa_follows_the_cone_that_carries_the_snitch() {
     let video = cone_slides_away_with_the_snitch();
     let truth = video.ground_truth.snitch_boxes(std::path::Path::new("handmade")).unwrap();
-    let run = |model: Model| predict(model, &model.default_params(), &video.scene, &video.perception).unwrap();
+    let run =
+        |model: Model| predict(model, &model.default_params(), &video.scene, &video.perception).unwrap();
     let aapa = run(Model::Aapa);
     // Carried (60..=100) and contained after the slide: AAPA's snitch is under the cone.
     for f in (60..=100).chain([120, 149]) {
@@ -154,9 +155,12 @@ fn aapa_beats_the_heuristic_on_generated_videos() {
     for (motion, seed) in [(Motion::MaxTwo, 5), (Motion::All, 6)] {
         let dir = std::env::temp_dir().join(format!("kpl-cater-models-{}-{seed}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        dataset::generate(&dir, 24, seed, 2, &GeneratorConfig { motion, ..GeneratorConfig::default() }).unwrap();
+        dataset::generate(&dir, 24, seed, 2, &GeneratorConfig { motion, ..GeneratorConfig::default() })
+            .unwrap();
         for perception in [Perception::Perfect, Perception::Detector] {
-            let run = |model| evaluate(&EvalOptions { threads: 2, ..EvalOptions::new(&dir, model, perception) }).unwrap();
+            let run = |model| {
+                evaluate(&EvalOptions { threads: 2, ..EvalOptions::new(&dir, model, perception) }).unwrap()
+            };
             let (aapa, heuristic) = (run(Model::Aapa), run(Model::Heuristic));
             assert_eq!(aapa.videos, 24);
             for (a, h) in [

@@ -53,7 +53,8 @@ fn frames(v: &Value) -> Vec<usize> {
 fn check_directory(python: &str, dir: &Path, motion: Motion, seed: u64, videos: usize) {
     let config = GeneratorConfig { motion, ..GeneratorConfig::default() };
     dataset::generate(dir, videos, seed, 2, &config).unwrap();
-    for (model, perception) in [(Model::Aapa, Perception::Perfect), (Model::Heuristic, Perception::Detector)] {
+    for (model, perception) in [(Model::Aapa, Perception::Perfect), (Model::Heuristic, Perception::Detector)]
+    {
         let predictions = dir.join(format!("predictions-{}-{}", model.name(), perception.name()));
         let report = evaluate(&EvalOptions {
             predictions_dir: Some(predictions.clone()),
@@ -66,7 +67,9 @@ fn check_directory(python: &str, dir: &Path, motion: Motion, seed: u64, videos: 
 
         // The annotation files the generator wrote are OPNet's.
         let annotations = layout::annotations_dir(dir);
-        for (file, key) in [(CONTAINMENT_FILE, "contained"), (CARRIED_FILE, "carried"), (VISIBLE_FILE, "visible")] {
+        for (file, key) in
+            [(CONTAINMENT_FILE, "contained"), (CARRIED_FILE, "carried"), (VISIBLE_FILE, "visible")]
+        {
             let ours = read_annotation_file(&annotations.join(file)).unwrap();
             for (video, theirs) in oracle["annotations"].as_object().unwrap() {
                 assert_eq!(ours[video], frames(&theirs[key]), "{file} of {video}");

@@ -30,7 +30,8 @@ fn opnets_pickles_are_read_as_python_wrote_them() {
         serde_json::from_slice(&std::fs::read(dir.join("expected.json")).unwrap()).unwrap();
     assert_eq!(expected.len(), 8);
     for (name, value) in &expected {
-        let (boxes, labels): (Vec<Vec<[f64; 4]>>, Vec<Vec<i64>>) = serde_json::from_value(value.clone()).unwrap();
+        let (boxes, labels): (Vec<Vec<[f64; 4]>>, Vec<Vec<i64>>) =
+            serde_json::from_value(value.clone()).unwrap();
         let file = PerceptionFile::read_pickle(&dir.join(name), "v", "detector").unwrap();
         assert_eq!(file.frames.len(), boxes.len(), "{name}");
         for (f, detections) in file.frames.iter().enumerate() {

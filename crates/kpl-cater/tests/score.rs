@@ -62,7 +62,10 @@ fn iou_counts_pixels_inclusively_and_never_overflows() {
     // A box at the limits of i32 gives a tiny IoU, not 5.8e14 %.
     let huge = iou([0, 0, i32::MAX, i32::MAX], [0, 0, 9, 9]);
     assert!((0.0..1e-15).contains(&huge), "{huge}");
-    assert_eq!(iou([i32::MIN, i32::MIN, i32::MAX, i32::MAX], [0, 0, 9, 9]), 100.0 / (2f64.powi(32) * 2f64.powi(32)));
+    assert_eq!(
+        iou([i32::MIN, i32::MIN, i32::MAX, i32::MAX], [0, 0, 9, 9]),
+        100.0 / (2f64.powi(32) * 2f64.powi(32))
+    );
 }
 
 #[test]
@@ -80,7 +83,13 @@ fn containment_and_carrying_follow_opnets_rules() {
                 ],
             ),
             // A cone containing something else, and a non-cone: neither counts.
-            ("Cone_2", vec![mv(MovementKind::Contain, Some("Cube_0"), 0, 20), mv(MovementKind::Slide, None, 150, 170)]),
+            (
+                "Cone_2",
+                vec![
+                    mv(MovementKind::Contain, Some("Cube_0"), 0, 20),
+                    mv(MovementKind::Slide, None, 150, 170),
+                ],
+            ),
             ("SmoothCube_v2_0", vec![mv(MovementKind::Slide, None, 200, 220)]),
             // Never released: contained to the last frame (299), and its slides carried, but not one
             // ending at frame 300, after that end (OPNet compares the slide's end with 299).
@@ -107,8 +116,17 @@ fn nested_stacks_are_carried_through_their_slide_records() {
     let s = scene(
         vec![],
         vec![
-            ("Cone_0", vec![mv(MovementKind::Contain, Some("Spl_0"), 5, 20), mv(MovementKind::Slide, None, 60, 80)]),
-            ("Cone_1", vec![mv(MovementKind::Contain, Some("Cone_0"), 30, 50), mv(MovementKind::Slide, None, 60, 80)]),
+            (
+                "Cone_0",
+                vec![mv(MovementKind::Contain, Some("Spl_0"), 5, 20), mv(MovementKind::Slide, None, 60, 80)],
+            ),
+            (
+                "Cone_1",
+                vec![
+                    mv(MovementKind::Contain, Some("Cone_0"), 30, 50),
+                    mv(MovementKind::Slide, None, 60, 80),
+                ],
+            ),
             ("Spl_0", vec![mv(MovementKind::Slide, None, 60, 80)]),
         ],
     );
@@ -126,7 +144,10 @@ fn visibility_is_opnets_covering_rule() {
     // Frame 1: the same boxes, the snitch nearer: visible.
     // Frame 2: overlapping but not inside: visible (ratio 0 needs full cover).
     truth.objects.insert("small_gold_spl_metal_Spl_0".into(), vec![[100, 100, 10, 10]; 3]);
-    truth.objects.insert("large_red_cone_rubber_Cone_0".into(), vec![[90, 90, 40, 40], [90, 90, 40, 40], [105, 90, 40, 40]]);
+    truth.objects.insert(
+        "large_red_cone_rubber_Cone_0".into(),
+        vec![[90, 90, 40, 40], [90, 90, 40, 40], [105, 90, 40, 40]],
+    );
     let s = scene(
         vec![
             object("Spl_0", "small_gold_spl_metal", vec![far, near, far]),
@@ -148,12 +169,20 @@ fn visibility_is_opnets_covering_rule() {
     s2.movements.insert("Cone_2".into(), vec![mv(MovementKind::Contain, Some("Cone_1"), 0, 0)]);
     assert_eq!(visible_frames(&s2, &truth, 3, 0.0).unwrap(), vec![true, true, true]);
     // The snitch itself contained: not visible.
-    s2.movements.insert("Cone_2".into(), vec![mv(MovementKind::Contain, Some("Spl_0"), 1, 1), mv(MovementKind::PickPlace, None, 2, 2)]);
+    s2.movements.insert(
+        "Cone_2".into(),
+        vec![mv(MovementKind::Contain, Some("Spl_0"), 1, 1), mv(MovementKind::PickPlace, None, 2, 2)],
+    );
     assert_eq!(visible_frames(&s2, &truth, 3, 0.0).unwrap(), vec![false, false, false]);
     // Without per-frame locations OPNet's rule cannot be applied.
     let mut s3 = s.clone();
     s3.objects[1].locations = Locations::default();
-    assert!(visible_frames(&s3, &truth, 3, 0.0).unwrap_err().to_string().contains("`Cone_0` has no per-frame `locations`"));
+    assert!(
+        visible_frames(&s3, &truth, 3, 0.0)
+            .unwrap_err()
+            .to_string()
+            .contains("`Cone_0` has no per-frame `locations`")
+    );
 }
 
 #[test]
@@ -204,7 +233,15 @@ fn bad_videos_are_skipped_with_their_reason_and_the_rest_scored() {
     let gt = layout::find_ground_truth(&dir, &videos[2]);
     let text = std::fs::read_to_string(&gt).unwrap();
     let at = text.find('[').unwrap() + 2;
-    std::fs::write(&gt, format!("{}[2000000000, 0, 5, 5]{}", &text[..at - 1], &text[text[at..].find(']').unwrap() + at + 1..])).unwrap();
+    std::fs::write(
+        &gt,
+        format!(
+            "{}[2000000000, 0, 5, 5]{}",
+            &text[..at - 1],
+            &text[text[at..].find(']').unwrap() + at + 1..]
+        ),
+    )
+    .unwrap();
     // 3: a movement of an object the scene does not have.
     let sp = layout::scene_path(&dir, &videos[3]);
     let mut scene: serde_json::Value = serde_json::from_slice(&std::fs::read(&sp).unwrap()).unwrap();
@@ -217,7 +254,8 @@ fn bad_videos_are_skipped_with_their_reason_and_the_rest_scored() {
     std::fs::write(&pp, serde_json::to_vec(&perception).unwrap()).unwrap();
     let report = evaluate(&EvalOptions::new(&dir, Model::Aapa, Perception::Perfect)).unwrap();
     assert_eq!(report.videos, 2);
-    let reasons: Vec<(&str, &str)> = report.skipped.iter().map(|s| (s.video.as_str(), s.reason.as_str())).collect();
+    let reasons: Vec<(&str, &str)> =
+        report.skipped.iter().map(|s| (s.video.as_str(), s.reason.as_str())).collect();
     assert_eq!(reasons.len(), 4, "{reasons:?}");
     assert!(reasons[0].1.contains("no snitch"), "{reasons:?}");
     assert!(reasons[1].1.contains("not a box"), "{reasons:?}");

@@ -22,11 +22,9 @@ use kpl_cater::sim::Motion;
 pub enum Command {
     /// Generate videos by CATER's procedure: scene JSON, `<video>_bb.json`, perfect and detector
     /// perception, OPNet's annotation files.
-    #[command(
-        after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  \
+    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  \
                       kpl cater generate --videos 20 --seed 2 --motion all --out /tmp/cater-all\n\n\
-                      LA-CATER's test set has 1371 videos (docs/cater.md)."
-    )]
+                      LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
     #[command(
@@ -297,7 +295,8 @@ fn write_file(path: &Path, text: &str) -> Result<(), Failure> {
 }
 
 fn read_params(path: &Path, model: Model) -> Result<Params, Failure> {
-    let text = std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
     // Fields missing from the file keep the model's defaults.
     let mut base = serde_json::to_value(model.default_params())
         .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
@@ -317,7 +316,10 @@ fn json_report(report: &Report) -> serde_json::Value {
         let mut map = serde_json::Map::new();
         for c in Category::ALL {
             let s = t.get(c);
-            map.insert(c.name().to_owned(), serde_json::json!({"mean": s.mean, "sem": s.sem, "videos": s.videos}));
+            map.insert(
+                c.name().to_owned(),
+                serde_json::json!({"mean": s.mean, "sem": s.sem, "videos": s.videos}),
+            );
         }
         serde_json::Value::Object(map)
     };

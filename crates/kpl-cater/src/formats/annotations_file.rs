@@ -16,7 +16,8 @@ pub type Annotations = BTreeMap<String, Vec<usize>>;
 /// Reads an annotation file. A frame number that is not a number, or is past frame 300, is a data
 /// error naming the line.
 pub fn read_annotation_file(path: &Path) -> Result<Annotations, CaterError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let text =
+        std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
     let mut out = Annotations::new();
     for (n, line) in text.lines().enumerate() {
         if line.trim().is_empty() {

@@ -64,17 +64,22 @@ impl PerceptionFile {
         for (frame, detections) in raw.into_iter().enumerate() {
             let mut out = Vec::with_capacity(detections.len());
             for (label, bbox) in detections {
-                let class = u32::try_from(label).ok().filter(|c| (*c as usize) < classes.len()).ok_or_else(|| {
-                    CaterError::invalid(
-                        path,
-                        format!("frame {frame}: label {label} is not one of OPNet's {} class indices", classes.len()),
-                    )
-                })?;
+                let class =
+                    u32::try_from(label).ok().filter(|c| (*c as usize) < classes.len()).ok_or_else(|| {
+                        CaterError::invalid(
+                            path,
+                            format!(
+                                "frame {frame}: label {label} is not one of OPNet's {} class indices",
+                                classes.len()
+                            ),
+                        )
+                    })?;
                 out.push(Detection { class, bbox });
             }
             frames.push(out);
         }
-        let file = PerceptionFile { video: video.to_owned(), perception: perception.to_owned(), classes, frames };
+        let file =
+            PerceptionFile { video: video.to_owned(), perception: perception.to_owned(), classes, frames };
         file.check().map_err(|reason| CaterError::invalid(path, reason))?;
         Ok(file)
     }

@@ -22,7 +22,8 @@ pub type PickleFrames = Vec<Vec<(i64, [f64; 4])>>;
 
 /// Reads a perception pickle's frames.
 pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
-    let file = std::fs::File::open(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let file =
+        std::fs::File::open(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
     let reader = std::io::BufReader::new(file);
     let value = serde_pickle::value_from_reader(
         reader,
@@ -34,8 +35,9 @@ pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
         return Err(bad("expected a dict with `bb` and `labels`".into()));
     };
     let field = |name: &str| {
-        map.get(&HashableValue::String(name.to_owned()))
-            .ok_or_else(|| bad(format!("no `{name}` in the pickle (OPNet's perception has `bb` and `labels`)")))
+        map.get(&HashableValue::String(name.to_owned())).ok_or_else(|| {
+            bad(format!("no `{name}` in the pickle (OPNet's perception has `bb` and `labels`)"))
+        })
     };
     let bb = sequence(field("bb")?).ok_or_else(|| bad("`bb` is not a list of frames".into()))?;
     let labels = sequence(field("labels")?).ok_or_else(|| bad("`labels` is not a list of frames".into()))?;
@@ -224,7 +226,13 @@ fn decode_elements(bytes: &[u8], item: usize, letter: Option<char>, big: bool) -
         Some(l) => l,
         None => {
             // Integers unless only floats make sense (see the module docs).
-            let limit: i64 = if item >= 8 { 1 << 40 } else if item == 4 { 1 << 23 } else { i64::MAX };
+            let limit: i64 = if item >= 8 {
+                1 << 40
+            } else if item == 4 {
+                1 << 23
+            } else {
+                i64::MAX
+            };
             if words.iter().all(|w| signed(*w).abs() < limit) { 'i' } else { 'f' }
         }
     };

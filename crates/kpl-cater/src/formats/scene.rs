@@ -33,8 +33,13 @@ pub enum MovementKind {
 }
 
 impl MovementKind {
-    pub const ALL: [MovementKind; 5] =
-        [MovementKind::Slide, MovementKind::PickPlace, MovementKind::Rotate, MovementKind::Contain, MovementKind::NoOp];
+    pub const ALL: [MovementKind; 5] = [
+        MovementKind::Slide,
+        MovementKind::PickPlace,
+        MovementKind::Rotate,
+        MovementKind::Contain,
+        MovementKind::NoOp,
+    ];
 
     /// The name CATER records (its action function's name).
     pub fn name(self) -> &'static str {
@@ -107,8 +112,9 @@ impl<'de> Deserialize<'de> for Locations {
         let raw: BTreeMap<String, [f64; 3]> = BTreeMap::deserialize(d)?;
         let mut frames: Vec<(usize, [f64; 3])> = Vec::with_capacity(raw.len());
         for (key, p) in raw {
-            let frame: usize =
-                key.parse().map_err(|_| D::Error::custom(format!("location key `{key}` is not a frame number")))?;
+            let frame: usize = key
+                .parse()
+                .map_err(|_| D::Error::custom(format!("location key `{key}` is not a frame number")))?;
             if !p.iter().all(|v| v.is_finite()) {
                 return Err(D::Error::custom(format!("location of frame {frame} is not finite")));
             }

@@ -30,7 +30,13 @@ struct Found {
 fn label_bb(detections: &[Detection], class: Option<u32>) -> Option<Found> {
     let d = detections.iter().find(|d| Some(d.class) == class)?;
     let [x1, y1, x2, y2] = d.bbox;
-    Some(Found { cx: ((x1 + x2) / 2.0).floor(), cy: ((y1 + y2) / 2.0).floor(), w: x2 - x1, h: y2 - y1, bbox: d.bbox })
+    Some(Found {
+        cx: ((x1 + x2) / 2.0).floor(),
+        cy: ((y1 + y2) / 2.0).floor(),
+        w: x2 - x1,
+        h: y2 - y1,
+        bbox: d.bbox,
+    })
 }
 
 /// `cx >= 0 and cy >= 0`: how OPNet tests that a class was found.
@@ -77,7 +83,8 @@ impl State {
 
 /// Runs the heuristic over a video's perception; one box per frame.
 pub fn heuristic(perception: &PerceptionFile) -> Vec<IntBox> {
-    let snitch = perception.classes.iter().position(|c| c == SNITCH_CLASS).and_then(|i| u32::try_from(i).ok());
+    let snitch =
+        perception.classes.iter().position(|c| c == SNITCH_CLASS).and_then(|i| u32::try_from(i).ok());
     let mut s = State {
         target_pos: (-1.0, 1.0),
         target_sz: (0.0, 0.0),

@@ -63,7 +63,8 @@ fn to_int(b: &BBox) -> IntBox {
 /// no effect. Moves past the video's last frame complete at frame `frames` and are not delivered.
 pub fn actions_per_frame(scene: &Scene, frames: usize) -> Vec<Vec<Action>> {
     let mut out = vec![Vec::new(); frames];
-    let class_of: HashMap<&str, String> = scene.objects.iter().map(|o| (o.instance.as_str(), o.class())).collect();
+    let class_of: HashMap<&str, String> =
+        scene.objects.iter().map(|o| (o.instance.as_str(), o.class())).collect();
     let mut events = Vec::new();
     for (instance, moves) in &scene.movements {
         let Some(actor) = class_of.get(instance.as_str()) else { continue };
@@ -100,8 +101,11 @@ pub fn predict(
     match model {
         Model::Heuristic => Ok(heuristic(perception)),
         Model::Aapa | Model::AapaPaper | Model::AapaNoActions => {
-            let aapa = Aapa::new(params.clone())
-                .map_err(|source| CaterError::Aapa { video: scene.video.clone(), frame: 0, source })?;
+            let aapa = Aapa::new(params.clone()).map_err(|source| CaterError::Aapa {
+                video: scene.video.clone(),
+                frame: 0,
+                source,
+            })?;
             let actions = if model == Model::AapaNoActions {
                 vec![Vec::new(); frames]
             } else {
@@ -114,7 +118,11 @@ pub fn predict(
                 world = aapa
                     .step_from(frame as Time * FRAME_US, &percepts, frame_actions, None, world)
                     .map_err(|source| CaterError::Aapa { video: scene.video.clone(), frame, source })?;
-                out.push(world.best_of_type(SNITCH_CLASS, params.theta_anch).map_or([0, 0, 0, 0], |a| to_int(&a.bbox)));
+                out.push(
+                    world
+                        .best_of_type(SNITCH_CLASS, params.theta_anch)
+                        .map_or([0, 0, 0, 0], |a| to_int(&a.bbox)),
+                );
             }
             Ok(out)
         }

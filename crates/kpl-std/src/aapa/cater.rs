@@ -14,8 +14,8 @@
 use std::path::PathBuf;
 
 use kpl_aapa::CameraPose;
-use kpl_cater::layout::{self, Perception};
 use kpl_cater::formats::{PerceptionFile, Scene};
+use kpl_cater::layout::{self, Perception};
 use kpl_cater::models::{FRAME_US, actions_per_frame};
 use kpl_core::{Time, Value};
 use kpl_runtime::context::SourceContext;
