@@ -46,7 +46,8 @@ use crate::link::{Condition, LinkIdentification, LinkProcess};
 use crate::networks::Networks;
 use crate::predict::PredictionModel;
 use crate::records::{check_fields, overlay};
-use crate::store::{LinkId, ObjectKey, Origin, PredictionRun, Store, TypeId};
+use crate::status;
+use crate::store::{LinkId, ObjectKey, Origin, PredictionRun, StateOrigin, Store, TypeId};
 
 /// What an engine is built with besides the spec.
 #[derive(Debug, Clone, Default)]
@@ -107,6 +108,9 @@ pub(crate) struct TypeInfo {
     pub links_into: Vec<LinkId>,
     pub model: Option<Arc<dyn PredictionModel>>,
     pub forget: Option<Time>,
+    /// Links of the spec lead into the type, but none of this engine's (they run on another
+    /// host): its objects come from snapshots that say whether they were measured.
+    pub made_elsewhere: bool,
 }
 
 /// A pending or completed identification.
@@ -125,10 +129,20 @@ pub(crate) struct Identification {
     existing: BTreeMap<ObjectKey, Condition>,
 }
 
+/// One `from` stream of a link at the state of one of its steps ([`Anchoring::step_link`]): the
+/// stream's name (for a type fed by snapshots, the source its objects belong to), the valid time
+/// of its sample (earlier than the step's when the sample is held over, `use most recent`), and
+/// the snapshot.
+#[derive(Debug, Clone, Copy)]
+pub struct FromSnapshot<'a> {
+    pub stream: &'a str,
+    pub valid: Time,
+    pub objects: &'a Value,
+}
+
 /// What a link process reads and writes during a step.
 pub(crate) struct StepCtx<'a> {
     pub time: Time,
-    pub step: u64,
     pub store: &'a mut Store,
     pub types: &'a [TypeInfo],
     pub identifications: &'a mut [Identification],
@@ -148,11 +162,14 @@ pub struct Anchoring {
     pub(crate) store: Store,
     source_ids: BTreeMap<String, u32>,
     source_percepts: Vec<Vec<ObjectKey>>,
+    /// The valid time of each source's last snapshot taken in.
+    source_times: Vec<Option<Time>>,
     pub(crate) identifications: Vec<Identification>,
     pub(crate) last_time: Option<Time>,
     step: u64,
-    /// Changes made between steps (identifications asked), reported with the next step.
-    pending: Vec<Change>,
+    /// Changes made between steps (identifications asked), reported with the next step of the
+    /// link that reports them (the first link into the type), or of any link when there is none.
+    pending: Vec<(Option<LinkId>, Change)>,
     notes: Vec<String>,
     keys: Vec<ObjectKey>,
     hypotheses: Vec<Record>,
@@ -183,6 +200,7 @@ impl Anchoring {
                 links_into: Vec::new(),
                 model: None,
                 forget: spec.forget.after(&record.name),
+                made_elsewhere: false,
             })
             .collect();
         let type_id =
@@ -273,6 +291,14 @@ impl Anchoring {
             types[ty as usize].model = Some(model);
         }
 
+        for ty in &mut types {
+            ty.made_elsewhere = ty.links_into.is_empty()
+                && spec
+                    .processes
+                    .iter()
+                    .any(|p| matches!(&p.kind, hir::ProcessKind::Link(l) if *l.to_type == *ty.name));
+        }
+
         // A percept type is forgotten only when the spec says so for that type (`forget
         // VisionPercept after 600ms`): the default forget time is about derived objects.
         for ty in &mut types {
@@ -301,6 +327,7 @@ impl Anchoring {
             store,
             source_ids: BTreeMap::new(),
             source_percepts: Vec::new(),
+            source_times: Vec::new(),
             identifications: Vec::new(),
             last_time: None,
             step: 0,
@@ -433,7 +460,8 @@ impl Anchoring {
             description: description_only,
             existing: BTreeMap::new(),
         });
-        self.pending.push(
+        self.pending.push((
+            links_into.first().copied(),
             Change::new(
                 time,
                 ChangeKind::Created,
@@ -442,7 +470,7 @@ impl Anchoring {
                 Cause::Identify,
             )
             .name(&name),
-        );
+        ));
         Ok(symbol)
     }
 
@@ -472,12 +500,17 @@ impl Anchoring {
         let id = self.source_percepts.len() as u32;
         self.source_ids.insert(source.to_string(), id);
         self.source_percepts.push(Vec::new());
+        self.source_times.push(None);
         id
     }
 
-    /// Advances to `time` (after the previous step's) with the snapshots of the sources that
-    /// report at this time (at most one per source); sources without a snapshot keep their
-    /// percepts as they were. On error nothing changes.
+    /// Advances every link to `time` (after the previous step's) with the snapshots of the
+    /// sources that report at this time (at most one per source): each link, in the order of
+    /// the hierarchy, takes one step ([`Anchoring::step_link`]) whose `from` objects are the
+    /// percepts listed at this time, or for a link from a type made by links, every object of
+    /// that type as the links before it left it. A source without a snapshot at this time has
+    /// no state now: its percepts are not stepped (nothing is held over). On error nothing
+    /// changes.
     pub fn step(&mut self, time: Time, inputs: &[Snapshot<'_>]) -> Result<StepOutput, StepError> {
         if let Some(previous) = self.last_time
             && time <= previous
@@ -502,41 +535,155 @@ impl Anchoring {
         self.last_time = Some(time);
         self.step += 1;
         let mut out = StepOutput { time, ..StepOutput::default() };
-        for mut change in self.pending.drain(..) {
+        for (_, mut change) in self.pending.drain(..) {
             change.time = time;
             out.changes.push(change);
         }
-        self.store.for_each_mut(|o| {
-            if !matches!(o.origin, Origin::Percept { .. }) {
-                o.measured_at = None;
-                o.predicted = false;
-                o.on_prediction_path = false;
-            }
-        });
         for (input, ty) in resolved {
             self.ingest(time, input.source, ty, input.objects, &mut out);
         }
-        self.predict(time, &mut out);
+        let mut from = Vec::new();
         for k in 0..self.link_order.len() {
             let l = self.link_order[k];
-            let mut cx = StepCtx {
-                time,
-                step: self.step,
-                store: &mut self.store,
-                types: &self.types,
-                identifications: &mut self.identifications,
-                out: &mut out,
-            };
-            self.links[l as usize].run(l, &mut cx, &mut self.keys);
+            from.clear();
+            self.current_objects(self.links[l as usize].from_ty, time, &mut from);
+            self.run_link(l, time, &from, &[], &mut out);
         }
-        self.match_descriptions(time, &mut out);
-        self.ground(time);
-        self.forget(time, &mut out);
         Ok(out)
+    }
+
+    /// One step of one link process at `time`, with its own input state, as the runtime runs a
+    /// link process: the snapshots of its `from` streams at this state (a stream without a
+    /// sample now is left out; a snapshot held over from an earlier valid time, `use most
+    /// recent`, counts as not measured now) and its unit's extra inputs. Snapshots of a type no
+    /// link of this engine leads into (percepts, or objects made on another host) are taken into
+    /// the store first (once per stream and time). Then: objects of the link's type due to be
+    /// forgotten are not predicted, the others without an incoming link are; the link's
+    /// instances of the objects in the state progress their conditions; identifications of its
+    /// type are matched; grounding and forgetting follow. Each link steps in strictly increasing
+    /// time; links step independently (a link downstream may lag behind). On error nothing
+    /// changes.
+    pub fn step_link(
+        &mut self,
+        link: &str,
+        time: Time,
+        from: &[FromSnapshot<'_>],
+        extra: &[Option<Value>],
+    ) -> Result<StepOutput, StepError> {
+        let l = self
+            .links
+            .iter()
+            .position(|x| &*x.name == link)
+            .ok_or_else(|| StepError::UnknownLink(link.to_string()))? as LinkId;
+        if let Some(previous) = self.links[l as usize].last_time
+            && time <= previous
+        {
+            return Err(StepError::TimeNotIncreasing { time, previous });
+        }
+        self.last_time = Some(self.last_time.map_or(time, |t| t.max(time)));
+        self.step += 1;
+        let mut out = StepOutput { time, ..StepOutput::default() };
+        let from_ty = self.links[l as usize].from_ty;
+        let fed = self.types[from_ty as usize].links_into.is_empty();
+        let mut objects = Vec::new();
+        for snapshot in from {
+            let current = snapshot.valid == time;
+            if fed && current {
+                let source = self.source_id(snapshot.stream);
+                if self.source_times[source as usize].is_none_or(|t| t < time) {
+                    self.ingest(time, snapshot.stream, from_ty, snapshot.objects, &mut out);
+                }
+            }
+            let Value::List(items) = snapshot.objects else {
+                if !fed {
+                    out.warn(
+                        time,
+                        format!(
+                            "link `{link}`: input `{}` is {}, expected a list of objects; ignored",
+                            snapshot.stream,
+                            with_article(snapshot.objects.kind())
+                        ),
+                    );
+                }
+                continue;
+            };
+            for item in items.iter() {
+                let Some(id) = item.as_record().and_then(|r| r.id.as_deref()) else { continue };
+                let Some(key) = self.store.by_symbol(from_ty, id) else { continue };
+                if objects.iter().any(|(k, _)| *k == key) {
+                    continue;
+                }
+                let Some(object) = self.store.get(key) else { continue };
+                let value = if fed && current {
+                    // What the store took in (its status attributes set), unless it is another
+                    // source's object.
+                    if object.last_seen != time || !object.present {
+                        continue;
+                    }
+                    object.value.clone()
+                } else if current {
+                    item.clone()
+                } else {
+                    status::held(item, time)
+                };
+                objects.push((key, value));
+            }
+        }
+        self.run_link(l, time, &objects, extra, &mut out);
+        Ok(out)
+    }
+
+    /// The `from` objects of a link in [`Anchoring::step`]: percepts listed at `time`, or every
+    /// (not partial) object of a type made by links.
+    fn current_objects(&self, ty: TypeId, time: Time, out: &mut Vec<(ObjectKey, Value)>) {
+        let fed = self.types[ty as usize].links_into.is_empty();
+        for key in self.store.objects_of(ty) {
+            let Some(object) = self.store.get(key) else { continue };
+            let current = if fed { object.present && object.last_seen == time } else { !object.is_partial() };
+            if current {
+                out.push((key, object.value.clone()));
+            }
+        }
+    }
+
+    /// A link's step on the objects of its state (see [`Anchoring::step_link`]).
+    fn run_link(
+        &mut self,
+        l: LinkId,
+        time: Time,
+        from: &[(ObjectKey, Value)],
+        extra: &[Option<Value>],
+        out: &mut StepOutput,
+    ) {
+        let mut k = 0;
+        while k < self.pending.len() {
+            if self.pending[k].0 == Some(l) {
+                let (_, mut change) = self.pending.remove(k);
+                change.time = time;
+                out.changes.push(change);
+            } else {
+                k += 1;
+            }
+        }
+        let to_ty = self.links[l as usize].to_ty;
+        self.predict(to_ty, time, out);
+        let mut cx = StepCtx {
+            time,
+            store: &mut self.store,
+            types: &self.types,
+            identifications: &mut self.identifications,
+            out,
+        };
+        self.links[l as usize].run(l, &mut cx, from, extra);
+        self.links[l as usize].last_time = Some(time);
+        self.match_descriptions(to_ty, time, out);
+        self.ground(to_ty, time);
+        self.forget(to_ty, time, out);
     }
 
     fn ingest(&mut self, time: Time, source: &str, ty: TypeId, objects: &Value, out: &mut StepOutput) {
         let source_id = self.source_id(source);
+        self.source_times[source_id as usize] = Some(time);
         let Value::List(items) = objects else {
             out.warn(
                 time,
@@ -549,6 +696,9 @@ impl Anchoring {
         };
         let type_record = self.types[ty as usize].record.clone();
         let type_name = self.types[ty as usize].name.clone();
+        // Objects of a type links make elsewhere (another host) say whether they were measured;
+        // percepts listed now are.
+        let derived_elsewhere = self.types[ty as usize].made_elsewhere;
         let mut listed = Vec::with_capacity(items.len());
         for item in items.iter() {
             let Value::Record(record) = item else {
@@ -569,7 +719,12 @@ impl Anchoring {
                 out.warn(time, format!("snapshot from `{source}`: {id} {problem}; skipped"));
                 continue;
             }
-            match self.store.by_symbol(ty, &id) {
+            let origin = if derived_elsewhere && !status::is_measured(item) {
+                StateOrigin::HELD
+            } else {
+                StateOrigin::MEASURED
+            };
+            let key = match self.store.by_symbol(ty, &id) {
                 Some(key) => {
                     let step = self.step;
                     let Some(object) = self.store.get_mut(key) else { continue };
@@ -584,28 +739,19 @@ impl Anchoring {
                         );
                         continue;
                     }
-                    object.value = item.clone();
-                    object.state_time = time;
-                    object.measured_at = Some(time);
-                    object.seen_step = step;
-                    object.present = true;
-                    object.last_seen = time;
-                    listed.push(key);
+                    key
                 }
                 None => {
                     let key = self.store.insert(
                         ty,
                         id.clone(),
                         Origin::Percept { source: source_id },
-                        (**record).clone(),
+                        Record::default(),
                         time,
                     );
                     if let Some(object) = self.store.get_mut(key) {
-                        object.measured_at = Some(time);
-                        object.seen_step = self.step;
                         object.anchored = true;
                     }
-                    listed.push(key);
                     out.changes.push(Change::new(
                         time,
                         ChangeKind::Created,
@@ -613,8 +759,16 @@ impl Anchoring {
                         type_name.clone(),
                         Cause::Source,
                     ));
+                    key
                 }
-            }
+            };
+            let step = self.step;
+            let Some(object) = self.store.get_mut(key) else { continue };
+            object.set_state_value(item, time, origin);
+            object.seen_step = step;
+            object.present = true;
+            object.last_seen = time;
+            listed.push(key);
         }
         // Percepts not listed: absent until the type's forget time has passed, then removed.
         let grace = self.types[ty as usize].forget.unwrap_or(0);
@@ -628,6 +782,7 @@ impl Anchoring {
                 self.remove_object(key, Cause::Lost, time, out);
             } else {
                 object.present = false;
+                object.keep_state_unmeasured(time);
                 listed.push(key);
             }
         }
@@ -709,40 +864,51 @@ impl Anchoring {
         (path, owner)
     }
 
-    fn predict(&mut self, time: Time, out: &mut StepOutput) {
-        for ti in 0..self.type_order.len() {
-            let ty = self.type_order[ti];
-            if self.types[ty as usize].links_into.is_empty() {
+    /// Whether `key` is on the predicted structure of its root: its state then comes from the
+    /// root's prediction, not from its link unit.
+    pub(crate) fn on_prediction_path(store: &Store, key: ObjectKey) -> bool {
+        let Some(root) = store.get(key).and_then(|o| o.prediction_root) else { return false };
+        store.get(root).and_then(|r| r.prediction.as_ref()).is_some_and(|run| run.path.contains(&key))
+    }
+
+    /// Predicts the objects of type `ty` that have no incoming link from a present object (the
+    /// roots of structures nothing feeds), with their structures; ends the prediction of those
+    /// fed again. An object due to be forgotten at this step is left alone.
+    fn predict(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
+        let forget = self.types[ty as usize].forget;
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.clear();
+        keys.extend(self.store.objects_of(ty));
+        for &root in &keys {
+            let Some(object) = self.store.get(root) else { continue };
+            if object.origin != Origin::Derived {
                 continue;
             }
-            let mut keys = std::mem::take(&mut self.keys);
-            keys.clear();
-            keys.extend(self.store.objects_of(ty));
-            for &root in &keys {
-                let Some(object) = self.store.get(root) else { continue };
-                if object.origin != Origin::Derived {
-                    continue;
+            let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
+            if fed {
+                if object.prediction.is_some()
+                    && let Some(o) = self.store.get_mut(root)
+                {
+                    o.prediction = None;
                 }
-                let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
-                if fed {
-                    if object.prediction.is_some()
-                        && let Some(o) = self.store.get_mut(root)
-                    {
-                        o.prediction = None;
-                    }
-                    continue;
-                }
+                continue;
+            }
+            let doomed = !object.anchored
+                && forget.is_some_and(|after| time.saturating_sub(object.last_anchored) >= after);
+            if !doomed {
                 self.predict_structure(root, time, out);
             }
-            self.keys = keys;
         }
+        self.keys = keys;
     }
 
     fn predict_structure(&mut self, root: ObjectKey, time: Time, out: &mut StepOutput) {
         let (mut path, owner_index) = self.prediction_path(root);
         let Some(owner_index) = owner_index else {
+            // No model: the last state is kept, no longer measured.
             if let Some(o) = self.store.get_mut(root) {
                 o.prediction = None;
+                o.keep_state_unmeasured(time);
             }
             return;
         };
@@ -786,26 +952,26 @@ impl Anchoring {
         run.n_hypotheses = hypotheses.len();
         for (i, &key) in path.iter().enumerate() {
             let Some(object) = self.store.get_mut(key) else { continue };
-            let values: Vec<Value> = if i == owner_index {
-                hypotheses
-                    .iter()
-                    .map(|h| {
-                        Value::Record(Arc::new(Record {
-                            id: Some(object.symbol.clone()),
-                            fields: h.fields.clone(),
-                        }))
-                    })
-                    .collect()
+            let base = object.record().cloned().unwrap_or_default();
+            let mut states = hypotheses.iter().map(|h| {
+                if i == owner_index {
+                    Record { id: Some(object.symbol.clone()), fields: h.fields.clone() }
+                } else {
+                    overlay(&base, h)
+                }
+            });
+            let Some(first) = states.next() else { continue };
+            let rest: Vec<Record> = states.collect();
+            object.set_state(first, time, StateOrigin::PREDICTED);
+            object.hypotheses = if rest.is_empty() {
+                Vec::new()
             } else {
-                let base = object.record().cloned().unwrap_or_default();
-                hypotheses.iter().map(|h| Value::Record(Arc::new(overlay(&base, h)))).collect()
+                let status = object.status();
+                std::iter::once(object.value.clone())
+                    .chain(rest.into_iter().map(|r| Value::Record(Arc::new(status::with_status(r, status)))))
+                    .collect()
             };
-            object.value = values[0].clone();
-            object.hypotheses = if values.len() > 1 { values } else { Vec::new() };
-            object.state_time = time;
-            object.measured_at = None;
-            object.predicted = true;
-            object.on_prediction_path = true;
+            object.prediction_root = Some(root);
         }
         if let Some(o) = self.store.get_mut(root) {
             o.prediction = Some(run);
@@ -813,12 +979,12 @@ impl Anchoring {
         self.hypotheses = hypotheses;
     }
 
-    fn match_descriptions(&mut self, time: Time, out: &mut StepOutput) {
+    /// Pending identifications of type `ty` that an existing object's state satisfies.
+    fn match_descriptions(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
         for i in 0..self.identifications.len() {
-            if self.identifications[i].done {
+            if self.identifications[i].done || self.identifications[i].ty != ty {
                 continue;
             }
-            let ty = self.identifications[i].ty;
             let mut keys = std::mem::take(&mut self.keys);
             keys.clear();
             keys.extend(self.store.objects_of(ty));
@@ -869,44 +1035,43 @@ impl Anchoring {
         }
     }
 
-    fn ground(&mut self, time: Time) {
-        for ti in 0..self.type_order.len() {
-            let ty = self.type_order[ti];
-            let mut keys = std::mem::take(&mut self.keys);
-            keys.clear();
-            keys.extend(self.store.objects_of(ty));
-            for &key in &keys {
-                let Some(object) = self.store.get(key) else { continue };
-                let anchored = match object.origin {
-                    Origin::Percept { .. } => true,
-                    Origin::Partial => false,
-                    Origin::Derived => {
-                        object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.anchored))
-                    }
-                };
-                if let Some(object) = self.store.get_mut(key) {
-                    object.anchored = anchored;
-                    if anchored {
-                        object.last_anchored = time;
-                    }
+    /// Grounds the objects of `ty` (the type of the link that stepped; the types after it are
+    /// grounded by the steps of the links into them): anchored exactly when a percept, or linked
+    /// from an anchored object.
+    fn ground(&mut self, ty: TypeId, time: Time) {
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.clear();
+        keys.extend(self.store.objects_of(ty));
+        for &key in &keys {
+            let Some(object) = self.store.get(key) else { continue };
+            let anchored = match object.origin {
+                Origin::Percept { .. } => true,
+                Origin::Partial => false,
+                Origin::Derived => {
+                    object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.anchored))
+                }
+            };
+            if let Some(object) = self.store.get_mut(key) {
+                object.anchored = anchored;
+                if anchored {
+                    object.last_anchored = object.last_anchored.max(time);
                 }
             }
-            self.keys = keys;
         }
+        self.keys = keys;
     }
 
-    fn forget(&mut self, time: Time, out: &mut StepOutput) {
+    /// Removes the objects of `ty` not anchored for its forget time.
+    fn forget(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
+        let Some(after) = self.types[ty as usize].forget else { return };
         let mut doomed = Vec::new();
-        for &ty in &self.type_order {
-            let Some(after) = self.types[ty as usize].forget else { continue };
-            for key in self.store.objects_of(ty) {
-                let Some(object) = self.store.get(key) else { continue };
-                if object.origin == Origin::Derived
-                    && !object.anchored
-                    && time.saturating_sub(object.last_anchored) >= after
-                {
-                    doomed.push(key);
-                }
+        for key in self.store.objects_of(ty) {
+            let Some(object) = self.store.get(key) else { continue };
+            if object.origin == Origin::Derived
+                && !object.anchored
+                && time.saturating_sub(object.last_anchored) >= after
+            {
+                doomed.push(key);
             }
         }
         for key in doomed {

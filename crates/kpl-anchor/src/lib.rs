@@ -69,12 +69,14 @@ pub mod records;
 pub mod registry;
 pub mod runtime;
 pub mod scale;
+pub mod stateful;
+pub mod status;
 pub mod store;
 pub mod units;
 pub mod views;
 
 pub use change::{Cause, Change, ChangeKind};
-pub use engine::{AnchorConfig, Anchoring, Snapshot, StepOutput, Warning};
+pub use engine::{AnchorConfig, Anchoring, FromSnapshot, Snapshot, StepOutput, Warning};
 pub use error::{BuildError, IdentifyError, StepError};
 pub use implementations::Implementations;
 pub use networks::Networks;

@@ -99,7 +99,7 @@ impl Anchoring {
             ty: self.types[object.ty as usize].name.clone(),
             status: self.status(object),
             anchored: object.anchored,
-            measured: object.measured_at.is_some() && object.measured_at == self.last_time,
+            measured: object.measured,
             predicted: object.predicted,
             state: object.value.clone(),
             hypotheses: object.hypotheses.clone(),
