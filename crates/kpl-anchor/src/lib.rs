@@ -49,9 +49,11 @@
 //!
 //! Modules: [`engine`] (the engine and its step), [`link`] (link processes and their per-object
 //! instances), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
-//! [`gate`] (the spatial index of gating), [`units`] (link units), [`predict`] (prediction
+//! [`gate`] (the spatial index of gating), [`units`] (link units), [`stateful`] (what stateful
+//! units see: time, extra inputs, memory), [`kalman`] (the Kalman units), [`predict`] (prediction
 //! models), [`implementations`] (both by name), [`networks`] (road networks), [`change`] (change
-//! records), [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
+//! records), [`status`] (the `measured` / `predicted_since` attributes of object records),
+//! [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
 //! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
 //! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
 
@@ -62,6 +64,7 @@ pub mod engine;
 mod error;
 pub mod gate;
 pub mod implementations;
+pub mod kalman;
 pub mod link;
 pub mod networks;
 pub mod predict;
