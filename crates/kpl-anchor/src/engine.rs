@@ -38,6 +38,7 @@ use kpl_mtl::Formula;
 use kpl_semantic::hir;
 use kpl_syntax::ast;
 
+use crate::branches;
 use crate::change::{Cause, Change, ChangeKind};
 use crate::conditions::{LinkConditions, LinkState, description_formula};
 use crate::error::{BuildError, IdentifyError, StepError};
@@ -143,6 +144,8 @@ pub struct FromSnapshot<'a> {
 /// What a link process reads and writes during a step.
 pub(crate) struct StepCtx<'a> {
     pub time: Time,
+    /// Branch objects whose structure was reacquired: removed after the link's step.
+    pub pruned: Vec<ObjectKey>,
     pub store: &'a mut Store,
     pub types: &'a [TypeInfo],
     pub identifications: &'a mut [Identification],
@@ -669,12 +672,15 @@ impl Anchoring {
         self.predict(to_ty, time, out);
         let mut cx = StepCtx {
             time,
+            pruned: Vec::new(),
             store: &mut self.store,
             types: &self.types,
             identifications: &mut self.identifications,
             out,
         };
         self.links[l as usize].run(l, &mut cx, from, extra);
+        let pruned = std::mem::take(&mut cx.pruned);
+        self.prune(pruned, time, out);
         self.links[l as usize].last_time = Some(time);
         self.match_descriptions(to_ty, time, out);
         self.ground(to_ty, time);
@@ -795,6 +801,7 @@ impl Anchoring {
         let Some(object) = self.store.get(key) else { return };
         let (symbol, ty) = (object.symbol.clone(), object.ty);
         let (incoming, outgoing) = (object.incoming.clone(), object.outgoing.clone());
+        let branches = object.prediction.as_ref().map(|run| run.branches.clone()).unwrap_or_default();
         let type_name = self.types[ty as usize].name.clone();
         for (l, to) in outgoing {
             if let Some(target) = self.store.get(to) {
@@ -835,6 +842,23 @@ impl Anchoring {
         }
         self.store.remove(key);
         out.changes.push(Change::new(time, ChangeKind::Removed, symbol, type_name, cause));
+        self.prune(branches, time, out);
+    }
+
+    /// Removes branch objects (`removed`, cause `pruned`).
+    fn prune(&mut self, mut branches: Vec<ObjectKey>, time: Time, out: &mut StepOutput) {
+        branches.sort_by_key(|k| self.store.get(*k).map(|o| o.seq));
+        for key in branches {
+            let owner = self.store.get(key).and_then(|b| b.branch_of).and_then(|o| self.store.get(o));
+            let owner = owner.map(|o| o.symbol.clone());
+            let before = out.changes.len();
+            self.remove_object(key, Cause::Pruned, time, out);
+            if let (Some(owner), Some(change)) =
+                (owner, out.changes.get_mut(before..).and_then(|c| c.last_mut()))
+            {
+                change.branch_of = Some(owner);
+            }
+        }
     }
 
     /// The structure predicted from `root`: the path from the root to the object whose model
@@ -881,15 +905,16 @@ impl Anchoring {
         keys.extend(self.store.objects_of(ty));
         for &root in &keys {
             let Some(object) = self.store.get(root) else { continue };
-            if object.origin != Origin::Derived {
+            // Branch objects are predicted with the structure they branch from.
+            if object.origin != Origin::Derived || object.branch_of.is_some() {
                 continue;
             }
             let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
             if fed {
                 if object.prediction.is_some()
-                    && let Some(o) = self.store.get_mut(root)
+                    && let Some(run) = self.store.get_mut(root).and_then(|o| o.prediction.take())
                 {
-                    o.prediction = None;
+                    self.prune(run.branches, time, out);
                 }
                 continue;
             }
@@ -907,8 +932,9 @@ impl Anchoring {
         let Some(owner_index) = owner_index else {
             // No model: the last state is kept, no longer measured.
             if let Some(o) = self.store.get_mut(root) {
-                o.prediction = None;
+                let run = o.prediction.take();
                 o.keep_state_unmeasured(time);
+                self.prune(run.map(|r| r.branches).unwrap_or_default(), time, out);
             }
             return;
         };
@@ -922,18 +948,34 @@ impl Anchoring {
             (root_obj.symbol.clone(), self.types[root_obj.ty as usize].name.clone());
         let mut run = match root_obj.prediction.take() {
             Some(run) if run.owner == owner && run.path == path => run,
-            _ => {
+            previous => {
+                self.prune(previous.map(|r| r.branches).unwrap_or_default(), time, out);
                 let Some(state) = owner_state else { return };
+                let state = Arc::new(status::without_branch((*state).clone()));
                 let start = model.start(state, owner_time);
-                Box::new(PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0 })
+                Box::new(PredictionRun {
+                    owner,
+                    path: path.clone(),
+                    start,
+                    n_hypotheses: 0,
+                    branches: Vec::new(),
+                })
             }
         };
-        let mut hypotheses = std::mem::take(&mut self.hypotheses);
-        hypotheses.clear();
-        model.predict(&run.start, time, &mut hypotheses);
-        if hypotheses.is_empty() {
-            hypotheses.push((*run.start.state).clone());
+        let mut raw = std::mem::take(&mut self.hypotheses);
+        raw.clear();
+        model.predict(&run.start, time, &mut raw);
+        if raw.is_empty() {
+            raw.push((*run.start.state).clone());
         }
+        // Most likely first.
+        let likely =
+            branches::likelihoods(run.start.lane.as_ref().map(|l| l.heading), &run.start.state, &raw);
+        let mut order: Vec<usize> = (0..raw.len()).collect();
+        order.sort_by(|&a, &b| likely[b].total_cmp(&likely[a]).then(a.cmp(&b)));
+        let hypotheses: Vec<(Record, f64)> =
+            order.iter().map(|&i| (status::without_branch(raw[i].clone()), likely[i])).collect();
+        self.hypotheses = raw;
         if run.n_hypotheses == 0 {
             let mut change =
                 Change::new(time, ChangeKind::Predicted, root_symbol, root_type, Cause::NoIncomingLink)
@@ -950,33 +992,108 @@ impl Anchoring {
             );
         }
         run.n_hypotheses = hypotheses.len();
+        let followers = self.follow_branches(&mut run, root, &hypotheses, model.name(), time, out);
+        let split = hypotheses.len() > 1;
+        let mine = followers.iter().position(|f| *f == Some(owner)).unwrap_or(0);
         for (i, &key) in path.iter().enumerate() {
             let Some(object) = self.store.get_mut(key) else { continue };
-            let base = object.record().cloned().unwrap_or_default();
-            let mut states = hypotheses.iter().map(|h| {
+            let base = status::without_branch(object.record().map(|r| (**r).clone()).unwrap_or_default());
+            let state_of = |h: &Record, likelihood: f64| {
                 if i == owner_index {
-                    Record { id: Some(object.symbol.clone()), fields: h.fields.clone() }
+                    let record = Record { id: Some(object.symbol.clone()), fields: h.fields.clone() };
+                    if split { status::with_branch(record, likelihood, None) } else { record }
                 } else {
                     overlay(&base, h)
                 }
-            });
-            let Some(first) = states.next() else { continue };
-            let rest: Vec<Record> = states.collect();
-            object.set_state(first, time, StateOrigin::PREDICTED);
-            object.hypotheses = if rest.is_empty() {
-                Vec::new()
-            } else {
-                let status = object.status();
-                std::iter::once(object.value.clone())
-                    .chain(rest.into_iter().map(|r| Value::Record(Arc::new(status::with_status(r, status)))))
-                    .collect()
             };
+            let (h, likelihood) = &hypotheses[mine];
+            let own = state_of(h, *likelihood);
+            let all: Vec<Record> =
+                if split { hypotheses.iter().map(|(h, l)| state_of(h, *l)).collect() } else { Vec::new() };
+            object.set_state(own, time, StateOrigin::PREDICTED);
+            let status = object.status();
+            object.hypotheses =
+                all.into_iter().map(|r| Value::Record(Arc::new(status::with_status(r, status)))).collect();
+            object.prediction_root = Some(root);
+        }
+        // The branch objects follow their hypotheses.
+        let owner_symbol = self.store.get(owner).map(|o| o.symbol.clone());
+        for (h, follower) in followers.iter().enumerate() {
+            let Some(key) = *follower else { continue };
+            if key == owner {
+                continue;
+            }
+            let Some(object) = self.store.get_mut(key) else { continue };
+            let (state, likelihood) = &hypotheses[h];
+            let record = Record { id: Some(object.symbol.clone()), fields: state.fields.clone() };
+            let record = status::with_branch(record, *likelihood, owner_symbol.as_ref());
+            object.set_state(record, time, StateOrigin::PREDICTED);
             object.prediction_root = Some(root);
         }
         if let Some(o) = self.store.get_mut(root) {
             o.prediction = Some(run);
         }
-        self.hypotheses = hypotheses;
+    }
+
+    /// Which object follows each hypothesis (most likely first): the owner and the run's branch
+    /// objects keep following theirs (matched by state distance), a hypothesis no object follows
+    /// gets a new branch object (`created`, cause `branch`), and a branch object whose hypothesis
+    /// ended is pruned. Updates `run.branches`.
+    fn follow_branches(
+        &mut self,
+        run: &mut PredictionRun,
+        root: ObjectKey,
+        hypotheses: &[(Record, f64)],
+        model: &str,
+        time: Time,
+        out: &mut StepOutput,
+    ) -> Vec<Option<ObjectKey>> {
+        let owner = run.owner;
+        let mut followers: Vec<Option<ObjectKey>> = vec![None; hypotheses.len()];
+        let previous: Vec<ObjectKey> = std::iter::once(owner).chain(run.branches.iter().copied()).collect();
+        let values: Vec<Value> = previous
+            .iter()
+            .map(|k| self.store.get(*k).map_or(Value::Bool(false), |o| o.value.clone()))
+            .collect();
+        let refs: Vec<&Value> = values.iter().collect();
+        let records: Vec<Record> = hypotheses.iter().map(|(h, _)| h.clone()).collect();
+        let assignment = branches::assign(&refs, &records, |v, h| {
+            crate::link::state_distance(v, &Value::Record(Arc::new(h.clone())))
+        });
+        let mut ended = Vec::new();
+        for (i, a) in assignment.into_iter().enumerate() {
+            match a {
+                Some(h) => followers[h] = Some(previous[i]),
+                None if i > 0 => ended.push(previous[i]),
+                None => {}
+            }
+        }
+        self.prune(ended, time, out);
+        // New hypotheses get branch objects of the owner's type.
+        let Some(owner_obj) = self.store.get(owner) else { return followers };
+        let (ty, owner_symbol, last_anchored) =
+            (owner_obj.ty, owner_obj.symbol.clone(), owner_obj.last_anchored);
+        let type_name = self.types[ty as usize].name.clone();
+        for (h, follower) in followers.iter_mut().enumerate() {
+            if follower.is_some() || hypotheses.len() < 2 {
+                continue;
+            }
+            let symbol = self.store.new_symbol(ty);
+            let key = self.store.insert(ty, symbol.clone(), Origin::Derived, hypotheses[h].0.clone(), time);
+            if let Some(branch) = self.store.get_mut(key) {
+                branch.branch_of = Some(owner);
+                branch.prediction_root = Some(root);
+                branch.last_anchored = last_anchored;
+            }
+            out.changes.push(
+                Change::new(time, ChangeKind::Created, symbol, type_name.clone(), Cause::Branch)
+                    .model(model)
+                    .branch_of(&owner_symbol),
+            );
+            *follower = Some(key);
+        }
+        run.branches = followers.iter().flatten().copied().filter(|k| *k != owner).collect();
+        followers
     }
 
     /// Pending identifications of type `ty` that an existing object's state satisfies.
@@ -994,7 +1111,7 @@ impl Anchoring {
             let mut found = None;
             for &key in &keys {
                 let Some(object) = store.get(key) else { continue };
-                if object.origin != Origin::Derived {
+                if object.origin != Origin::Derived || object.branch_of.is_some() {
                     continue;
                 }
                 let condition =

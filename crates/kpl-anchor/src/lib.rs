@@ -48,7 +48,7 @@
 //! ```
 //!
 //! Modules: [`engine`] (the engine and its step), [`link`] (link processes and their per-object
-//! instances), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
+//! instances), [`branches`] (the objects of a prediction's branches), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
 //! [`gate`] (the spatial index of gating), [`units`] (link units), [`stateful`] (what stateful
 //! units see: time, extra inputs, memory), [`kalman`] (the Kalman units), [`predict`] (prediction
 //! models), [`implementations`] (both by name), [`networks`] (road networks), [`change`] (change
@@ -57,6 +57,7 @@
 //! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
 //! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
 
+pub mod branches;
 pub mod change;
 pub mod conditions;
 pub mod driver;

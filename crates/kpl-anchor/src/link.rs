@@ -237,7 +237,7 @@ struct Decisions {
 pub const VELOCITY_WEIGHT_S: f64 = 1.0;
 
 /// The distance used to pair `p` with a candidate state (`INFINITY` without positions).
-fn state_distance(p: &Value, o: &Value) -> f64 {
+pub(crate) fn state_distance(p: &Value, o: &Value) -> f64 {
     let (Some(a), Some(b)) = (p.as_record(), o.as_record()) else { return f64::INFINITY };
     let (Some(pa), Some(pb)) = (position(a), position(b)) else { return f64::INFINITY };
     let mut d = (pa[0] - pb[0]).hypot(pa[1] - pb[1]);
@@ -344,7 +344,8 @@ impl LinkProcess {
         let gated = self.conditions.gate.is_some();
         for key in cx.store.objects_of(self.to_ty) {
             let Some(o) = cx.store.get(key) else { continue };
-            if o.is_partial() || o.incoming_via(id).is_some() {
+            // Partial objects have no state; branch objects are reacquired through their root.
+            if o.is_partial() || o.branch_of.is_some() || o.incoming_via(id).is_some() {
                 continue;
             }
             if !gated {
@@ -859,6 +860,7 @@ impl LinkProcess {
                     x.hypotheses.clear();
                 }
             }
+            cx.pruned.extend(run.branches);
         }
     }
 }

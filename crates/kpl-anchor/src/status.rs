@@ -6,7 +6,9 @@
 //!   time;
 //! - `predicted_since` (int, microseconds; only when `measured` is false): the valid time of the
 //!   first state since the object was last measured (predicted by a model, or held at its last
-//!   value).
+//!   value);
+//! - `likelihood` (float) on the objects of a structure predicted along several branches, and
+//!   `branch_of` (string) on its branch objects ([`crate::branches`]).
 //!
 //! The names are [`kpl_core::OBJECT_STATUS`]: decoders (files, the wire) keep them on records of
 //! any object type.
@@ -17,6 +19,31 @@ use kpl_core::{Record, Time, Value};
 
 pub const MEASURED: &str = "measured";
 pub const PREDICTED_SINCE: &str = "predicted_since";
+/// On the objects of a structure predicted along several branches: how likely its branch is.
+pub const LIKELIHOOD: &str = "likelihood";
+/// On a branch object: the symbol of the object whose prediction it branches from.
+pub const BRANCH_OF: &str = "branch_of";
+
+/// Whether `name` is one of the attributes the engine sets on object records.
+pub fn is_status(name: &str) -> bool {
+    matches!(name, MEASURED | PREDICTED_SINCE | LIKELIHOOD | BRANCH_OF)
+}
+
+/// `record` with the branch attributes set: its `likelihood`, and `branch_of` for a branch object.
+pub fn with_branch(mut record: Record, likelihood: f64, branch_of: Option<&Arc<str>>) -> Record {
+    record.fields.retain(|(name, _)| &**name != LIKELIHOOD && &**name != BRANCH_OF);
+    record.fields.push((Arc::from(LIKELIHOOD), Value::Float(likelihood)));
+    if let Some(owner) = branch_of {
+        record.fields.push((Arc::from(BRANCH_OF), Value::Str(owner.clone())));
+    }
+    record
+}
+
+/// `record` without the branch attributes (a prediction's start state, a hypothesis).
+pub fn without_branch(mut record: Record) -> Record {
+    record.fields.retain(|(name, _)| &**name != LIKELIHOOD && &**name != BRANCH_OF);
+    record
+}
 
 /// The status of one object's state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

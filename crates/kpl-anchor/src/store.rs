@@ -55,6 +55,8 @@ pub struct PredictionRun {
     pub path: Vec<ObjectKey>,
     pub start: PredictionStart,
     pub n_hypotheses: usize,
+    /// The branch objects following the hypotheses the owner does not (`crate::branches`).
+    pub branches: Vec<ObjectKey>,
 }
 
 #[derive(Debug, Clone)]
@@ -83,6 +85,8 @@ pub struct Object {
     /// The root of the predicted structure this object is on (its state then comes from the
     /// root's prediction, not from its link unit); stale once the root's prediction ended.
     pub(crate) prediction_root: Option<ObjectKey>,
+    /// A branch object: the object whose prediction it branches from (`crate::branches`).
+    pub branch_of: Option<ObjectKey>,
     /// Links into this object: (link, from object).
     pub incoming: Vec<(LinkId, ObjectKey)>,
     /// Links out of this object: (link, to object).
@@ -332,6 +336,7 @@ impl Store {
             predicted: false,
             predicted_since: Some(time),
             prediction_root: None,
+            branch_of: None,
             incoming: Vec::new(),
             outgoing: Vec::new(),
             anchored: false,

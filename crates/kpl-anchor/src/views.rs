@@ -218,6 +218,12 @@ impl Anchoring {
                 if let Some(since) = v.predicted_since.filter(|_| !v.measured) {
                     fields.push(("predicted_since".into(), Value::Int(since)));
                 }
+                // A branch of a prediction: how likely, and of which object.
+                for name in [status::LIKELIHOOD, status::BRANCH_OF] {
+                    if let Some(value) = v.state.as_record().and_then(|r| r.get(name)) {
+                        fields.push((name.into(), value.clone()));
+                    }
+                }
                 fields.extend([
                     ("state".into(), state_without_id(&v.state)),
                     ("from".into(), symbols(&v.from)),
@@ -285,6 +291,9 @@ impl Anchoring {
             for key in self.store.objects_of(ty) {
                 let Some(object) = self.store.get(key) else { continue };
                 let _ = write!(text, "{} {}", object.symbol, self.status(object).as_str());
+                if let Some(owner) = object.branch_of.and_then(|o| self.store.get(o)) {
+                    let _ = write!(text, " (branch of {})", owner.symbol);
+                }
                 if object.hypotheses.len() > 1 {
                     let _ = write!(text, " ({} hypotheses)", object.hypotheses.len());
                 }
@@ -322,12 +331,7 @@ impl Anchoring {
 fn state_without_id(value: &Value) -> Value {
     match value {
         Value::Record(r) => {
-            let fields = r
-                .fields
-                .iter()
-                .filter(|(name, _)| &**name != status::MEASURED && &**name != status::PREDICTED_SINCE)
-                .cloned()
-                .collect();
+            let fields = r.fields.iter().filter(|(name, _)| !status::is_status(name)).cloned().collect();
             Value::Record(Arc::new(Record { id: None, fields }))
         }
         other => other.clone(),

@@ -71,10 +71,15 @@ impl RecordType {
 
 /// Attributes every object record may carry besides its type's own: how anchoring knows the
 /// object's state (`measured`: derived from a percept sample of this time; `predicted_since`:
-/// since when it has not been, in microseconds). Decoders keep them, when they have these types,
-/// on records of any type; declared types cannot use the names.
-pub const OBJECT_STATUS: [(&str, ValueType); 2] =
-    [("measured", ValueType::Bool), ("predicted_since", ValueType::Int)];
+/// since when it has not been, in microseconds; `likelihood` and `branch_of` on the branches of a
+/// prediction). Decoders keep them, when they have these types, on records of any type; declared
+/// types cannot use the names.
+pub const OBJECT_STATUS: [(&str, ValueType); 4] = [
+    ("measured", ValueType::Bool),
+    ("predicted_since", ValueType::Int),
+    ("likelihood", ValueType::Float),
+    ("branch_of", ValueType::Str),
+];
 
 /// The type of an [`OBJECT_STATUS`] attribute.
 pub fn object_status_type(name: &str) -> Option<&'static ValueType> {

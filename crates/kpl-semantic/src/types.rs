@@ -191,6 +191,8 @@ pub(crate) fn reserved_meaning(name: &str) -> Option<&'static str> {
     match name {
         "measured" => Some("whether the object's state was measured at this state"),
         "predicted_since" => Some("since when the object's state has not been measured"),
+        "likelihood" => Some("how likely a predicted branch is"),
+        "branch_of" => Some("the object a predicted branch object branches from"),
         _ => None,
     }
 }
