@@ -239,14 +239,22 @@ impl Anchoring {
                 })?;
             let id = links.len() as LinkId;
             types[to_ty as usize].links_into.push(id);
-            links.push(LinkProcess::new(
+            let mut link_process = LinkProcess::new(
                 Arc::from(process.name.as_str()),
                 from_ty,
                 to_ty,
                 link.via.entry.clone(),
                 unit,
                 conditions,
-            ));
+            );
+            // The names a source of its `from` objects goes by: each input stream and its producer.
+            for input in process.inputs.iter().filter(|i| i.port == "from") {
+                link_process.from_sources.push(input.stream.name.clone());
+                if let Some(producer) = spec.processes.get(input.stream.producer) {
+                    link_process.from_sources.push(producer.name.clone());
+                }
+            }
+            links.push(link_process);
         }
 
         // The hierarchy: types ordered so that every link goes forward (Kahn's algorithm,
@@ -549,7 +557,7 @@ impl Anchoring {
         for k in 0..self.link_order.len() {
             let l = self.link_order[k];
             from.clear();
-            self.current_objects(self.links[l as usize].from_ty, time, &mut from);
+            self.current_objects(l, time, &mut from);
             self.run_link(l, time, &from, &[], &mut out);
         }
         Ok(out)
@@ -636,13 +644,27 @@ impl Anchoring {
         Ok(out)
     }
 
-    /// The `from` objects of a link in [`Anchoring::step`]: percepts listed at `time`, or every
-    /// (not partial) object of a type made by links.
-    fn current_objects(&self, ty: TypeId, time: Time, out: &mut Vec<(ObjectKey, Value)>) {
+    /// The `from` objects of link `l` in [`Anchoring::step`]: the percepts listed at `time` by the
+    /// sources the link reads (a source no link from the type names goes to all of them), or
+    /// every (not partial) object of a type made by links.
+    fn current_objects(&self, l: LinkId, time: Time, out: &mut Vec<(ObjectKey, Value)>) {
+        let ty = self.links[l as usize].from_ty;
         let fed = self.types[ty as usize].links_into.is_empty();
+        let read_by = |source: u32, link: &LinkProcess| {
+            let name = self.source_ids.iter().find(|(_, id)| **id == source).map(|(n, _)| n.as_str());
+            name.is_some_and(|n| link.from_sources.iter().any(|s| s == n))
+        };
         for key in self.store.objects_of(ty) {
             let Some(object) = self.store.get(key) else { continue };
-            let current = if fed { object.present && object.last_seen == time } else { !object.is_partial() };
+            let current = match object.origin {
+                Origin::Percept { source } if fed => {
+                    object.present
+                        && object.last_seen == time
+                        && (read_by(source, &self.links[l as usize])
+                            || !self.links.iter().any(|other| other.from_ty == ty && read_by(source, other)))
+                }
+                _ => !object.is_partial(),
+            };
             if current {
                 out.push((key, object.value.clone()));
             }

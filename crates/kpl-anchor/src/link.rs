@@ -200,6 +200,9 @@ pub struct LinkProcess {
     pub stats: LinkStats,
     /// The valid time of the link's last step.
     pub last_time: Option<Time>,
+    /// The names its `from` objects' sources go by (its input streams and their producers), so
+    /// that [`crate::Anchoring::step`] gives it the percepts of its own sources.
+    pub from_sources: Vec<String>,
     /// The `from` objects of the current step (reused buffer).
     stepped: Vec<ObjectKey>,
 }
@@ -288,6 +291,7 @@ impl LinkProcess {
             grid,
             stats: LinkStats::default(),
             last_time: None,
+            from_sources: Vec::new(),
             stepped: Vec::new(),
         }
     }
