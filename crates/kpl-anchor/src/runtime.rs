@@ -119,6 +119,30 @@ impl Shared {
     }
 }
 
+/// What a link process achieved, counted from the changes of its own decisions: the run's result
+/// (`kpl run` prints it; summary.json has it under each link's `results`).
+#[derive(Debug, Default, Clone, Copy)]
+struct Tally {
+    /// New objects created by the establish condition.
+    established: u64,
+    /// Links to a waiting object made by the reestablish condition: the object kept its symbol.
+    reestablished: u64,
+    /// Links dropped because the maintain condition became false.
+    dropped: u64,
+}
+
+impl Tally {
+    fn count(&mut self, change: &crate::change::Change) {
+        use crate::change::{Cause, ChangeKind};
+        match (change.kind, change.cause) {
+            (ChangeKind::Created, Cause::Establish) => self.established += 1,
+            (ChangeKind::Linked, Cause::Reestablish) => self.reestablished += 1,
+            (ChangeKind::Unlinked, Cause::Maintain) => self.dropped += 1,
+            _ => {}
+        }
+    }
+}
+
 /// What an input port of a link process carries.
 #[derive(Debug, Clone)]
 enum Port {
@@ -137,16 +161,24 @@ struct LinkProcess {
     /// The run's counters for this process: the per-object instances the link process created
     /// and removed are reported there, and the engine's warnings are counted as its errors.
     stats: Arc<kpl_runtime::stats::ProcessStats>,
+    /// What its decisions achieved so far.
+    tally: Tally,
 }
 
 impl LinkProcess {
-    /// Copies the engine's count of per-object instances into the run's statistics.
+    /// Copies the engine's count of per-object instances and what the link achieved into the
+    /// run's statistics.
     fn count_instances(&self, engine: &Anchoring) {
         use std::sync::atomic::Ordering;
         if let Some(stats) = engine.link_stats(&self.name) {
             self.stats.instances_created.store(stats.instances_created, Ordering::Relaxed);
             self.stats.instances_removed.store(stats.instances_removed, Ordering::Relaxed);
         }
+        let tally = self.tally;
+        let to = engine.link_to_type(&self.name).unwrap_or("linked");
+        self.stats.result(&format!("new {to} objects (establish)"), tally.established);
+        self.stats.result(&format!("links reestablished: a waiting {to} kept its symbol"), tally.reestablished);
+        self.stats.result("links dropped (maintain became false)", tally.dropped);
     }
 }
 
@@ -180,6 +212,9 @@ impl Unit for LinkProcess {
         out.emit_at(input.valid, objects);
         if !output.changes.is_empty() {
             out.emit_port("changes", input.valid, output.changes_value());
+        }
+        for change in output.changes.iter().filter(|c| c.link.as_deref() == Some(self.name.as_str())) {
+            self.tally.count(change);
         }
         for warning in &output.warnings {
             self.stats.error(format!("at {}: {}", warning.time, warning.message));
@@ -228,7 +263,7 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
         Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
     }
     let stats = ctx.stats.clone();
-    Ok(Box::new(SyncUnit(LinkProcess { name, ports, n_extra, shared, stats })))
+    Ok(Box::new(SyncUnit(LinkProcess { name, ports, n_extra, shared, stats, tally: Tally::default() })))
 }
 
 /// `anchor.world_model`: emits the run's world model, at the valid time of each sample of its
