@@ -177,7 +177,8 @@ impl LinkProcess {
         let tally = self.tally;
         let to = engine.link_to_type(&self.name).unwrap_or("linked");
         self.stats.result(&format!("new {to} objects (establish)"), tally.established);
-        self.stats.result(&format!("links reestablished: a waiting {to} kept its symbol"), tally.reestablished);
+        self.stats
+            .result(&format!("links reestablished: a waiting {to} kept its symbol"), tally.reestablished);
         self.stats.result("links dropped (maintain became false)", tally.dropped);
     }
 }
