@@ -31,7 +31,8 @@ pub enum Command {
         after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  \
                       kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
                       kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --frames from-first-detection --per-video /tmp/aapa.csv\n\n\
+                      kpl cater eval --data /tmp/cater --model aapa --frames from-first-detection\n  \
+                      kpl cater eval --data /tmp/cater --model aapa --per-video /tmp/aapa.csv\n\n\
                       LA-CATER's own files: --pickles DIR reads OPNet's perception pickles, --videos FILE a split, \
                       --annotations DIR its annotation files (docs/cater.md)."
     )]
