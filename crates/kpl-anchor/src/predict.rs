@@ -12,7 +12,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use kpl_core::{Record, Time, Value};
-use kpl_sim::{LanePosition, RoadNetwork, geom};
+use kpl_roads::{LanePosition, RoadNetwork, geom};
 
 use crate::records::{position, velocity, with_fields};
 use crate::units::heading_of_velocity;
@@ -125,7 +125,7 @@ impl PredictionModel for AlongRoads {
         let distance = speed * seconds(start.time, time);
         let mut hypotheses = self.network.advance(lane, distance, self.max_hypotheses);
         // Straightest first; `advance` gives a deterministic order, which breaks ties.
-        let turn = |h: &kpl_sim::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
+        let turn = |h: &kpl_roads::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
         hypotheses.sort_by(|a, b| turn(a).total_cmp(&turn(b)));
         for h in &hypotheses {
             let direction = geom::unit(h.position.heading);
@@ -188,7 +188,7 @@ mod tests {
 
     #[test]
     fn along_roads_splits_at_a_crossing_straightest_first() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::crossing()).unwrap());
         let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
         // Eastbound on `west`, 30 m before the crossing at 10 m/s: after 1 s still one hypothesis.
         let out = predict(&model, state([-30.0, -1.75], [10.0, 0.0]), 1.0);

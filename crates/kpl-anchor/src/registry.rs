@@ -17,7 +17,7 @@ fn network_params(entry: Entry) -> Entry {
     entry
         .param(Param::optional(
             "scenario",
-            ParamType::Choice(kpl_sim::scenarios::NAMES.iter().map(|s| s.to_string()).collect()),
+            ParamType::Choice(kpl_roads::scenarios::NAMES.iter().map(|s| s.to_string()).collect()),
             Value::str("crossing"),
             "built-in road network (ignored when `network_file` is set)",
         ))

@@ -13,8 +13,8 @@ use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Value};
 use kpl_mtl::Function;
-use kpl_sim::RoadNetwork;
-use kpl_sim::geom;
+use kpl_roads::RoadNetwork;
+use kpl_roads::geom;
 
 use crate::records::{fill, position, velocity};
 
@@ -186,7 +186,7 @@ mod tests {
 
     #[test]
     fn snap_to_lane_centres_the_object_on_its_lane() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
         let main = network.road_by_name("main").unwrap().id;
         let unit = SnapToLane::new(network);
         // Eastbound on `main` (lanes at y = +-1.75, driving on the right: eastbound at y = -1.75).
@@ -208,7 +208,7 @@ mod tests {
 
     #[test]
     fn on_road_reads_positions_and_objects() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
         let f = on_road(network);
         assert_eq!((f.body)(&[Value::vec2(-100.0, -1.0)]).unwrap(), Value::Bool(true));
         assert_eq!((f.body)(&[Value::vec2(-100.0, -40.0)]).unwrap(), Value::Bool(false));

@@ -69,10 +69,11 @@ fn check_seed(seed: u64) {
                 })
                 .collect();
             for car in &frame.cars {
-                let hidden = match car.place {
-                    Place::Road { road, .. } => network.occluder_over(road, car.pos).is_some(),
-                    Place::Crossing { .. } => false,
+                let road = match car.place {
+                    Place::Road { road, .. } => Some(road),
+                    Place::Crossing { .. } => None,
                 };
+                let hidden = network.occluders().hiding(car.pos, road).is_some();
                 let list = passages.entry(car.id).or_default();
                 if hidden {
                     match list.last_mut() {

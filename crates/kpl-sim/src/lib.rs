@@ -27,23 +27,14 @@
 //! [`params`] (source parameters), [`sim`] (the source object), [`svg`] (pictures).
 
 pub mod error;
-pub mod format;
-pub mod geom;
-mod index;
-pub mod network;
 pub mod params;
-pub mod predict;
-pub mod scenarios;
 pub mod sim;
-pub mod svg;
 pub mod tracker;
 pub mod traffic;
 
-pub use error::{NetworkError, NetworkProblem, ParamsError};
-pub use format::NetworkFile;
-pub use network::{LaneId, LanePosition, NodeId, OccluderId, Place, RoadId, RoadNetwork};
+pub use error::ParamsError;
+pub use kpl_roads::{LaneId, LanePosition, NetworkError, NodeId, OccluderId, Place, RoadId, RoadNetwork};
 pub use params::{ParamInfo, Params};
-pub use predict::Hypothesis;
 pub use sim::{Frame, UavTrackerSim};
 pub use tracker::{Percept, PerceptId, PerceptSource};
 pub use traffic::{CarId, CarState};

@@ -15,8 +15,8 @@ use kpl_core::Value;
 use serde::{Deserialize, Serialize};
 
 use crate::error::ParamsError;
-use crate::network::RoadNetwork;
-use crate::scenarios::{self, GridTownSize};
+use kpl_roads::RoadNetwork;
+use kpl_roads::scenarios::{self, GridTownSize};
 
 /// One parameter as shown to users.
 #[derive(Debug, Clone, PartialEq, Eq)]

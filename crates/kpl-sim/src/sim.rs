@@ -20,10 +20,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::ParamsError;
-use crate::network::RoadNetwork;
 use crate::params::Params;
 use crate::tracker::{Percept, Tracker, TrackerConfig};
 use crate::traffic::{CarState, Traffic};
+use kpl_roads::RoadNetwork;
 
 /// Random streams of one seed: traffic and tracker draw from separate streams, so changing a
 /// tracker parameter (noise, dropout) leaves the cars' motion unchanged.

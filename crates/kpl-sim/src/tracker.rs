@@ -14,10 +14,10 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Geometric, Poisson, StandardNormal};
 
-use crate::geom::Point;
-use crate::network::{Place, RoadNetwork};
 use crate::params::Params;
 use crate::traffic::{CarId, CarState};
+use kpl_roads::geom::Point;
+use kpl_roads::{Place, RoadNetwork};
 
 /// A percept's identity; shown as `vp1`, `vp2`, ... and never reused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -169,10 +169,11 @@ impl Tracker {
     pub fn observe(&mut self, net: &RoadNetwork, cars: &[CarState], dt_s: f64) -> Vec<Percept> {
         let mut percepts = Vec::with_capacity(cars.len() + self.false_positives.len());
         for car in cars {
-            let hidden = match car.place {
-                Place::Road { road, .. } => net.occluder_over(road, car.pos).is_some(),
-                Place::Crossing { .. } => false,
+            let road = match car.place {
+                Place::Road { road, .. } => Some(road),
+                Place::Crossing { .. } => None,
             };
+            let hidden = net.occluders().hiding(car.pos, road).is_some();
             let mut track = self.tracks.remove(&car.id).unwrap_or_default();
             if hidden {
                 track.hidden = true;

@@ -14,8 +14,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::error::ParamsError;
-use crate::geom::{self, Point};
-use crate::network::{LaneId, LaneKind, Place, RoadNetwork};
+use kpl_roads::geom::{self, Point};
+use kpl_roads::{LaneId, LaneKind, Place, RoadNetwork};
 
 /// A car's identity; shown as `car1`, `car2`, ... and never reused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -81,10 +81,10 @@ fn cars_drive_plausibly_along_their_lanes() {
             assert!(car.speed_mps >= 0.0 && car.speed_mps <= lane.speed_limit_mps * 1.5 + 1e-9, "{car:?}");
             // Lane keeping: within half a metre of the lane centre.
             let centre = lane.path.point_at(car.offset_m);
-            assert!(kpl_sim::geom::dist(centre, car.pos) <= 0.5 + 1e-9);
+            assert!(kpl_roads::geom::dist(centre, car.pos) <= 0.5 + 1e-9);
             if let Some(previous) = last_pos.insert(car.id, car.pos) {
                 // Moves at most its speed's worth (plus the lateral wander) per frame: no jumps.
-                assert!(kpl_sim::geom::dist(previous, car.pos) <= 0.1 * 21.0 + 0.2, "{car:?} jumped");
+                assert!(kpl_roads::geom::dist(previous, car.pos) <= 0.1 * 21.0 + 0.2, "{car:?} jumped");
             }
             speeds.push(car.speed_mps);
         }
@@ -116,7 +116,7 @@ fn cars_keep_their_distance_on_a_lane() {
             by_lane.entry(car.lane.0).or_default().push((car.offset_m, car.length_m));
         }
         for (lane, mut cars) in by_lane {
-            if !matches!(net.lanes()[lane as usize].kind, kpl_sim::network::LaneKind::Road { .. }) {
+            if !matches!(net.lanes()[lane as usize].kind, kpl_roads::LaneKind::Road { .. }) {
                 continue; // connectors cross each other inside crossings
             }
             cars.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -243,7 +243,7 @@ fn a_car_under_the_bridge_is_lost_for_about_two_seconds_and_comes_back_with_a_ne
                     f.cars.iter().any(|c| {
                         c.id == car
                             && matches!(c.place, Place::Road { road, .. } if road == main)
-                            && net.occluder_over(main, c.pos).is_some()
+                            && net.occluders().hiding(c.pos, Some(main)).is_some()
                     })
                 })
                 .map(|f| f.index)
@@ -403,7 +403,7 @@ fn the_parameter_table_in_the_docs_matches_the_code() {
 
 #[test]
 fn a_town_sized_for_ten_thousand_cars_holds_them() {
-    let size = kpl_sim::scenarios::GridTownSize::for_cars(10_000);
+    let size = kpl_roads::scenarios::GridTownSize::for_cars(10_000);
     assert_eq!((size.blocks_x, size.blocks_y), (30, 30));
     let params = Params {
         scenario: "grid_town".into(),
