@@ -75,10 +75,7 @@ pub struct DriverStep<'a> {
 
 /// The `sim.uav_tracker` parameters of a call (an empty `network_file` means none).
 pub fn tracker_params(params: &BTreeMap<String, Value>) -> Result<Params, String> {
-    let given = params
-        .iter()
-        .filter(|(name, value)| !(name.as_str() == "network_file" && value.as_str() == Some("")));
-    Params::from_args(given.map(|(n, v)| (n.as_str(), v))).map_err(|e| e.to_string())
+    Params::from_args(params.iter().map(|(n, v)| (n.as_str(), v))).map_err(|e| e.to_string())
 }
 
 impl SimDriver {

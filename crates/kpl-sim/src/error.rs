@@ -14,6 +14,14 @@ pub enum ParamsError {
         "{n_cars} cars do not fit on this road network ({lane_km:.1} km of lanes holds at most {capacity})"
     )]
     TooManyCars { n_cars: u32, lane_km: f64, capacity: u64 },
+    #[error("parameter `{name}` has no effect here: {reason}")]
+    NoEffect { name: &'static str, reason: &'static str },
+    #[error("parameter `{name}` needs `{needs}`: {reason}")]
+    Needs { name: &'static str, needs: &'static str, reason: &'static str },
+    #[error(transparent)]
+    Camera(#[from] crate::camera::CameraError),
     #[error(transparent)]
     Network(#[from] kpl_roads::NetworkError),
+    #[error(transparent)]
+    Recording(#[from] crate::recorded::RecordingError),
 }

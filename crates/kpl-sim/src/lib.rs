@@ -26,8 +26,10 @@
 //! [`scenarios`] (built-in networks), [`traffic`] (cars and ground truth), [`tracker`] (percepts),
 //! [`params`] (source parameters), [`sim`] (the source object), [`svg`] (pictures).
 
+pub mod camera;
 pub mod error;
 pub mod params;
+pub mod recorded;
 pub mod sim;
 pub mod tracker;
 pub mod traffic;
@@ -36,5 +38,5 @@ pub use error::ParamsError;
 pub use kpl_roads::{LaneId, LanePosition, NetworkError, NodeId, OccluderId, Place, RoadId, RoadNetwork};
 pub use params::{ParamInfo, Params};
 pub use sim::{Frame, UavTrackerSim};
-pub use tracker::{Percept, PerceptId, PerceptSource};
+pub use tracker::{Percept, PerceptId, PerceptSource, Visibility};
 pub use traffic::{CarId, CarState};
