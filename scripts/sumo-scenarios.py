@@ -6,7 +6,8 @@ into .venv; no other SUMO is needed).
 Each scenario is a folder with the network (net.xml.gz), the recorded traffic as SUMO's floating
 car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type, speed and lane,
 every 0.5 s) and, where the traffic uses vehicle types of its own, their definitions (vtypes.xml).
-Everything is seeded, so the same SUMO release makes the same files.
+Everything is seeded, so the same SUMO release makes the same traffic (only the files' "generated
+on" comments differ).
 
     .venv/bin/python scripts/sumo-scenarios.py                 # every scenario into specs/traffic/sumo
     .venv/bin/python scripts/sumo-scenarios.py --only grid --out /tmp/s --duration 30
@@ -89,7 +90,7 @@ def grid(s, duration):
     s.netgenerate("net.net.xml", "--grid", "--grid.number", "4", "--grid.length", "120",
                   "--grid.attach-length", "80", "--default-junction-type", "traffic_light",
                   "--tls.default-type", "static")
-    s.random_trips("net.net.xml", "routes.rou.xml", duration, "2.5", "--fringe-factor", "50",
+    s.random_trips("net.net.xml", "routes.rou.xml", duration, "1.5", "--fringe-factor", "50",
                    "--min-distance", "300")
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration)
     return ["net.net.xml", "fcd.xml"], None

@@ -67,6 +67,9 @@ pub enum Cause {
     NoIncomingLink,
     /// The prediction split into more hypotheses (or fewer: routes that left the map merge).
     Branch,
+    /// The prediction ended (every route reached a dead end or the network's border): the
+    /// structure keeps its last state, unanchored, until it is forgotten or reacquired.
+    Ended,
     /// A percept no longer listed by its source.
     Lost,
     /// Not anchored for the forget time.
@@ -88,6 +91,7 @@ impl Cause {
             Cause::ToRemoved => "to_removed",
             Cause::NoIncomingLink => "no_incoming_link",
             Cause::Branch => "branch",
+            Cause::Ended => "ended",
             Cause::Lost => "lost",
             Cause::Forgotten => "forgotten",
             Cause::Resolved => "resolved",

@@ -759,9 +759,30 @@ impl Anchoring {
             _ => {
                 let Some(state) = owner_state else { return };
                 let start = model.start(state, owner_time);
-                Box::new(PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0 })
+                Box::new(PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0, ended: false })
             }
         };
+        if run.ended || model.ended(&run.start, time) {
+            // Every route reached a dead end or the border: the structure stays where the
+            // prediction left it, unanchored and not predicted, until it is forgotten.
+            if !run.ended {
+                run.ended = true;
+                out.changes.push(
+                    Change::new(time, ChangeKind::Predicted, root_symbol, root_type, Cause::Ended)
+                        .model(model.name()),
+                );
+                for &key in &path {
+                    if let Some(object) = self.store.get_mut(key) {
+                        object.predicted = false;
+                        object.hypotheses.clear();
+                    }
+                }
+            }
+            if let Some(o) = self.store.get_mut(root) {
+                o.prediction = Some(run);
+            }
+            return;
+        }
         let mut hypotheses = std::mem::take(&mut self.hypotheses);
         hypotheses.clear();
         model.predict(&run.start, time, &mut hypotheses);

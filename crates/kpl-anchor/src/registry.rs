@@ -25,7 +25,13 @@ fn network_params(entry: Entry) -> Entry {
             "network_file",
             ParamType::Str,
             Value::str(""),
-            "road network JSON file (docs/simulator.md)",
+            "road network file: SUMO .net.xml or the project's JSON, either gzipped (docs/roads.md)",
+        ))
+        .param(Param::optional(
+            "min_heading_speed",
+            ParamType::Float,
+            Value::Float(crate::units::MIN_HEADING_SPEED_MPS),
+            "below this speed (m/s) the direction of `vel` is not used to pick the lane",
         ))
 }
 

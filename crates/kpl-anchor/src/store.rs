@@ -53,6 +53,8 @@ pub struct PredictionRun {
     pub path: Vec<ObjectKey>,
     pub start: PredictionStart,
     pub n_hypotheses: usize,
+    /// The model said the prediction ended ([`crate::predict::PredictionModel::ended`]).
+    pub ended: bool,
 }
 
 #[derive(Debug, Clone)]

@@ -60,7 +60,9 @@ impl Camera {
             let ok = seconds.is_finite()
                 && seconds.abs() < 1e9
                 && centre.iter().all(|c| c.is_finite())
-                && waypoints.last().is_none_or(|&(t, _): &(Time, Point)| ((seconds * 1e6).round() as Time) > t);
+                && waypoints
+                    .last()
+                    .is_none_or(|&(t, _): &(Time, Point)| ((seconds * 1e6).round() as Time) > t);
             if !ok {
                 return Err(CameraError::Path);
             }
@@ -116,7 +118,11 @@ impl Camera {
 }
 
 fn check_polygon(polygon: &[Point]) -> Result<(), CameraError> {
-    if polygon.len() >= 3 && polygon.iter().all(|p| p[0].is_finite() && p[1].is_finite() && p[0].abs() < 1e7 && p[1].abs() < 1e7) {
+    if polygon.len() >= 3
+        && polygon
+            .iter()
+            .all(|p| p[0].is_finite() && p[1].is_finite() && p[0].abs() < 1e7 && p[1].abs() < 1e7)
+    {
         Ok(())
     } else {
         Err(CameraError::Footprint)

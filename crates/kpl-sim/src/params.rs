@@ -230,7 +230,8 @@ impl Params {
             3600.0,
             "between 0.001 and 3600",
         )?;
-        let size_ok = |size: &[f64]| size.len() == 2 && size.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= 1e6);
+        let size_ok =
+            |size: &[f64]| size.len() == 2 && size.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= 1e6);
         if !self.footprint_size_m.is_empty() && !size_ok(&self.footprint_size_m) {
             return Err(ParamsError::OutOfRange {
                 name: "footprint_size_m",

@@ -135,10 +135,15 @@ impl VehicleTypes {
                                 .parse::<f64>()
                                 .ok()
                                 .filter(|v| v.is_finite() && *v > 0.0 && *v < 1000.0)
-                                .ok_or_else(|| format!("vType {id}: `{name}` is not a size in metres: {text:?}")),
+                                .ok_or_else(|| {
+                                    format!("vType {id}: `{name}` is not a size in metres: {text:?}")
+                                }),
                         }
                     };
-                    let size = (number("length", class_size.0).map_err(error)?, number("width", class_size.1).map_err(error)?);
+                    let size = (
+                        number("length", class_size.0).map_err(error)?,
+                        number("width", class_size.1).map_err(error)?,
+                    );
                     types.sizes.insert(id.clone(), size);
                 }
                 Event::Eof => break,
@@ -244,7 +249,12 @@ struct FcdReader {
 }
 
 impl FcdReader {
-    fn vehicle(&mut self, e: &BytesStart<'_>, time_s: &str, problems: &mut Vec<Problem>) -> Option<Observation> {
+    fn vehicle(
+        &mut self,
+        e: &BytesStart<'_>,
+        time_s: &str,
+        problems: &mut Vec<Problem>,
+    ) -> Option<Observation> {
         let location = |id: &str| format!("timestep {time_s}, vehicle {id:?}");
         let attributes = match attributes_of(e) {
             Ok(a) => a,
@@ -259,7 +269,8 @@ impl FcdReader {
             bad("a vehicle without an id".to_string());
             return None;
         }
-        let number = |name: &str| attributes.get(name).map(|t| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()));
+        let number =
+            |name: &str| attributes.get(name).map(|t| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()));
         let (x, y) = match (number("x"), number("y")) {
             (Some(Some(x)), Some(Some(y))) if x.abs() < 1e7 && y.abs() < 1e7 => (x, y),
             _ => {
@@ -549,7 +560,8 @@ impl RowReader {
                 if self.last_time.is_some_and(|last| row.time < last) {
                     problems.push(Problem {
                         location: format!("line {}", self.line_number),
-                        error: "time goes backwards; rows must be sorted by time. The row is skipped".to_string(),
+                        error: "time goes backwards; rows must be sorted by time. The row is skipped"
+                            .to_string(),
                     });
                     continue;
                 }
@@ -638,14 +650,19 @@ fn open_steps(path: &Path, types: VehicleTypes) -> Result<Box<dyn StepReader>, R
             if let Some(unknown) = header.split(',').find(|c| column_of(c) == Column::Unknown) {
                 return Err(RecordingError::Format {
                     path: path.to_path_buf(),
-                    message: format!("unknown CSV column {unknown:?} (columns: time, id, x, y, heading, length, width)"),
+                    message: format!(
+                        "unknown CSV column {unknown:?} (columns: time, id, x, y, heading, length, width)"
+                    ),
                 });
             }
             rows.csv_header = Some(columns);
             Box::new(rows)
         }
         None => {
-            return Err(RecordingError::Format { path: path.to_path_buf(), message: "the file is empty".to_string() });
+            return Err(RecordingError::Format {
+                path: path.to_path_buf(),
+                message: "the file is empty".to_string(),
+            });
         }
     })
 }
@@ -676,11 +693,16 @@ impl std::fmt::Debug for Playback {
 
 impl Playback {
     /// Opens a recording; its first recorded time is the start.
-    pub fn open(path: &Path, types: VehicleTypes, network: Arc<RoadNetwork>) -> Result<Playback, RecordingError> {
+    pub fn open(
+        path: &Path,
+        types: VehicleTypes,
+        network: Arc<RoadNetwork>,
+    ) -> Result<Playback, RecordingError> {
         let mut steps = open_steps(path, types)?;
         let mut problems = Vec::new();
         let Some(first) = steps.next_step(&mut problems) else {
-            let detail = problems.first().map(|p| format!(" ({}: {})", p.location, p.error)).unwrap_or_default();
+            let detail =
+                problems.first().map(|p| format!(" ({}: {})", p.location, p.error)).unwrap_or_default();
             return Err(RecordingError::Format {
                 path: path.to_path_buf(),
                 message: format!("it has no vehicle positions{detail}"),
@@ -724,8 +746,10 @@ impl Playback {
         // Taken out while the states are made (`state_of` updates the vehicles' memory).
         let (before, after) = (self.before.take(), self.after.take());
         if let Some(before) = &before {
-            let next: HashMap<&str, &Observation> =
-                after.as_ref().map(|a| a.vehicles.iter().map(|o| (&*o.name, o)).collect()).unwrap_or_default();
+            let next: HashMap<&str, &Observation> = after
+                .as_ref()
+                .map(|a| a.vehicles.iter().map(|o| (&*o.name, o)).collect())
+                .unwrap_or_default();
             let after_time = after.as_ref().map_or(before.time, |a| a.time);
             for obs in &before.vehicles {
                 let later = next.get(&*obs.name).copied();
@@ -750,7 +774,14 @@ impl Playback {
         (states, gone)
     }
 
-    fn state_of(&mut self, a: &Observation, ta: Time, b: Option<&Observation>, tb: Time, now: Time) -> CarState {
+    fn state_of(
+        &mut self,
+        a: &Observation,
+        ta: Time,
+        b: Option<&Observation>,
+        tb: Time,
+        now: Time,
+    ) -> CarState {
         let next_id = CarId(self.ids.len() as u32 + 1);
         let id = *self.ids.entry(a.name.clone()).or_insert(next_id);
         let span = (tb - ta) as f64 / 1e6;
@@ -779,9 +810,12 @@ impl Playback {
             (None, Some(v)) => v,
             (None, None) => [0.0, 0.0],
         };
-        let lane_name = if u < 0.5 { a.lane.clone() } else { b.and_then(|b| b.lane.clone()).or(a.lane.clone()) };
+        let lane_name =
+            if u < 0.5 { a.lane.clone() } else { b.and_then(|b| b.lane.clone()).or(a.lane.clone()) };
         let named = lane_name.as_deref().and_then(|name| self.network.lane_by_name(name)).map(|l| l.id);
-        let snapped = self.network.snap(pos, &SnapHint { heading: Some(heading), previous: self.lanes.get(&id).copied() });
+        let snapped = self
+            .network
+            .snap(pos, &SnapHint { heading: Some(heading), previous: self.lanes.get(&id).copied() });
         let on_lane = match (named, snapped) {
             (Some(lane), _) => {
                 let projection = self.network.lane(lane).path.project(pos);

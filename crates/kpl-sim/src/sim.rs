@@ -113,7 +113,9 @@ impl UavTrackerSim {
         if let Some(file) = &params.occluders_file {
             extra.extend(kpl_roads::load::read_occluders(Path::new(file), &network)?);
         }
-        if let Some(bad) = extra.iter().find(|o| o.area.len() < 3 || o.area.iter().flatten().any(|c| !c.is_finite())) {
+        if let Some(bad) =
+            extra.iter().find(|o| o.area.len() < 3 || o.area.iter().flatten().any(|c| !c.is_finite()))
+        {
             return Err(ParamsError::OutOfRange {
                 name: "occluders",
                 expected: "polygons of at least 3 corners [x, y] with finite coordinates",

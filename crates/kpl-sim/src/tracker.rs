@@ -241,7 +241,13 @@ impl Tracker {
         (percepts, visibility)
     }
 
-    fn false_positives_frame(&mut self, net: &RoadNetwork, view: &View<'_>, dt_s: f64, percepts: &mut Vec<Percept>) {
+    fn false_positives_frame(
+        &mut self,
+        net: &RoadNetwork,
+        view: &View<'_>,
+        dt_s: f64,
+        percepts: &mut Vec<Percept>,
+    ) {
         self.false_positives.retain_mut(|fp| {
             fp.frames_left -= 1;
             fp.frames_left > 0

@@ -349,7 +349,10 @@ fn parameters_have_defaults_docs_and_clear_errors() {
     for info in &described {
         assert!(serialized.get(info.name).is_some(), "{} is documented but not a field", info.name);
         assert!(!info.doc.is_empty() && !info.doc.contains('\n'), "{}", info.name);
-        assert!(["int", "float", "string", "list<float>", "list<list<float>>", "list<list<list<float>>>"].contains(&info.ty));
+        assert!(
+            ["int", "float", "string", "list<float>", "list<list<float>>", "list<list<list<float>>>"]
+                .contains(&info.ty)
+        );
     }
     assert_eq!(described.iter().find(|p| p.name == "rate_hz").unwrap().default, "10.0");
 
