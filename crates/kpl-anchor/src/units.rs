@@ -127,11 +127,27 @@ impl LinkUnit for SnapToLane {
             return Err("snapping to a lane needs a `pos` (vec2)".to_string());
         };
         let vel = velocity(from);
+        let previous_lane = previous.and_then(|p| previous_lane(&self.network, p));
         let hint = SnapHint {
             heading: heading_of_velocity(vel, self.min_heading_speed_mps),
-            previous: previous.and_then(|p| previous_lane(&self.network, p)),
+            previous: previous_lane,
         };
-        let snapped = self.network.snap(pos, &hint);
+        // Standing still, the velocity says nothing and one noisy position little: the lane is
+        // chosen for the middle of this position and the last one (the previous state's point
+        // on its lane plus its `lane_offset`), which halves the noise's variance.
+        let query = match (hint.heading, previous, previous_lane) {
+            (None, Some(previous), Some(lane)) => last_position(&self.network, previous, lane)
+                .map_or(pos, |last| geom::scale(geom::add(pos, last), 0.5)),
+            _ => pos,
+        };
+        let snapped = self.network.snap(query, &hint).map(|s| {
+            // The lane chosen, the point and the offset of this measurement.
+            let projection = self.network.lane(s.lane).path.project(pos);
+            let mut at = self.network.lane_position(s.lane, projection.offset);
+            at.point = projection.point;
+            at.lateral_m = projection.lateral;
+            at
+        });
         let (pos, vel, road, lane_offset) = match &snapped {
             Some(lane) => {
                 let along = geom::unit(lane.heading);
@@ -171,6 +187,20 @@ impl LinkUnit for SnapToLane {
     fn functions(&self) -> Vec<Function> {
         vec![on_road(self.network.clone())]
     }
+}
+
+/// The unsnapped position a previous state stood for: its point on `lane` moved sideways by its
+/// `lane_offset`.
+fn last_position(network: &RoadNetwork, previous: &Record, lane: kpl_roads::LaneId) -> Option<[f64; 2]> {
+    let point = position(previous)?;
+    let offset = previous.get("lane_offset").and_then(Value::as_f64)?;
+    let path = &network.lane(lane).path;
+    let along = path.project(point);
+    if along.lateral.abs() > 0.05 {
+        return None; // not a point on that lane
+    }
+    let left = geom::left_normal(geom::unit(path.heading_at(along.offset)));
+    Some(geom::add(along.point, geom::scale(left, offset)))
 }
 
 /// `on_road(p)`: whether a position (or an object's `pos`) is on the paved surface of the network.

@@ -43,8 +43,10 @@ pub const HEADING_PENALTY_M: f64 = 10.0;
 /// change), in metres.
 pub const LANE_CHANGE_PENALTY_M: f64 = 1.0;
 /// What snapping adds for a lane that does not continue the previous lane (neither the lane
-/// itself, nor a lane a few steps before or after it, nor a neighbour of those), in metres.
-pub const DISCONTINUITY_PENALTY_M: f64 = 5.0;
+/// itself, nor a lane a few steps before or after it, nor a neighbour of those), in metres. Less
+/// than the distance between neighbouring lane centres, so that a wrong first guess is corrected
+/// by the measurements that follow.
+pub const DISCONTINUITY_PENALTY_M: f64 = 2.0;
 /// Side of a spatial-grid cell.
 const GRID_CELL_M: f64 = 15.0;
 
