@@ -402,7 +402,8 @@ pub(crate) fn parts_of(text: &str) -> Result<Parts, NetworkError> {
         }
     }
 
-    // Connections: the lane graph.
+    // Connections: the lane graph, by lane name first (source, destination, U-turn).
+    let mut links: Vec<(String, String, bool)> = Vec::new();
     for c in &raw.connections {
         let (Some(from), Some(from_lane)) =
             (problems.text(c, "connection", "from"), problems.text(c, "connection", "fromLane"))
@@ -429,19 +430,38 @@ pub(crate) fn parts_of(text: &str) -> Result<Parts, NetworkError> {
                 problems.unknown(c, "connection", "lane", name);
             }
         }
-        // A connection of lanes cars may not use (bicycles, pedestrians) is left out quietly.
-        let (Some(&src), Some(&dst)) = (lane_index.get(&src_name), lane_index.get(&dst_name)) else {
-            continue;
-        };
-        if src == dst {
-            continue;
+        links.push((src_name, dst_name, c.get("dir") == Some("t")));
+    }
+    // An internal lane of no length (SUMO writes them where lanes meet without a curve) is left
+    // out of the model: what leads into it leads on to what follows it.
+    let mut skipped: HashMap<&str, Vec<&str>> = HashMap::new();
+    for (src, dst, _) in &links {
+        if src.starts_with(':') && !lane_index.contains_key(src) && all_lane_ids.contains(src.as_str()) {
+            skipped.entry(src.as_str()).or_default().push(dst.as_str());
         }
-        lanes[src.0 as usize].successors.push(dst);
-        lanes[dst.0 as usize].predecessors.push(src);
-        if c.get("dir") == Some("t") {
-            for lane in [src, dst] {
-                if matches!(lanes[lane.0 as usize].kind, LaneKind::Connector { .. }) {
-                    lanes[lane.0 as usize].turnaround = true;
+    }
+    for (src_name, dst_name, turnaround) in &links {
+        let Some(&src) = lane_index.get(src_name) else { continue };
+        let mut targets = vec![dst_name.as_str()];
+        for _ in 0..8 {
+            if !targets.iter().any(|t| skipped.contains_key(t)) {
+                break;
+            }
+            targets =
+                targets.iter().flat_map(|t| skipped.get(t).cloned().unwrap_or_else(|| vec![*t])).collect();
+        }
+        // A connection of lanes cars may not use (bicycles, pedestrians) is left out quietly.
+        for dst in targets.iter().filter_map(|t| lane_index.get(*t).copied()) {
+            if src == dst {
+                continue;
+            }
+            lanes[src.0 as usize].successors.push(dst);
+            lanes[dst.0 as usize].predecessors.push(src);
+            if *turnaround {
+                for lane in [src, dst] {
+                    if matches!(lanes[lane.0 as usize].kind, LaneKind::Connector { .. }) {
+                        lanes[lane.0 as usize].turnaround = true;
+                    }
                 }
             }
         }
