@@ -55,15 +55,20 @@ fn queries(c: &mut Criterion) {
 /// makes it), gzipped as shipped and from its text in memory; the baseline is decompressing the
 /// file alone, measured in the same run.
 fn load(c: &mut Criterion) {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic/sumo/town400/net.xml.gz");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic/sumo/town400/net.xml.gz");
     let text = kpl_roads::load::read_text(&path).expect("the shipped network");
     let mut group = c.benchmark_group("load_town400");
     group.sample_size(20);
-    group.bench_function("gunzip_only", |b| b.iter(|| kpl_roads::load::read_text(black_box(&path)).map(|t| t.len())));
+    group.bench_function("gunzip_only", |b| {
+        b.iter(|| kpl_roads::load::read_text(black_box(&path)).map(|t| t.len()))
+    });
     group.bench_function("parse_and_index", |b| {
         b.iter(|| RoadNetwork::from_sumo_str(black_box(&text)).map(|n| n.lanes().len()))
     });
-    group.bench_function("load_file", |b| b.iter(|| RoadNetwork::load(black_box(&path)).map(|n| n.lanes().len())));
+    group.bench_function("load_file", |b| {
+        b.iter(|| RoadNetwork::load(black_box(&path)).map(|n| n.lanes().len()))
+    });
     group.finish();
 }
 

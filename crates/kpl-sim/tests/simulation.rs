@@ -425,3 +425,29 @@ fn a_town_sized_for_ten_thousand_cars_holds_them() {
         frames.iter().map(|f| f.percepts.iter().filter(|p| p.source != PerceptSource::FalsePositive).count());
     assert!(detected.clone().all(|n| (8_800..=9_200).contains(&n)), "{:?}", detected.collect::<Vec<_>>());
 }
+
+/// Simulated traffic drives on SUMO networks too: along the lanes and through the connections
+/// SUMO gives, never off the road, leaving and entering at the border.
+#[test]
+fn simulated_cars_drive_on_sumo_networks() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic/sumo");
+    for name in ["grid", "random", "highway"] {
+        let params = Params {
+            network_file: Some(dir.join(name).join("net.xml.gz").to_string_lossy().into_owned()),
+            n_cars: 20,
+            seed: 3,
+            ..Params::default()
+        };
+        let (net, frames) = run(&params, 120.0);
+        let mut names = std::collections::BTreeSet::new();
+        for frame in &frames {
+            for car in &frame.cars {
+                assert!(net.on_road(car.pos), "{name}: {car:?} is off the road");
+                let lane = net.lane(car.lane.unwrap());
+                assert!(!lane.turnaround, "{name}: no U-turns");
+                names.insert(car.name.clone());
+            }
+        }
+        assert!(names.len() > 20, "{name}: cars left and new ones entered ({})", names.len());
+    }
+}
