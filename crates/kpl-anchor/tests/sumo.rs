@@ -158,8 +158,11 @@ fn sumo_grid_keeps_standing_cars_on_their_lane_and_gives_queued_cars_a_symbol() 
         );
     }
     eprintln!(
-        "grid: {cars} vehicles; switches WorldObject {} OnRoadObject {} Car {}; standing frames {standing}, \
+        "grid: {cars} vehicles, with a world object {} on-road object {} car {}; switches WorldObject {} OnRoadObject {} Car {}; standing frames {standing}, \
          off their road {now} (before {before}); car symbol delay median {median:.1} s, over 3 s {late}, max {:.1} s",
+        score.cars_with("WorldObject"),
+        score.cars_with("OnRoadObject"),
+        score.cars_with("Car"),
         score.switches("WorldObject"),
         score.switches("OnRoadObject"),
         score.switches("Car"),
@@ -206,7 +209,10 @@ fn sumo_highway_and_random_network_anchor_their_traffic() {
             assert!(switches * 10 <= score.cars_with(ty), "{spec} {ty}: {switches} switches");
         }
         eprintln!(
-            "{spec}: {cars} vehicles; switches WorldObject {} OnRoadObject {} Car {}",
+            "{spec}: {cars} vehicles, with a world object {} on-road object {} car {}; switches WorldObject {} OnRoadObject {} Car {}",
+            score.cars_with("WorldObject"),
+            score.cars_with("OnRoadObject"),
+            score.cars_with("Car"),
             score.switches("WorldObject"),
             score.switches("OnRoadObject"),
             score.switches("Car")

@@ -2,7 +2,8 @@
 //! the same model the JSON form builds:
 //!
 //! - `junction` (except `type="internal"`, SUMO's waiting points inside junctions): a node with its
-//!   `x`, `y`, `type` and `shape` (the junction's area); `incLanes` and `intLanes` tie lanes to it.
+//!   `x`, `y`, `type` and `shape` (the junction's area); `intLanes` says which internal lanes lie
+//!   inside it (every lane `incLanes` and `intLanes` name must be in the file).
 //! - `edge` without a `function` (or `function="normal"`): a road from `from` to `to`; its `lane`s
 //!   keep their `shape` (each direction of a street is its own edge, on its own side), `width`
 //!   (SUMO's default 3.2 m when absent), `speed`, and `allow` / `disallow`: only lanes that
@@ -462,6 +463,17 @@ pub(crate) fn parts_of(text: &str) -> Result<Parts, NetworkError> {
                     if matches!(lanes[lane.0 as usize].kind, LaneKind::Connector { .. }) {
                         lanes[lane.0 as usize].turnaround = true;
                     }
+                }
+            }
+        }
+    }
+
+    // Every lane a junction lists as incoming or internal is in the file.
+    for j in &raw.junctions {
+        for attribute in ["incLanes", "intLanes"] {
+            for lane in j.get(attribute).unwrap_or("").split_ascii_whitespace() {
+                if !all_lane_ids.contains(lane) {
+                    problems.unknown(j, "junction", "lane", lane);
                 }
             }
         }
