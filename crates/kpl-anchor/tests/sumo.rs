@@ -4,6 +4,7 @@
 //! having to drive first, symbols of cars that left the map are not driven off it, and identity
 //! switches stay rare.
 #![allow(clippy::unwrap_used, reason = "tests")]
+#![allow(clippy::print_stderr, reason = "tests say when an oracle is missing and what they measured")]
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -22,7 +23,7 @@ fn driver(name: &str) -> SimDriver {
 }
 
 fn driver_of(text: &str) -> SimDriver {
-    let spec = kpl_anchor::registry::check_text(&text).unwrap();
+    let spec = kpl_anchor::registry::check_text(text).unwrap();
     SimDriver::from_spec_in(&spec, Default::default(), &traffic_dir()).unwrap()
 }
 

@@ -3,6 +3,7 @@
 //! the test environment of `scripts/test`), and queried: lanes on their own side of the street,
 //! turns only where SUMO connects lanes, prediction that stops at the border.
 #![allow(clippy::unwrap_used, reason = "tests")]
+#![allow(clippy::print_stderr, reason = "tests say when an oracle is missing and what they measured")]
 
 use std::path::{Path, PathBuf};
 use std::sync::LazyLock;

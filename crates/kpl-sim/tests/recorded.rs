@@ -4,6 +4,7 @@
 //! occluders; SUMO's vehicle sizes checked against SUMO itself, and a scenario regenerated with
 //! SUMO and read back (both with the Python of `scripts/test`).
 #![allow(clippy::unwrap_used, reason = "tests")]
+#![allow(clippy::print_stderr, reason = "tests say when an oracle is missing and what they measured")]
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
