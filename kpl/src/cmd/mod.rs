@@ -11,3 +11,4 @@ pub mod graph;
 pub mod list;
 pub mod mtl;
 pub mod run;
+pub mod score;
