@@ -39,7 +39,7 @@ fn bridge_run() -> &'static Path {
         let dir = scratch("bridge");
         let spec = std::fs::read_to_string(workspace().join("specs/traffic/bridge.kpl")).unwrap();
         let spec = format!(
-            "{spec}\ncompute world = anchor.world_model(onroad_car)\nsink world_model = file.jsonl(world, path: \"bridge/world.jsonl\")\n"
+            "{spec}\ncompute world = anchor.world_model(onroad_car)\nsink world_model = file.jsonl(world, path: \"world.jsonl\")\n"
         );
         let spec_path = dir.join("bridge_world.kpl");
         std::fs::write(&spec_path, spec).unwrap();
@@ -52,7 +52,7 @@ fn bridge_run() -> &'static Path {
 
 /// The plain bridge recording alone (tracks.jsonl), as `kpl run specs/traffic/bridge.kpl` writes it.
 fn tracks() -> PathBuf {
-    bridge_run().join("bridge/tracks.jsonl")
+    bridge_run().join("tracks.jsonl")
 }
 
 fn score_json(args: &[&str]) -> Value {
@@ -326,7 +326,7 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
         "{}",
         stderr(&o)
     );
-    let changes = bridge_run().join("bridge/changes.jsonl");
+    let changes = bridge_run().join("changes.jsonl");
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--stream", "onroad_car.changes"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("`onroad_car.changes` is not an object stream"), "{}", stderr(&o));

@@ -54,6 +54,11 @@ impl Source for Tracker {
             Ok(())
         })
     }
+
+    /// A car that leaves the map is replaced by a new one: the traffic never ends.
+    fn ends_by_itself(&self) -> bool {
+        false
+    }
 }
 
 /// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
