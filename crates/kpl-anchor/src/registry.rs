@@ -65,7 +65,7 @@ pub fn entries() -> Vec<Entry> {
             "Snaps a world object to the centre of the nearest lane of the road network.",
         ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
-        .computes(&["pos", "vel", "road", "lane_offset"], true)
+        .computes(&["pos", "vel", "road", "lane", "lane_offset"], true)
         .provides(on_road_signature()),
         Entry::new(EntryKind::Predict, "constant_velocity", "Moves on with the velocity it last had.")
             .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
