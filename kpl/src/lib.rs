@@ -46,6 +46,10 @@ enum Command {
     List(cmd::list::Args),
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
+    /// Launch every host of a deployed spec on this machine, with one summary.
+    Launch(cmd::launch::Args),
+    /// Make the keys of a deployment: mutual TLS between its hosts, authenticated messages.
+    Keys(cmd::keys::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -90,16 +94,20 @@ pub fn main() -> ExitCode {
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Launch(args) => cmd::launch::run(args),
+        Command::Keys(args) => cmd::keys::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),
     }
 }
 
-/// Logs go to stderr; `RUST_LOG` selects what is shown (default: warnings).
+/// Logs go to stderr; `RUST_LOG` selects what is shown (default: warnings, and what the hosts of
+/// a deployment say about each other: who is up, who is awaited).
 fn init_tracing() {
     use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new("warn,kpl_zenoh::transport=info"));
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)

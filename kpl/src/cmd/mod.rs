@@ -8,6 +8,8 @@ pub mod cater;
 pub mod check;
 pub mod fmt;
 pub mod graph;
+pub mod keys;
+pub mod launch;
 pub mod list;
 pub mod mtl;
 pub mod run;
