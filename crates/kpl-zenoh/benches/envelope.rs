@@ -20,8 +20,12 @@ fn messages() -> Vec<(&'static str, Sample, ValueType)> {
     let text = Value::str(&"x".repeat(64));
     let floats: Vec<Value> = (0..512).map(|i| Value::Float(f64::from(i) * 0.5)).collect();
     vec![
-        ("string 64 B", Sample::new(1, 2, text), ValueType::String),
-        ("512 floats", Sample::new(1, 2, Value::List(floats.into())), ValueType::List(Box::new(ValueType::Float))),
+        ("string 64 B", Sample::new(1, 2, text), ValueType::Str),
+        (
+            "512 floats",
+            Sample::new(1, 2, Value::List(floats.into())),
+            ValueType::List(Box::new(ValueType::Float)),
+        ),
     ]
 }
 
@@ -38,7 +42,9 @@ fn envelope(c: &mut Criterion) {
                 black_box(codec::decode(&bytes, &ty).expect("decodable"))
             })
         });
-        for (label, key) in [("envelope: seal + open", None), ("envelope with keys: seal + open", Some(&secret))] {
+        for (label, key) in
+            [("envelope: seal + open", None), ("envelope with keys: seal + open", Some(&secret))]
+        {
             let mut sequence = 0u64;
             group.bench_function(label, |b| {
                 b.iter(|| {

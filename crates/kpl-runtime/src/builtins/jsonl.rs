@@ -333,17 +333,17 @@ mod tests {
     #[test]
     fn lines_are_bounded() {
         let text = "one\r\ntwo\n\nthree-is-long\nlast";
-        let mut lines = LineReader::new(std::io::BufReader::new(text.as_bytes()), 8);
+        let mut lines = LineReader::new(BufReader::new(text.as_bytes()), 8);
         assert_eq!(lines.next_line().unwrap(), Line::Text("one"));
         assert_eq!(lines.next_line().unwrap(), Line::Text("two"));
         assert_eq!(lines.next_line().unwrap(), Line::Text(""));
         assert_eq!(lines.next_line().unwrap(), Line::TooLong);
         // An endless stream without line breaks (as /dev/zero) is cut at the limit: the reader
         // holds at most the limit and one buffer.
-        let mut zeros = LineReader::new(std::io::BufReader::new(std::io::repeat(0)), 1 << 20);
+        let mut zeros = LineReader::new(BufReader::new(std::io::repeat(0)), 1 << 20);
         assert_eq!(zeros.next_line().unwrap(), Line::TooLong);
         assert!(zeros.buffer.capacity() <= 4 << 20, "{}", zeros.buffer.capacity());
-        let mut invalid = LineReader::new(std::io::BufReader::new(&b"\xff\xfe\n"[..]), 8);
+        let mut invalid = LineReader::new(BufReader::new(&b"\xff\xfe\n"[..]), 8);
         assert_eq!(invalid.next_line().unwrap(), Line::NotUtf8);
         assert_eq!(invalid.next_line().unwrap(), Line::End);
     }
