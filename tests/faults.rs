@@ -412,6 +412,12 @@ fn hosts_killed_restarted_frozen_and_late_resume_every_stream() {
     );
     // The late c missed what a and b sent before it came: counted by the consumers' first runs'
     // logs as lost samples, and nothing hung.
+    // a and b said they waited for c while it was late, then went on without it.
+    for host in ["a", "b"] {
+        let first = d.runs.iter().find(|r| r.0 == host).unwrap();
+        assert!(first.3.contains("waiting for host(s) `c`"), "{host} reported its wait:\n{}", first.3);
+        assert!(first.3.contains("without host(s) `c`"), "{host} went on without c:\n{}", first.3);
+    }
     let first_c = d.runs.iter().find(|r| r.0 == "c").unwrap();
     assert!(first_c.3.contains("lost on the way"), "c counted what it missed:\n{}", first_c.3);
 }

@@ -218,6 +218,26 @@ fn a_consumer_gives_up_on_a_killed_producer_that_does_not_come_back() {
     assert!(why.contains("went away and did not come back within 3 s"), "{why}");
 }
 
+#[test]
+fn a_host_whose_producer_never_comes_ends_incomplete() {
+    let base = free_ports(2);
+    let out = out_dir("never");
+    let consumer = host_with(
+        "specs/zenoh/endless.kpl",
+        "consumer",
+        &out,
+        &[],
+        &[("KPL_ZENOH_PORT_BASE", base.to_string()), ("KPL_ZENOH_GIVE_UP", "2".into())],
+    );
+    let (code, stderr) = finish(consumer, "consumer");
+    assert_eq!(code, Some(3), "{stderr}");
+    assert!(stderr.contains("host `producer` did not appear within 2 s"), "{stderr}");
+    assert!(stderr.contains("nothing arrived on `ticks` from another host"), "{stderr}");
+    let report = summary(&out);
+    assert_eq!(report["transport"]["inbound"][0]["received"], 0);
+    assert_eq!(report["transport"]["hosts"][0]["first_seen_s"], Value::Null);
+}
+
 fn summary(out: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
 }
@@ -467,7 +487,17 @@ fn kpl_launch_runs_every_host_with_one_summary() {
     assert_eq!(result.status.code(), Some(0), "{stderr}");
     assert!(out.join("keys/a.pem").exists() && out.join("keys/secret").exists());
     assert!(stderr.contains(&format!("--keys {}", out.join("keys").display())), "{stderr}");
-    assert_eq!(of_stream(&lines(&out.join("b/received.jsonl")), "ticks").len(), 300);
+    // Every tick arrived, or its loss is counted: a TLS link between the two processes has been
+    // seen to drop and come back within milliseconds on this loaded machine (zenoh closes it and
+    // the host dials again), and what was sent meanwhile is lost, as docs/streams.md says.
+    let received = of_stream(&lines(&out.join("b/received.jsonl")), "ticks").len() as u64;
+    let ticks = &summary(&out.join("b"))["transport"]["inbound"][1];
+    assert_eq!(ticks["stream"], "ticks");
+    assert_eq!(ticks["received"].as_u64(), Some(received));
+    assert_eq!(received + ticks["lost"].as_u64().unwrap(), 300, "{stderr}");
+    if received < 300 {
+        assert!(stderr.contains("went away"), "a loss comes with its reason:\n{stderr}");
+    }
 }
 
 fn python() -> Option<String> {

@@ -39,6 +39,17 @@ impl StopSignal {
         self.interrupted.load(Ordering::SeqCst)
     }
 
+    /// Resolves once the run is interrupted (not when it merely stops).
+    pub async fn interrupted(&self) {
+        loop {
+            let notified = self.notify.notified();
+            if self.is_interrupted() {
+                return;
+            }
+            notified.await;
+        }
+    }
+
     pub fn is_stopped(&self) -> bool {
         self.stopped.load(Ordering::SeqCst)
     }
@@ -119,7 +130,12 @@ impl Outputs {
         for port in &mut self.ports {
             port.local.clear();
             for remote in &mut port.remote {
-                remote.end(finished).await;
+                // A finished stream's end may wait for its consumers to confirm it; Ctrl-C or
+                // SIGTERM cuts that wait short (the end itself has gone out by then).
+                tokio::select! {
+                    () = remote.end(finished) => {}
+                    () = self.stop.interrupted(), if finished => {}
+                }
             }
             port.remote.clear();
         }

@@ -48,7 +48,7 @@ use crate::envelope::{Envelope, Refusal, Sequence};
 use crate::keys;
 use crate::session::{HostSession, Sessions};
 
-/// How often a start-up wait says who it is still waiting for.
+/// How often a start-up wait says who it is still waiting for (after a first report at 1 s).
 const REPORT_EVERY: Duration = Duration::from_secs(5);
 
 /// Opens the [`ZenohTransport`] of a host (what `kpl run --host` uses).
@@ -343,13 +343,15 @@ impl Transport for ZenohTransport {
         Box::pin(async move {
             self.declare_inbound().await?;
             let early = self.declared.lock().await.as_mut().and_then(|d| d.remove(key));
-            let receiver = match early {
-                Some(receiver) => receiver,
-                None => {
-                    ZenohReceiver::declare(&self.session, key, self.plan.value_type(key), &self.plan.host)
-                        .await?
-                }
-            };
+            // Every stream this host receives was declared, with its producing host, up front.
+            let receiver = early.ok_or_else(|| {
+                TransportError(format!(
+                    "host `{}` receives no stream `{}` from another host in deployment `{}`",
+                    self.plan.host,
+                    key.stream_name(),
+                    self.plan.deployment
+                ))
+            })?;
             Ok(Box::new(receiver) as Box<dyn RemoteReceiver>)
         })
     }
@@ -358,7 +360,8 @@ impl Transport for ZenohTransport {
         Box::pin(async move {
             let wait = self.session.options.subscriber_wait;
             let start = Instant::now();
-            let mut next_report = start + REPORT_EVERY;
+            // The first report comes soon, so that a host that waits says so.
+            let mut next_report = start + Duration::from_secs(1);
             loop {
                 let missing = self.missing();
                 if missing.is_empty() {
@@ -1057,9 +1060,6 @@ impl ZenohReceiver {
 
     /// Tells the producing host this one has the end (a token it keeps until its session closes).
     fn confirm_end(&self) {
-        if self.producer_host.is_none() {
-            return;
-        }
         match self.session.liveliness().declare_token(keys::done_token(&self.key, &self.host)).wait() {
             Ok(token) => {
                 if let Ok(mut keeper) = self.keeper.lock() {

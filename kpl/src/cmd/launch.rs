@@ -98,7 +98,7 @@ pub fn run(args: Args) -> ExitCode {
             a.extend(["--keys".to_string(), keys.display().to_string()]);
         }
         if let Some(d) = args.duration {
-            a.extend(["--for".to_string(), format!("{}ms", d / 1000)]);
+            a.extend(["--for".to_string(), format!("{d}us")]);
         }
         if args.seed != 0 {
             a.extend(["--seed".to_string(), args.seed.to_string()]);
