@@ -517,6 +517,8 @@ struct Outbound {
     consumers: BTreeSet<String>,
     /// The consuming hosts subscribed now.
     present: Mutex<BTreeSet<String>>,
+    /// The consuming hosts that subscribed at some point of this run.
+    seen: Mutex<BTreeSet<String>>,
     /// The consuming hosts that confirmed they have the end.
     done: Mutex<BTreeSet<String>>,
     /// The end, once the stream finished: what the end queryable answers.
@@ -532,6 +534,11 @@ impl Outbound {
 
     fn on_subscriber_token(&self, token: &zenoh::sample::Sample) {
         let Some(host) = keys::token_host(token.key_expr().as_str()) else { return };
+        if token.kind() == SampleKind::Put
+            && let Ok(mut seen) = self.seen.lock()
+        {
+            seen.insert(host.clone());
+        }
         if let Ok(mut present) = self.present.lock() {
             match token.kind() {
                 SampleKind::Put => present.insert(host),
@@ -628,6 +635,7 @@ impl ZenohSender {
             key: key.clone(),
             consumers,
             present: Mutex::new(BTreeSet::new()),
+            seen: Mutex::new(BTreeSet::new()),
             done: Mutex::new(BTreeSet::new()),
             ended: Mutex::new(None),
             report: Mutex::new(OutboundReport { stream: key.stream_name(), ..OutboundReport::default() }),
@@ -762,8 +770,16 @@ impl ZenohSender {
         let deadline = start + self.wait;
         loop {
             let done = self.state.done.lock().map(|d| d.clone()).unwrap_or_default();
-            let missing: Vec<String> =
-                self.state.consumers.iter().filter(|h| !done.contains(*h)).cloned().collect();
+            // A host never seen during this run has not started (or cannot reach this one): it
+            // is not waited for, and gives up on this host when it comes (KPL_ZENOH_GIVE_UP).
+            let seen = self.state.seen.lock().map(|s| s.clone()).unwrap_or_default();
+            let missing: Vec<String> = self
+                .state
+                .consumers
+                .iter()
+                .filter(|h| seen.contains(*h) && !done.contains(*h))
+                .cloned()
+                .collect();
             if missing.is_empty() {
                 tracing::debug!(stream = %self.key_expr, waited = ?start.elapsed(), "every consumer has the end");
                 return;
