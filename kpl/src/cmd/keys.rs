@@ -9,7 +9,7 @@ use clap::Args as ClapArgs;
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl keys specs/zenoh/two_hosts.kpl --out keys/two_hosts\n  kpl run specs/zenoh/two_hosts.kpl --host a --clock wall --keys keys/two_hosts\n\nFiles that exist are kept: after adding a host to the spec, run it again to add that host's\ncertificate, signed by the same authority. Each host needs ca.pem, secret, HOST.pem and HOST.key;\nca.key is needed only to add hosts (keep it apart).\nExit status: 0 done, 1 the spec has errors or no deploy section, 2 I/O errors."
+    after_help = "Examples:\n  kpl keys specs/zenoh/endless.kpl --out keys/endless\n  kpl run specs/zenoh/endless.kpl --host producer --clock wall --for 3s --keys keys/endless\n\nFiles that exist are kept: after adding a host to the spec, run it again to add that host's\ncertificate, signed by the same authority. Each host needs ca.pem, secret, HOST.pem and HOST.key;\nca.key is needed only to add hosts (keep it apart).\nExit status: 0 done, 1 the spec has errors or no deploy section, 2 I/O errors."
 )]
 pub struct Args {
     /// The spec whose hosts get keys.
