@@ -491,3 +491,27 @@ fn recorded_traffic_ends_the_run_with_its_recording() {
     let last = seen.last().unwrap()["valid"].as_i64().unwrap();
     assert!((239_000_000..=240_000_000).contains(&last), "{last}");
 }
+
+/// A reader that stops early (`kpl graph ... | head`) ends the command quietly, as it ends `cat`:
+/// killed by SIGPIPE (or done, if it wrote everything before the pipe closed), never a panic.
+#[test]
+fn a_reader_that_stops_early_is_not_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    for args in [
+        ["graph", "specs/ok/overview.kpl", "--format", "dot"],
+        ["check", "specs/ok/overview.kpl", "--format", "json"],
+    ] {
+        let mut child = kpl(&args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+        drop(child.stdout.take());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!stderr.contains("panicked"), "kpl {}: {stderr}", args.join(" "));
+        assert!(
+            output.status.success() || output.status.signal() == Some(13),
+            "kpl {}: {:?} {stderr}",
+            args.join(" "),
+            output.status
+        );
+    }
+}

@@ -104,6 +104,12 @@ pub fn main() -> ExitCode {
     };
     report::set_color(cli.color);
     init_tracing();
+    // A reader that stops early (`kpl check | head`, `kpl explain E0101 | less`) ends the command
+    // quietly, as it ends cat or grep, instead of a panic in `println!`. Not for the commands that
+    // run a deployment: they write their sinks out and report on stderr whatever happens to stdout.
+    if !matches!(cli.command, Command::Run(_) | Command::Launch(_)) {
+        sigpipe::reset();
+    }
     match cli.command {
         Command::Check(args) => cmd::check::run(args),
         Command::Graph(args) => cmd::graph::run(args),
