@@ -19,7 +19,8 @@ use std::sync::Arc;
 
 use kpl_core::{Time, TimeUnit, Value};
 use kpl_mtl::{
-    BinOp, CompileError, Context, EvalError, Formula, Function, InstanceId, Mtl, ProgressorGroup, SlotId, State, Term,
+    BinOp, CompileError, Context, EvalError, Formula, Function, InstanceId, Mtl, ProgressorGroup, SlotId,
+    State, Term,
 };
 use kpl_semantic::hir::{self, SPEC_TICK};
 use kpl_syntax::ast;
