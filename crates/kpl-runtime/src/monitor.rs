@@ -7,6 +7,11 @@
 //! streams the open formula is closed with finite-trace semantics and its verdict emitted at the
 //! last state's time. Objects quantified over (`forall c: Car . ...`) are the records of the
 //! latest snapshot of each producer of that type.
+//!
+//! One `Progressor` serves the monitor's whole life: starting over keeps what its engine learnt
+//! (the residuals and their cached transitions), and the objects of a quantifier that are in the
+//! same situation share one residual and its transitions (see `kpl_mtl`), so a monitor over
+//! thousands of cars progresses each distinct situation once per state.
 
 use std::sync::Arc;
 
@@ -26,8 +31,8 @@ enum Role {
 pub(crate) struct MonitorUnit {
     progressor: Progressor,
     roles: Vec<Role>,
-    slots: usize,
-    domains: usize,
+    /// The state handed to the progressor, refilled at every input.
+    state: SlotState,
     stats: Arc<ProcessStats>,
     last_valid: Option<kpl_core::Time>,
 }
@@ -73,8 +78,10 @@ pub(crate) fn build(
     Ok(MonitorUnit {
         progressor: Progressor::new(Arc::new(formula)),
         roles,
-        slots: ctx.slot_names().len(),
-        domains: ctx.domain_names().len(),
+        state: SlotState {
+            values: vec![None; ctx.slot_names().len()],
+            objects: vec![Vec::new(); ctx.domain_names().len()],
+        },
         stats,
         last_valid: None,
     })
@@ -86,7 +93,9 @@ impl Unit for MonitorUnit {
     }
 
     fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
-        let mut state = SlotState { values: vec![None; self.slots], objects: vec![Vec::new(); self.domains] };
+        let state = &mut self.state;
+        state.values.iter_mut().for_each(|v| *v = None);
+        state.objects.iter_mut().for_each(Vec::clear);
         for (role, value) in self.roles.iter().zip(input.values) {
             let Some(sample) = value else { continue };
             match role {
@@ -98,7 +107,7 @@ impl Unit for MonitorUnit {
                 },
             }
         }
-        match self.progressor.step(input.valid, &state) {
+        match self.progressor.step(input.valid, &self.state) {
             Ok(Some(verdict)) => {
                 out.emit(Value::Bool(verdict));
                 self.progressor.reset();
