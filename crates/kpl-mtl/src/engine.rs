@@ -45,6 +45,8 @@ const IMPLICATION_DEPTH: u32 = 3;
 /// Most entries of the transition cache; past this it starts over (and the nodes only it kept
 /// are reclaimed by the next collection).
 const CACHE_LIMIT: usize = 1 << 17;
+/// Recent instantiations kept per compiled node.
+const INSTANTIATIONS: usize = 4;
 
 /// How an engine works. The verdicts are the same whatever the configuration (the differential
 /// tests check it); only the cost changes.
@@ -127,6 +129,8 @@ pub(crate) struct Engine {
     cache: Cache,
     scratch: Scratch,
     atoms: AtomMemo,
+    /// Per compiled node, `INSTANTIATIONS` recent instantiations: (atom values, result).
+    instantiations: Vec<(u64, NodeId)>,
     epoch: u32,
     /// Collect when the arena reaches this many nodes.
     next_collect: usize,
@@ -137,6 +141,7 @@ pub(crate) struct Engine {
 impl Engine {
     pub fn new(formula: Arc<Formula>, config: EngineConfig) -> Engine {
         Engine {
+            instantiations: vec![(0, NONE); formula.nodes.len() * INSTANTIATIONS],
             formula,
             arena: Arena::new(),
             cache: Cache::default(),
@@ -195,6 +200,7 @@ impl Engine {
             cache: &mut self.cache,
             scratch: &mut self.scratch,
             atoms: &mut self.atoms,
+            instantiations: &mut self.instantiations,
             stats: &mut self.stats,
             use_cache: self.config.transition_cache,
             epoch: self.epoch,
@@ -232,6 +238,7 @@ impl Engine {
         }
         self.scratch.memo.clear();
         self.scratch.inst.clear();
+        self.instantiations.iter_mut().for_each(|e| *e = (0, NONE));
         self.atoms.forget_envs();
         let live = self.arena.len();
         self.next_collect = (2 * live).max(live + self.config.collect_slack.max(1));
@@ -245,6 +252,8 @@ struct Stepper<'a, S: State + ?Sized> {
     cache: &'a mut Cache,
     scratch: &'a mut Scratch,
     atoms: &'a mut AtomMemo,
+    /// Per compiled node, `INSTANTIATIONS` recent instantiations: (atom values, result).
+    instantiations: &'a mut [(u64, NodeId)],
     stats: &'a mut EngineStats,
     use_cache: bool,
     epoch: u32,
@@ -362,7 +371,28 @@ impl<S: State + ?Sized> Stepper<'_, S> {
                     node.hi - self.d
                 };
                 let lo = node.lo.saturating_sub(self.d);
-                self.temporal(op, lo, hi, node.tpl, env, false)?
+                // The node's last transition, if it recurs (no table lookup below the root).
+                let inline = self.use_cache && node.cacheable;
+                let value = if inline {
+                    let (value, failed) =
+                        self.atoms.word(node.reads, env, &self.arena.envs, self.formula, self.state);
+                    if failed == 0
+                        && node.last_next != NONE
+                        && node.last_value == value
+                        && node.last_d == self.d
+                    {
+                        return Ok(self.remember(id, env, node.last_next));
+                    }
+                    (failed == 0).then_some(value)
+                } else {
+                    None
+                };
+                let next = self.temporal(op, lo, hi, node.tpl, env, false)?;
+                if let Some(value) = value {
+                    let node = &mut self.arena.nodes[id as usize];
+                    (node.last_value, node.last_d, node.last_next) = (value, self.d, next);
+                }
+                next
             }
             Kind::Bind => {
                 let inner = self.arena.kids[node.kids as usize];
@@ -473,6 +503,28 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             return Ok(*memo);
         }
         let formula = self.formula;
+        let info = formula.info[tpl as usize];
+        // What a compiled node without quantifiers gives at a state depends only on the values of
+        // its atoms: a few recent instantiations are kept per node.
+        let slot = if self.use_cache && info.cacheable && env == 0 && info.reads != 0 {
+            let (value, failed) = self.atoms.word(info.reads, 0, &self.arena.envs, formula, self.state);
+            if failed == 0 {
+                let slot = tpl as usize * INSTANTIATIONS
+                    + (value.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62) as usize;
+                if let Some(&(v, result)) = self.instantiations.get(slot)
+                    && v == value
+                    && result != NONE
+                {
+                    self.scratch.inst[tpl as usize] = (self.epoch, result);
+                    return Ok(result);
+                }
+                Some((slot, value))
+            } else {
+                None
+            }
+        } else {
+            None
+        };
         let result = match &formula.nodes[tpl as usize] {
             TNode::Const(b) => {
                 if *b {
@@ -499,6 +551,11 @@ impl<S: State + ?Sized> Stepper<'_, S> {
             self.scratch.inst[tpl as usize] = (self.epoch, result);
         } else {
             self.scratch.inst_env.insert((tpl, env), result);
+        }
+        if let Some((slot, value)) = slot
+            && let Some(entry) = self.instantiations.get_mut(slot)
+        {
+            *entry = (value, result);
         }
         Ok(result)
     }
@@ -665,6 +722,9 @@ impl<S: State + ?Sized> Stepper<'_, S> {
     /// the same object merge as they do without quantifiers).
     fn group_binds(&mut self, is_and: bool, items: &mut Vec<NodeId>) {
         let arena = &*self.arena;
+        if items.iter().filter(|id| arena.nodes[**id as usize].kind == Kind::Bind).nth(1).is_none() {
+            return;
+        }
         let mut binds: Vec<(u32, NodeId, NodeId)> = items
             .iter()
             .filter_map(|id| {

@@ -57,6 +57,8 @@ pub(crate) struct Node {
     pub kids: u32,
     pub n_kids: u32,
     pub target: NodeId,
+    /// The node's hash (of what it stands for), kept for the interning table.
+    pub hash: u32,
     /// The atoms the node's progression may read, as a bit set over the first word of atoms.
     pub reads: u64,
     pub lo: u64,
@@ -93,6 +95,7 @@ impl Node {
             kids: 0,
             n_kids: 0,
             target: NONE,
+            hash: 0,
             reads: 0,
             lo: 0,
             hi: 0,
@@ -141,13 +144,17 @@ pub(crate) type Env = Arc<[Binding]>;
 /// The hash-consed nodes of one owner's residuals.
 pub(crate) struct Arena {
     pub nodes: Vec<Node>,
-    /// Per node: the previous node with the same hash (`NONE` if none).
-    chain: Vec<u32>,
     pub kids: Vec<NodeId>,
-    table: HashMap<u64, u32, BuildHasherDefault<IdHasher>>,
+    /// The interning table: node ids by hash, open addressing with linear probing, at most half
+    /// full (`NONE`: empty slot). Its length is a power of two.
+    table: Vec<NodeId>,
     /// Environments of `Bind` nodes; `envs[0]` is the empty one.
     pub envs: Vec<Env>,
     env_table: HashMap<Env, u32>,
+    /// Buffers that compaction fills and swaps in, kept to be reused.
+    spare_nodes: Vec<Node>,
+    spare_kids: Vec<NodeId>,
+    stack: Vec<NodeId>,
 }
 
 impl fmt::Debug for Arena {
@@ -160,15 +167,16 @@ impl Arena {
     pub fn new() -> Arena {
         let mut arena = Arena {
             nodes: Vec::new(),
-            chain: Vec::new(),
             kids: Vec::new(),
-            table: HashMap::default(),
+            table: vec![NONE; 64],
             envs: vec![Arc::from(Vec::new())],
             env_table: HashMap::new(),
+            spare_nodes: Vec::new(),
+            spare_kids: Vec::new(),
+            stack: Vec::new(),
         };
         for kind in [Kind::True, Kind::False] {
             arena.nodes.push(Node { cacheable: true, simplified: true, ..Node::blank(kind) });
-            arena.chain.push(NONE);
         }
         arena
     }
@@ -203,28 +211,28 @@ impl Arena {
     pub fn intern(&mut self, mut node: Node, kids: &[NodeId]) -> NodeId {
         node.n_kids = kids.len() as u32;
         let h = Arena::hash(&node, kids);
-        let id = self.nodes.len() as u32;
-        let head = match self.table.entry(h) {
-            std::collections::hash_map::Entry::Vacant(slot) => {
-                slot.insert(id);
-                NONE
+        node.hash = h as u32;
+        let mask = self.table.len() - 1;
+        let mut slot = (node.hash as usize) & mask;
+        loop {
+            let candidate = self.table[slot];
+            if candidate == NONE {
+                break;
             }
-            std::collections::hash_map::Entry::Occupied(mut slot) => {
-                let head = *slot.get();
-                let mut candidate = head;
-                while candidate != NONE {
-                    let other = &self.nodes[candidate as usize];
-                    if other.same_key(&node)
-                        && self.kids[other.kids as usize..(other.kids + other.n_kids) as usize] == *kids
-                    {
-                        return candidate;
-                    }
-                    candidate = self.chain[candidate as usize];
-                }
-                slot.insert(id);
-                head
+            let other = &self.nodes[candidate as usize];
+            // (Children compared one by one: a call to `memcmp` for these short slices cost more
+            // than the rest of the lookup.)
+            if other.hash == node.hash
+                && other.same_key(&node)
+                && self.kids[other.kids as usize..(other.kids + other.n_kids) as usize]
+                    .iter()
+                    .zip(kids)
+                    .all(|(a, b)| a == b)
+            {
+                return candidate;
             }
-        };
+            slot = (slot + 1) & mask;
+        }
         match node.kind {
             Kind::And | Kind::Or => {
                 node.cacheable = kids.iter().all(|k| self.nodes[*k as usize].cacheable);
@@ -236,11 +244,29 @@ impl Arena {
             }
             _ => {}
         }
+        let id = self.nodes.len() as NodeId;
         node.kids = self.kids.len() as u32;
         self.kids.extend_from_slice(kids);
         self.nodes.push(node);
-        self.chain.push(head);
+        self.table[slot] = id;
+        if 2 * self.nodes.len() > self.table.len() {
+            self.rebuild_table(self.table.len() * 2);
+        }
         id
+    }
+
+    /// Refills the interning table (of `len` slots) from the nodes' stored hashes.
+    fn rebuild_table(&mut self, len: usize) {
+        self.table.clear();
+        self.table.resize(len, NONE);
+        let mask = len - 1;
+        for (id, node) in self.nodes.iter().enumerate().skip(2) {
+            let mut slot = (node.hash as usize) & mask;
+            while self.table[slot] != NONE {
+                slot = (slot + 1) & mask;
+            }
+            self.table[slot] = id as NodeId;
+        }
     }
 
     pub fn intern_env(&mut self, env: &[Binding]) -> u32 {
@@ -299,29 +325,35 @@ impl Arena {
     /// mapping from old to new ids (`NONE` for nodes that were dropped).
     pub fn compact(&mut self, roots: &mut [NodeId], extra: impl Iterator<Item = NodeId>) -> Vec<NodeId> {
         let n = self.nodes.len();
-        let mut live = vec![false; n];
-        live[TRUE as usize] = true;
-        live[FALSE as usize] = true;
-        let mut stack: Vec<NodeId> = roots.iter().copied().chain(extra).collect();
+        // `map` first marks the live nodes (0: dead, 1: live), then holds their new ids.
+        let mut map = vec![0u32; n];
+        map[TRUE as usize] = 1;
+        map[FALSE as usize] = 1;
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        stack.extend(roots.iter().copied().chain(extra));
         while let Some(id) = stack.pop() {
-            if std::mem::replace(&mut live[id as usize], true) {
+            if std::mem::replace(&mut map[id as usize], 1) == 1 {
                 continue;
             }
-            let node = self.nodes[id as usize];
-            stack.extend_from_slice(self.kids_of(&node));
+            let node = &self.nodes[id as usize];
+            stack.extend_from_slice(self.kids_of(node));
             if node.target != NONE {
                 stack.push(node.target);
             }
         }
+        self.stack = stack;
         // Environments still bound somewhere.
         let mut env_map = vec![NONE; self.envs.len()];
         env_map[0] = 0;
         let mut envs: Vec<Env> = vec![self.envs[0].clone()];
-        let mut map = vec![NONE; n];
-        let mut nodes: Vec<Node> = Vec::with_capacity(n / 2 + 2);
-        let mut kids: Vec<NodeId> = Vec::with_capacity(self.kids.len() / 2);
+        let mut nodes = std::mem::take(&mut self.spare_nodes);
+        let mut kids = std::mem::take(&mut self.spare_kids);
+        nodes.clear();
+        kids.clear();
         for id in 0..n {
-            if !live[id] {
+            if map[id] == 0 {
+                map[id] = NONE;
                 continue;
             }
             let mut node = self.nodes[id];
@@ -353,18 +385,12 @@ impl Arena {
                 node.last_next = map[node.last_next as usize];
             }
         }
-        self.nodes = nodes;
-        self.kids = kids;
+        self.spare_nodes = std::mem::replace(&mut self.nodes, nodes);
+        self.spare_kids = std::mem::replace(&mut self.kids, kids);
         self.envs = envs;
         self.env_table = self.envs.iter().enumerate().skip(1).map(|(i, e)| (e.clone(), i as u32)).collect();
-        self.table.clear();
-        self.chain.clear();
-        for id in 0..self.nodes.len() {
-            let node = self.nodes[id];
-            let h = Arena::hash(&node, self.kids_of(&node));
-            let head = self.table.insert(h, id as u32).unwrap_or(NONE);
-            self.chain.push(head);
-        }
+        let len = (2 * self.nodes.len()).next_power_of_two().max(64);
+        self.rebuild_table(len);
         for root in roots.iter_mut() {
             *root = map[*root as usize];
         }
