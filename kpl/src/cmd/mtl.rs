@@ -40,7 +40,9 @@ Example:
   $ kpl mtl eval --formula 'eventually[0, 1] q' --trace trace.jsonl --every
   {\"t\":0,\"verdict\":false}
   {\"t\":2,\"verdict\":true}
+  $ echo 'always[0, 3] (p -> eventually[0, 5] q)' > condition.mtl
   $ kpl mtl eval --formula-file condition.mtl --trace trace.jsonl
+  {\"decided_at\":null,\"verdict\":true}
 
 Exit status: 0 with a verdict; 1 when the formula or the trace is wrong (the message names the
 line); 2 when a file cannot be read or the arguments are wrong.";
