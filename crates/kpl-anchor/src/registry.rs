@@ -44,19 +44,22 @@ pub fn entries() -> Vec<Entry> {
     use ValueType::{Float, Int, Vec2};
     vec![
         Entry::new(EntryKind::Link, "anchor.copy", "Copies the attributes the two types share.")
-            .output(TypeReq::Any),
+            .output(TypeReq::Any)
+            .computes(&[], true),
         Entry::new(
             EntryKind::Link,
             "anchor.world_from_percept",
             "World position and velocity from a vision percept.",
         )
-        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)]))
+        .computes(&["pos", "vel"], true),
         network_params(Entry::new(
             EntryKind::Link,
             "anchor.snap_to_lane",
             "Snaps a world object to the centre of the nearest lane of the road network.",
         ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
+        .computes(&["pos", "vel", "road", "lane_offset"], true)
         .provides(on_road_signature()),
         Entry::new(EntryKind::Predict, "constant_velocity", "Moves on with the velocity it last had.")
             .output(fields(&[("pos", Vec2), ("vel", Vec2)])),

@@ -94,6 +94,32 @@ struct Shared {
     /// The last (stream, valid time) a snapshot was taken from, so that two links reading the
     /// same stream step the engine once.
     taken: BTreeMap<String, Time>,
+    /// What each link achieved so far, by link.
+    tallies: BTreeMap<String, Tally>,
+}
+
+/// What a link process achieved, counted from its changes: the run's result (`kpl run` prints
+/// it; summary.json has it under each link's `results`).
+#[derive(Debug, Default, Clone, Copy)]
+struct Tally {
+    /// New objects created by the establish condition.
+    established: u64,
+    /// Links to a waiting object made by the reestablish condition: the object kept its symbol.
+    reestablished: u64,
+    /// Links dropped because the maintain condition became false.
+    dropped: u64,
+}
+
+impl Tally {
+    fn count(&mut self, change: &crate::change::Change) {
+        use crate::change::{Cause, ChangeKind};
+        match (change.kind, change.cause) {
+            (ChangeKind::Created, Cause::Establish) => self.established += 1,
+            (ChangeKind::Linked, Cause::Reestablish) => self.reestablished += 1,
+            (ChangeKind::Unlinked, Cause::Maintain) => self.dropped += 1,
+            _ => {}
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -112,6 +138,7 @@ impl SharedHandle {
                     queues: BTreeMap::new(),
                     worlds: Vec::new(),
                     taken: BTreeMap::new(),
+                    tallies: BTreeMap::new(),
                 })))
             })
             .clone()
@@ -145,7 +172,7 @@ impl Shared {
             return Ok(());
         }
         self.engine()?;
-        let Shared { engine: Some(engine), links, queues, worlds, taken, .. } = self else {
+        let Shared { engine: Some(engine), links, queues, worlds, taken, tallies, .. } = self else {
             return Err(ProcessError::failed("anchoring: no engine"));
         };
         let time = match engine.time() {
@@ -163,6 +190,7 @@ impl Shared {
         let mut changes: BTreeMap<&str, Vec<Value>> = BTreeMap::new();
         for change in &output.changes {
             if let Some(link) = engine.link_of_change(change) {
+                tallies.entry(link.to_string()).or_default().count(change);
                 changes.entry(link).or_default().push(change.to_value());
             }
         }
@@ -202,13 +230,21 @@ struct LinkProcess {
 }
 
 impl LinkProcess {
-    /// Copies the engine's count of per-object instances into the run's statistics.
+    /// Copies the engine's count of per-object instances and what the link achieved into the
+    /// run's statistics.
     fn count_instances(&self, shared: &Shared) {
         use std::sync::atomic::Ordering;
-        if let Some(stats) = shared.engine.as_ref().and_then(|e| e.link_stats(&self.name)) {
+        let Some(engine) = shared.engine.as_ref() else { return };
+        if let Some(stats) = engine.link_stats(&self.name) {
             self.stats.instances_created.store(stats.instances_created, Ordering::Relaxed);
             self.stats.instances_removed.store(stats.instances_removed, Ordering::Relaxed);
         }
+        let tally = shared.tallies.get(&self.name).copied().unwrap_or_default();
+        let to = engine.link_to_type(&self.name).unwrap_or("linked");
+        self.stats.result(&format!("new {to} objects (establish)"), tally.established);
+        self.stats
+            .result(&format!("links reestablished: a waiting {to} kept its symbol"), tally.reestablished);
+        self.stats.result("links dropped (maintain became false)", tally.dropped);
     }
 
     fn emit_queue(&self, shared: &mut Shared, out: &mut Emitter) {

@@ -43,6 +43,8 @@ pub const BAD_INTERVAL: &str = "E0160";
 pub const BAD_BOUND: &str = "E0161";
 pub const UNUSED_STREAM: &str = "W0201";
 pub const UNUSED_OUTPUT: &str = "W0202";
+pub const BARE_BOUND: &str = "W0203";
+pub const UNSET_ATTRIBUTE: &str = "W0204";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
@@ -335,4 +337,33 @@ pub fn unused_output(span: Span, name: &str, kind: &str) -> Diagnostic {
     Diagnostic::warning(UNUSED_OUTPUT, span, format!("the output of {kind} `{name}` is never used"))
         .with_label("nothing consumes this")
         .with_hint("connect it to a sink or another process, or remove it")
+}
+
+pub fn bare_bound(span: Span, bare: &[u64], fixed: &str) -> Diagnostic {
+    let numbers: Vec<String> = bare.iter().map(|n| format!("`{n}`")).collect();
+    let message = if bare.len() == 1 {
+        format!("the bare number {} in a time bound counts milliseconds", numbers[0])
+    } else {
+        format!("the bare numbers {} in a time bound count milliseconds", numbers.join(" and "))
+    };
+    Diagnostic::warning(BARE_BOUND, span, message)
+        .with_label("milliseconds")
+        .with_hint(format!("write the unit: `{fixed}` (or `s`, `min` where that is meant)"))
+}
+
+pub fn unset_attribute(
+    span: Span,
+    ty: &str,
+    attribute: &str,
+    link: (Span, &str),
+    unit: &str,
+    sets: &[String],
+) -> Diagnostic {
+    let sets = if sets.is_empty() { "nothing".to_string() } else { sets.join(", ") };
+    Diagnostic::warning(UNSET_ATTRIBUTE, span, format!("nothing sets `{ty}.{attribute}`: it keeps its default"))
+        .with_label("declared here")
+        .with_secondary(link.0, format!("`{ty}` objects come from `{}`", link.1))
+        .with_hint(format!(
+            "`{unit}` sets {sets} of a `{ty}`; compute `{attribute}` in a link unit that sets it (see `kpl list`), or remove the attribute"
+        ))
 }
