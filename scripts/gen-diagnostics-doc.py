@@ -41,6 +41,8 @@ codes = [
 ("E0152","No producer of a type","A link from type A (or a monitor quantifying over A) needs a process that produces objects of exactly type A: a source or compute declared with that type, or a link `... -> A`. Name another stream with `input`.",["no_producer"]),
 ("E0153","`to` in an establish condition","Establish decides whether to create a new object, so only `from` exists there.",["to_in_establish"]),
 ("E0154","Link input of the wrong type","The stream named by `input` must carry objects of the link's from-type (or a subtype).",["link_input_type"]),
+("E0155","Reserved attribute name","Every object has the attributes `id` (its symbol), `measured` (whether anchoring measured its state at this state) and `predicted_since` (since when it has not), and the branches of a prediction `likelihood` and `branch_of`; a type cannot declare attributes of these names.",["reserved_attribute"]),
+("E0156","Link objects only through feedback","A link process steps at the states of its inputs, and a `feedback` input is never waited for, so a link whose `from` streams are all `feedback` would never step.",["link_input_feedback"]),
 ("E0160","Empty interval","An interval's lower bound is above its upper bound.",["bad_interval"]),
 ("E0161","Invalid interval bound","`inf` as a lower bound, or a bound too large. In a spec a bare integer bound counts milliseconds (the DyKnow paper's unit).",["bad_bound"]),
 ("W0201","Unused stream","A declared stream that no process consumes. Reported only for files without errors.",["unused_stream"]),

@@ -177,14 +177,18 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     assert!(n(&only["alignment"]["left_out"]) > 100, "{}", only["alignment"]);
     assert!(n(&only["clear"]["false_positives"]) < n(&all["clear"]["false_positives"]) / 4);
     assert!(n(&only["clear"]["misses"]) > n(&all["clear"]["misses"]), "predicted states matched cars too");
-    // Streams without a `measured` field are scored whole, and the report says so.
-    assert_eq!(stream(&measured, "vision_world")["alignment"]["measured"], "not_available");
-    let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "vision_world"]);
+    // A link's output says per object whether it was measured, as the world model does: the two
+    // agree with only measured states too.
+    assert_eq!(stream(&measured, "vision_world")["alignment"]["measured"], "applied");
+    for part in ["clear", "identity", "hota"] {
+        assert_eq!(stream(&measured, "vision_world")[part], only[part], "{part}");
+    }
+    // Streams without a `measured` field (a tracker's percepts) are scored whole, and the report
+    // says so.
+    assert_eq!(stream(&measured, "tracker")["alignment"]["measured"], "not_available");
+    let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "tracker"]);
     let text = String::from_utf8(o.stdout).unwrap();
-    assert!(
-        text.contains("--measured-only: vision_world say nothing about which states were measured"),
-        "{text}"
-    );
+    assert!(text.contains("--measured-only: tracker say nothing about which states were measured"), "{text}");
 }
 
 #[test]

@@ -509,6 +509,7 @@ async fn run_unit(mut caller: Caller, mut inputs: Vec<InputEdge>, clock: Clock) 
                 .iter()
                 .map(|i| SyncInput {
                     max_delay: i.filter.policy().max_delay,
+                    approximate: i.filter.policy().approximation == hir::Approximation::UseMostRecent,
                     feedback: i.feedback,
                     stats: i.rx.stats().clone(),
                 })

@@ -976,6 +976,11 @@ impl Resolver<'_, '_, '_> {
             }
         }
 
+        // A link steps at the states of its inputs; `feedback` inputs are never waited for.
+        if !inputs.is_empty() && inputs.iter().all(|i: &hir::Input| i.stream.policy.feedback) {
+            self.checker.diagnostics.push(diag::link_input_feedback(l.name.span, &l.name.name));
+        }
+
         // The link unit: its own inputs and parameters; it must be able to fill `to` objects.
         let via_entry = self.checker.entry(EntryKind::Link, &l.via);
         let provided: &[Function] = via_entry.map_or(&[], |e| e.provides.as_slice());

@@ -39,6 +39,8 @@ pub const CONDITION_TWICE: &str = "E0151";
 pub const NO_PRODUCER: &str = "E0152";
 pub const TO_IN_ESTABLISH: &str = "E0153";
 pub const LINK_INPUT_TYPE: &str = "E0154";
+pub const RESERVED_ATTRIBUTE: &str = "E0155";
+pub const LINK_INPUT_FEEDBACK: &str = "E0156";
 pub const BAD_INTERVAL: &str = "E0160";
 pub const BAD_BOUND: &str = "E0161";
 pub const UNUSED_STREAM: &str = "W0201";
@@ -309,6 +311,22 @@ pub fn link_input_type(span: Span, stream: &str, found: &str, expected: &str) ->
     )
     .with_label(format!("not `{expected}` objects"))
     .with_hint(format!("give the link a stream of `{expected}` (or of a subtype)"))
+}
+
+pub fn reserved_attribute(span: Span, name: &str, meaning: &str) -> Diagnostic {
+    Diagnostic::error(RESERVED_ATTRIBUTE, span, format!("`{name}` is an attribute every object has"))
+        .with_label(format!("anchoring sets `{name}`: {meaning}"))
+        .with_hint("choose another name for this attribute")
+}
+
+pub fn link_input_feedback(span: Span, link: &str) -> Diagnostic {
+    Diagnostic::error(
+        LINK_INPUT_FEEDBACK,
+        span,
+        format!("link `{link}` takes its objects only through `feedback` streams"),
+    )
+    .with_label("a link steps at the states of its inputs, and a `feedback` input starts none")
+    .with_hint("give the link an input without `feedback` (drop `feedback` from this stream's policy)")
 }
 
 pub fn bad_interval(span: Span, lo: &str, hi: &str) -> Diagnostic {

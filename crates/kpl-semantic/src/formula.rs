@@ -308,6 +308,10 @@ impl<'a> FormulaChecker<'a> {
                 if field.name == "id" {
                     return ValueType::Str;
                 }
+                // Set by anchoring on percepts and the objects of links (`docs/language.md`).
+                if field.name == "measured" {
+                    return ValueType::Bool;
+                }
                 if let Some(f) = record.field(&field.name) {
                     return f.ty.clone();
                 }
