@@ -40,7 +40,8 @@ Example:
   $ kpl mtl eval --formula 'eventually[0, 1] q' --trace trace.jsonl --every
   {\"t\":0,\"verdict\":false}
   {\"t\":2,\"verdict\":true}
-  $ echo 'always[0, 3] (p -> eventually[0, 5] q)' > condition.mtl
+  $ cat condition.mtl
+  always[0, 3] (p -> eventually[0, 5] q)
   $ kpl mtl eval --formula-file condition.mtl --trace trace.jsonl
   {\"decided_at\":null,\"verdict\":true}
 
