@@ -14,12 +14,17 @@
 //! missing from, or the end): each verdict is reported once, for its object, as
 //! `{x: SYMBOL, verdict: BOOL}`. With no object there is nothing to report (a plain progression
 //! would report the vacuous `true` at every state).
+//!
+//! Progressions are instances of one `kpl_mtl::ProgressorGroup` per formula: the bindings of
+//! thousands of objects share residuals and cached transitions, so each distinct situation is
+//! progressed once per state and each further object costs its atoms and a lookup; starting over
+//! after a verdict keeps what the group learnt.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use kpl_core::{Record, Time, TimeUnit, Value};
-use kpl_mtl::{Context, Formula, Progressor, SlotState};
+use kpl_mtl::{Context, Formula, InstanceId, ProgressorGroup, SlotState};
 use kpl_semantic::hir;
 
 use crate::process::{Emitter, Input, ProcessError, Unit};
@@ -40,15 +45,16 @@ pub(crate) struct MonitorUnit {
 }
 
 enum Mode {
-    /// One progression of the whole formula.
-    Whole(Open),
+    /// One progression of the whole formula (the only instance of its group).
+    Whole(ProgressorGroup, Open),
     /// `forall x: T . φ`: one progression of φ per object of `T`.
     PerBinding(Bindings),
 }
 
-/// A progression and the valid time of its last state (while its verdict is open).
+/// A progression (an instance of its formula's group) and the valid time of its last state
+/// (while its verdict is open).
 struct Open {
-    progressor: Progressor,
+    instance: InstanceId,
     last_valid: Option<Time>,
     /// The verdict decided at the previous state, if one was: the same verdict decided again at
     /// the next state (a violation that lasts) is one decision, reported once.
@@ -56,16 +62,22 @@ struct Open {
 }
 
 impl Open {
-    fn new(formula: &Arc<Formula>) -> Open {
-        Open { progressor: Progressor::new(formula.clone()), last_valid: None, repeat: None }
+    fn new(group: &mut ProgressorGroup) -> Open {
+        Open { instance: group.start(), last_valid: None, repeat: None }
     }
 
     /// Steps through one state: the verdict to report, when it became certain (the progression
     /// then starts over from the next state) and was not already decided at the previous state.
-    fn step(&mut self, valid: Time, state: &SlotState, stats: &ProcessStats) -> Option<bool> {
-        match self.progressor.step(valid, state) {
+    fn step(
+        &mut self,
+        group: &mut ProgressorGroup,
+        valid: Time,
+        state: &SlotState,
+        stats: &ProcessStats,
+    ) -> Option<bool> {
+        match group.step(self.instance, valid, state) {
             Ok(Some(verdict)) => {
-                self.progressor.reset();
+                group.restart(self.instance);
                 self.last_valid = None;
                 let repeated = self.repeat == Some(verdict);
                 self.repeat = Some(verdict);
@@ -86,15 +98,16 @@ impl Open {
 
     /// Closes the open progression (finite-trace semantics): its verdict and the time of its
     /// last state, if it had any state since its last verdict.
-    fn close(&mut self) -> Option<(Time, bool)> {
+    fn close(&mut self, group: &mut ProgressorGroup) -> Option<(Time, bool)> {
         let last = self.last_valid.take()?;
-        self.progressor.finish().map(|verdict| (last, verdict))
+        group.finish(self.instance).map(|verdict| (last, verdict))
     }
 }
 
 /// The bindings of `forall x: T . φ`, by object symbol (ordered, so a run is reproducible).
 struct Bindings {
-    body: Arc<Formula>,
+    /// The instances of φ, one per binding.
+    group: ProgressorGroup,
     /// The variable's name (a field of each verdict) and its slot in the state.
     var: Arc<str>,
     slot: usize,
@@ -117,26 +130,31 @@ impl Bindings {
     /// Steps the binding of every object present; closes those of objects that are gone.
     fn step(&mut self, valid: Time, mut state: SlotState, stats: &ProcessStats, out: &mut Emitter) {
         let objects = std::mem::take(&mut state.objects[self.domain]);
-        let mut present = Vec::with_capacity(objects.len());
-        for object in &objects {
+        // (symbol, index of the object), sorted by symbol for the look-ups below.
+        let mut present: Vec<(Arc<str>, usize)> = Vec::with_capacity(objects.len());
+        for (k, object) in objects.iter().enumerate() {
             let Value::Record(record) = object else { continue };
             let Some(id) = record.id.clone() else { continue };
-            present.push(id.clone());
+            present.push((id, k));
         }
+        present.sort_unstable_by(|a, b| a.0.cmp(&b.0));
         state.objects[self.domain] = objects;
+        let is_present = |id: &Arc<str>| present.binary_search_by(|(p, _)| p.cmp(id)).is_ok();
         // The objects that are gone first: their last verdicts are older than this state.
-        let gone: Vec<Arc<str>> = self.open.keys().filter(|id| !present.contains(id)).cloned().collect();
+        let gone: Vec<Arc<str>> = self.open.keys().filter(|id| !is_present(id)).cloned().collect();
         for id in gone {
-            if let Some(mut open) = self.open.remove(&id)
-                && let Some((last, verdict)) = open.close()
-            {
-                out.emit_at(last, self.verdict(&id, verdict));
+            if let Some(mut open) = self.open.remove(&id) {
+                if let Some((last, verdict)) = open.close(&mut self.group) {
+                    out.emit_at(last, self.verdict(&id, verdict));
+                }
+                self.group.remove(open.instance);
             }
         }
-        for (k, id) in present.iter().enumerate() {
-            state.values[self.slot] = Some(state.objects[self.domain][k].clone());
-            let open = self.open.entry(id.clone()).or_insert_with(|| Open::new(&self.body));
-            if let Some(verdict) = open.step(valid, &state, stats) {
+        for (id, k) in &present {
+            state.values[self.slot] = Some(state.objects[self.domain][*k].clone());
+            let group = &mut self.group;
+            let open = self.open.entry(id.clone()).or_insert_with(|| Open::new(group));
+            if let Some(verdict) = open.step(&mut self.group, valid, &state, stats) {
                 let value = self.verdict(id, verdict);
                 out.emit(value);
             }
@@ -145,9 +163,10 @@ impl Bindings {
 
     fn close(&mut self, out: &mut Emitter) {
         for (id, mut open) in std::mem::take(&mut self.open) {
-            if let Some((last, verdict)) = open.close() {
+            if let Some((last, verdict)) = open.close(&mut self.group) {
                 out.emit_at(last, self.verdict(&id, verdict));
             }
+            self.group.remove(open.instance);
         }
     }
 }
@@ -197,10 +216,14 @@ pub(crate) fn build(
         Some((var, ty, body)) if ctx.slot(var).is_none() => {
             let domain = ctx.domain(ty).unwrap_or_else(|| ctx.declare_object_type(ty)) as usize;
             let slot = ctx.declare_value(var) as usize;
-            let body = compile(body, &mut ctx)?;
-            Mode::PerBinding(Bindings { body, var: Arc::from(var), slot, domain, open: BTreeMap::new() })
+            let group = ProgressorGroup::new(compile(body, &mut ctx)?);
+            Mode::PerBinding(Bindings { group, var: Arc::from(var), slot, domain, open: BTreeMap::new() })
         }
-        _ => Mode::Whole(Open::new(&compile(&monitor.formula, &mut ctx)?)),
+        _ => {
+            let mut group = ProgressorGroup::new(compile(&monitor.formula, &mut ctx)?);
+            let open = Open::new(&mut group);
+            Mode::Whole(group, open)
+        }
     };
     Ok(MonitorUnit { roles, slots: ctx.slot_names().len(), domains: ctx.domain_names().len(), stats, mode })
 }
@@ -224,8 +247,8 @@ impl Unit for MonitorUnit {
             }
         }
         match &mut self.mode {
-            Mode::Whole(open) => {
-                if let Some(verdict) = open.step(input.valid, &state, &self.stats) {
+            Mode::Whole(group, open) => {
+                if let Some(verdict) = open.step(group, input.valid, &state, &self.stats) {
                     out.emit(Value::Bool(verdict));
                 }
             }
@@ -236,8 +259,8 @@ impl Unit for MonitorUnit {
 
     fn on_end(&mut self, out: &mut Emitter) -> Result<(), ProcessError> {
         match &mut self.mode {
-            Mode::Whole(open) => {
-                if let Some((last, verdict)) = open.close() {
+            Mode::Whole(group, open) => {
+                if let Some((last, verdict)) = open.close(group) {
                     out.emit_at(last, Value::Bool(verdict));
                 }
             }
