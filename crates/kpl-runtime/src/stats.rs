@@ -98,6 +98,9 @@ pub struct ProcessStats {
     /// Process instances created and removed at run time (link processes: one per object).
     pub instances_created: AtomicU64,
     pub instances_removed: AtomicU64,
+    /// Things the process could do but that are probably not what the spec meant (a replay
+    /// filter that matched nothing), each said once.
+    pub warnings: Mutex<Vec<String>>,
 }
 
 impl ProcessStats {
@@ -109,6 +112,16 @@ impl ProcessStats {
 
     pub fn error(&self, error: String) {
         count(&self.errors, &self.error_examples, error);
+    }
+
+    /// Keeps a warning for the end-of-run summary (at most [`ProcessStats::KEEP`]).
+    pub fn warn(&self, warning: String) {
+        if let Ok(mut warnings) = self.warnings.lock()
+            && warnings.len() < ProcessStats::KEEP
+            && !warnings.contains(&warning)
+        {
+            warnings.push(warning);
+        }
     }
 }
 
@@ -191,8 +204,9 @@ impl RunStats {
                         error_examples: snapshot(&s.error_examples),
                         instances_created: s.instances_created.load(Ordering::Relaxed),
                         instances_removed: s.instances_removed.load(Ordering::Relaxed),
+                        warnings: snapshot(&s.warnings),
                     })
-                    .filter(|p| p.malformed + p.errors + p.instances_created > 0)
+                    .filter(|p| p.malformed + p.errors + p.instances_created > 0 || !p.warnings.is_empty())
                     .collect()
             })
             .unwrap_or_default();
@@ -225,6 +239,8 @@ pub struct ProcessSummary {
     pub error_examples: Vec<String>,
     pub instances_created: u64,
     pub instances_removed: u64,
+    /// What the process warned about (`kpl run` prints them even with `--quiet`).
+    pub warnings: Vec<String>,
 }
 
 /// The end-of-run summary (`kpl run` prints it and writes it as `summary.json`).

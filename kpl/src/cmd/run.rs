@@ -112,6 +112,13 @@ pub fn run(args: Args) -> ExitCode {
     if !args.quiet {
         let _ = std::io::stderr().lock().write_all(describe(&report, config.clock).as_bytes());
     }
+    // Warnings are printed even with --quiet: each says why a run may not have done what the spec
+    // meant (a replay filter matching nothing gives an empty source).
+    for p in &report.summary.processes {
+        for warning in &p.warnings {
+            eprintln!("warning: {}: {warning}", p.process);
+        }
+    }
     match report.ending {
         Ending::Interrupted => ExitCode::from(130),
         Ending::Strict => ExitCode::from(1),
@@ -175,6 +182,9 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
                 "{} instance(s) created, {} removed",
                 p.instances_created, p.instances_removed
             ));
+        }
+        if parts.is_empty() {
+            continue; // only warnings, printed after the summary
         }
         let _ = writeln!(out, "{}: {}", p.process, parts.join("; "));
         for m in &p.malformed_examples {

@@ -12,6 +12,7 @@
 //! With simulated time samples keep their recorded times; with wall-clock time they are shifted so
 //! the first one happens when the run starts.
 
+use std::borrow::Cow;
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::PathBuf;
@@ -21,6 +22,7 @@ use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 use serde::{Deserialize, Serialize};
 
 use crate::clock::ClockKind;
+use super::replay::{ReplayTimes, StreamFilter};
 use crate::context::SourceContext;
 use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
 use crate::registry::Registry;
@@ -48,23 +50,39 @@ pub fn encode_line(stream: &str, sample: &Sample) -> String {
 
 /// Decodes one line: the stream name and the sample, or what is wrong with it.
 pub fn decode_line(line: &str, ty: &ValueType) -> Result<(String, Sample), String> {
+    let stream = line_stream(line)?;
+    Ok((stream.into_owned(), decode_sample(line, ty)?))
+}
+
+/// The stream a line belongs to (`""` when it names none), read without decoding its value: a
+/// replay keeps only the lines of one stream, and the other streams' values need not fit its type.
+pub fn line_stream(line: &str) -> Result<Cow<'_, str>, String> {
+    #[derive(Deserialize)]
+    struct Head<'a> {
+        #[serde(default, borrow)]
+        stream: Cow<'a, str>,
+    }
+    let head: Head<'_> = serde_json::from_str(line).map_err(|e| format!("not a sample line: {e}"))?;
+    Ok(head.stream)
+}
+
+/// The sample of a line, its value decoded with `ty`.
+fn decode_sample(line: &str, ty: &ValueType) -> Result<Sample, String> {
     #[derive(Deserialize)]
     struct Raw {
-        #[serde(default)]
-        stream: String,
         valid: Time,
         available: Option<Time>,
         value: serde_json::Value,
     }
     let raw: Raw = serde_json::from_str(line).map_err(|e| format!("not a sample line: {e}"))?;
     let value = Value::from_json(&raw.value, ty).map_err(|e| format!("value {e}"))?;
-    Ok((raw.stream, Sample::new(raw.valid, raw.available.unwrap_or(raw.valid), value)))
+    Ok(Sample::new(raw.valid, raw.available.unwrap_or(raw.valid), value))
 }
 
 struct Replay {
     path: PathBuf,
     reader: Option<BufReader<File>>,
-    stream: String,
+    filter: StreamFilter,
     ty: ValueType,
     clock: ClockKind,
 }
@@ -74,8 +92,7 @@ impl Source for Replay {
         Box::pin(async move {
             let Some(reader) = self.reader.take() else { return Ok(()) };
             let display = self.path.display().to_string();
-            let mut shift: Option<Time> = None;
-            let mut last_available: Option<Time> = None;
+            let mut times = ReplayTimes::new(self.clock);
             for (index, line) in reader.lines().enumerate() {
                 let location = format!("{display}:{}", index + 1);
                 let line = match line {
@@ -88,32 +105,23 @@ impl Source for Replay {
                 if line.trim().is_empty() {
                     continue;
                 }
-                let (stream, mut sample) = match decode_line(&line, &self.ty) {
-                    Ok(decoded) => decoded,
+                // The stream first: other streams' values need not fit this source's type.
+                match line_stream(&line) {
+                    Ok(stream) if self.filter.keep(&stream) => {}
+                    Ok(_) => continue,
+                    Err(error) => {
+                        ctx.malformed(&location, error)?;
+                        continue;
+                    }
+                }
+                let sample = match decode_sample(&line, &self.ty) {
+                    Ok(sample) => sample,
                     Err(error) => {
                         ctx.malformed(&location, error)?;
                         continue;
                     }
                 };
-                if !self.stream.is_empty() && stream != self.stream {
-                    continue;
-                }
-                if let Some(last) = last_available
-                    && sample.available < last
-                {
-                    ctx.malformed(
-                        &location,
-                        format!("time stamp goes backwards: available {} after {last}", sample.available),
-                    )?;
-                    continue;
-                }
-                last_available = Some(sample.available);
-                let shift = *shift.get_or_insert_with(|| match self.clock {
-                    ClockKind::Sim => 0,
-                    ClockKind::Wall => ctx.clock.start() - sample.available,
-                });
-                sample.valid += shift;
-                sample.available += shift;
+                let Some(sample) = times.admit(ctx, &location, sample)? else { continue };
                 if !ctx.wait_until(sample.available).await {
                     break;
                 }
@@ -121,6 +129,9 @@ impl Source for Replay {
                 if ctx.unconsumed() {
                     break;
                 }
+            }
+            if let Some(warning) = self.filter.warning(&display) {
+                ctx.warn(warning);
             }
             Ok(())
         })
@@ -193,7 +204,7 @@ pub(super) fn register(registry: &mut Registry) {
             Ok(Box::new(Replay {
                 path,
                 reader: Some(BufReader::new(file)),
-                stream: ctx.param("stream").and_then(Value::as_str).unwrap_or("").to_string(),
+                filter: StreamFilter::new(ctx.param("stream").and_then(Value::as_str).unwrap_or("")),
                 ty: ctx.process.output.clone().unwrap_or(ValueType::Any),
                 clock: ctx.clock,
             }))

@@ -3,6 +3,7 @@
 //! `vec2`).
 
 mod console;
+mod replay;
 mod functions;
 mod jsonl;
 mod merge;
@@ -18,4 +19,5 @@ pub(crate) fn register(registry: &mut Registry) {
     functions::register(registry);
 }
 
-pub use jsonl::{SampleLine, decode_line, encode_line};
+pub use replay::{ReplayTimes, StreamFilter};
+pub use jsonl::{SampleLine, decode_line, encode_line, line_stream};
