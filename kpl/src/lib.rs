@@ -46,6 +46,8 @@ enum Command {
     List(cmd::list::Args),
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
+    /// Convert a recording between JSON lines and MCAP, losing nothing.
+    Convert(cmd::convert::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -90,6 +92,7 @@ pub fn main() -> ExitCode {
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Convert(args) => cmd::convert::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),
