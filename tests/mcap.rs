@@ -96,8 +96,15 @@ sink cars = file.jsonl(onroad_car, path: "cars.jsonl")
     std::fs::write(&spec_path, spec).unwrap();
     let out = dir.join(name);
     ok(&["run", "--quiet", spec_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(summary["summary"]["processes"].as_array().map_or(0, |p| p.iter().filter(|p| p["malformed"] != 0).count()), 0, "{summary}");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(
+        summary["summary"]["processes"]
+            .as_array()
+            .map_or(0, |p| p.iter().filter(|p| p["malformed"] != 0).count()),
+        0,
+        "{summary}"
+    );
     lines(&out.join("cars.jsonl"))
 }
 
@@ -146,7 +153,11 @@ fn a_traffic_run_recorded_to_mcap_reads_converts_and_replays_like_its_json_lines
     let spec = dir.join("bridge.kpl");
     ok(&["convert", jsonl.to_str().unwrap(), again_mcap.to_str().unwrap(), "--spec", spec.to_str().unwrap()]);
     ok(&["convert", again_mcap.to_str().unwrap(), again.to_str().unwrap()]);
-    assert_eq!(std::fs::read(&again).unwrap(), std::fs::read(&jsonl).unwrap(), "JSON lines -> MCAP -> JSON lines");
+    assert_eq!(
+        std::fs::read(&again).unwrap(),
+        std::fs::read(&jsonl).unwrap(),
+        "JSON lines -> MCAP -> JSON lines"
+    );
 
     // Replays from either file anchor the same cars, and the same as the live run.
     let rec = |file: &str, kind: &str| format!("file.{kind}(path: \"out/{file}\", stream: \"percepts\")");

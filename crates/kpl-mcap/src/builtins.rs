@@ -131,7 +131,11 @@ pub fn register(registry: &mut Registry) {
             "Records samples in an MCAP file, a channel per stream with its JSON schema (docs/streams.md).",
         )
         .variadic(1, "in", TypeReq::Any, "streams to record")
-        .param(Param::required("path", ParamType::Str, "file to write, relative to the run's --out directory"))
+        .param(Param::required(
+            "path",
+            ParamType::Str,
+            "file to write, relative to the run's --out directory",
+        ))
         .param(Param::optional(
             "compression",
             ParamType::Choice(Compression::NAMES.iter().map(|n| (*n).to_string()).collect()),

@@ -117,10 +117,14 @@ impl Reader {
     /// the end of the file (or after it stopped being MCAP, which was the last event).
     pub fn next_event(&mut self, filter: &mut StreamFilter, ty: &ValueType) -> Option<Event> {
         Some(match self.next_raw(filter)? {
-            RawEvent::Message { stream, valid, available, value, location } => match Value::from_json(&value, ty) {
-                Ok(value) => Event::Sample { stream, sample: Sample::new(valid, available, value), location },
-                Err(e) => Event::Malformed { location, error: format!("value {e}") },
-            },
+            RawEvent::Message { stream, valid, available, value, location } => {
+                match Value::from_json(&value, ty) {
+                    Ok(value) => {
+                        Event::Sample { stream, sample: Sample::new(valid, available, value), location }
+                    }
+                    Err(e) => Event::Malformed { location, error: format!("value {e}") },
+                }
+            }
             RawEvent::Malformed { location, error } => Event::Malformed { location, error },
         })
     }
@@ -137,21 +141,25 @@ impl Reader {
                 Some(Err(e)) => {
                     self.done = true;
                     let location = format!("{}: after message {}", self.display, self.messages);
-                    return Some(RawEvent::Malformed { location, error: format!("not readable as MCAP: {e}") });
+                    return Some(RawEvent::Malformed {
+                        location,
+                        error: format!("not readable as MCAP: {e}"),
+                    });
                 }
                 Some(Ok(event)) => event,
             };
             match event {
-                LinearReadEvent::ReadRequest(need) => {
-                    match self.file.read(self.reader.insert(need)) {
-                        Ok(read) => self.reader.notify_read(read),
-                        Err(e) => {
-                            self.done = true;
-                            let location = format!("{}: after message {}", self.display, self.messages);
-                            return Some(RawEvent::Malformed { location, error: format!("cannot read the file: {e}") });
-                        }
+                LinearReadEvent::ReadRequest(need) => match self.file.read(self.reader.insert(need)) {
+                    Ok(read) => self.reader.notify_read(read),
+                    Err(e) => {
+                        self.done = true;
+                        let location = format!("{}: after message {}", self.display, self.messages);
+                        return Some(RawEvent::Malformed {
+                            location,
+                            error: format!("cannot read the file: {e}"),
+                        });
                     }
-                }
+                },
                 LinearReadEvent::Record { opcode: op::CHANNEL, data } => {
                     match mcap::parse_record(op::CHANNEL, data) {
                         Ok(Record::Channel(channel)) => {
@@ -162,11 +170,15 @@ impl Reader {
                             } else {
                                 Encoding::Other(channel.message_encoding.clone())
                             };
-                            self.channels.insert(channel.id, Channel { topic: channel.topic.into(), encoding });
+                            self.channels
+                                .insert(channel.id, Channel { topic: channel.topic.into(), encoding });
                         }
                         Ok(_) | Err(_) => {
                             let location = format!("{}: after message {}", self.display, self.messages);
-                            return Some(RawEvent::Malformed { location, error: "a channel record does not parse".into() });
+                            return Some(RawEvent::Malformed {
+                                location,
+                                error: "a channel record does not parse".into(),
+                            });
                         }
                     }
                 }
@@ -180,7 +192,10 @@ impl Reader {
                         }
                     };
                     let Some(channel) = self.channels.get(&header.channel_id) else {
-                        let error = format!("the message is on channel {}, which the file does not declare before it", header.channel_id);
+                        let error = format!(
+                            "the message is on channel {}, which the file does not declare before it",
+                            header.channel_id
+                        );
                         return Some(RawEvent::Malformed { location: self.location(), error });
                     };
                     if !filter.keep(&channel.topic) {

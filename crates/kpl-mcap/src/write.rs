@@ -109,7 +109,9 @@ impl Recorder {
             .library(concat!("kpl ", env!("CARGO_PKG_VERSION")))
             // Compress on the writing thread: a sink must not start threads of its own.
             .compression_threads(0);
-        let writer = options.create(BufWriter::new(file)).map_err(|error| WriteError::Mcap { path: display(), error })?;
+        let writer = options
+            .create(BufWriter::new(file))
+            .map_err(|error| WriteError::Mcap { path: display(), error })?;
         Ok(Recorder { path: path.to_path_buf(), writer, channels: Vec::new(), buffer: Vec::new() })
     }
 

@@ -133,7 +133,7 @@ fn the_filter_skips_other_streams_before_decoding_and_warns_when_nothing_matched
     let (events, _) = read_all(&path, "", &ValueType::Float);
     let Event::Malformed { location, error } = &events[1] else { panic!("{events:?}") };
     assert!(location.ends_with("message 2"), "{location}");
-    assert_eq!(error, "value at `.`: expected a finite number, found a string");
+    assert_eq!(error, "value at `.`: expected a finite number, found the string \"not a number\"");
     std::fs::remove_file(&path).ok();
 }
 
@@ -141,7 +141,8 @@ fn the_filter_skips_other_streams_before_decoding_and_warns_when_nothing_matched
 fn json_channels_of_other_tools_replay_and_other_encodings_are_malformed() {
     let path = temp("foreign");
     {
-        let mut writer = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&path).unwrap())).unwrap();
+        let mut writer =
+            mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&path).unwrap())).unwrap();
         let schema = writer.add_schema("Pose", "jsonschema", br#"{"type": "object"}"#).unwrap();
         let pose = writer.add_channel(schema, "/pose", "json", &BTreeMap::new()).unwrap();
         let cdr = writer.add_channel(0, "/scan", "cdr", &BTreeMap::new()).unwrap();

@@ -114,7 +114,11 @@ fn percept_type() -> ValueType {
         name: "VisionPercept".into(),
         parent: None,
         symbol: "vp".into(),
-        fields: vec![field("pos", ValueType::Vec2), field("vel", ValueType::Vec2), field("size", ValueType::Float)],
+        fields: vec![
+            field("pos", ValueType::Vec2),
+            field("vel", ValueType::Vec2),
+            field("size", ValueType::Float),
+        ],
     }))))
 }
 
@@ -162,10 +166,14 @@ fn bench(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("encode", "kpl"), |b| {
             b.iter(|| codec::encode_sample(&sample, &mut kpl).unwrap());
         });
-        group.bench_function(BenchmarkId::new("encode", "cbor"), |b| b.iter(|| cbor_encode(&sample, &mut cbor)));
+        group.bench_function(BenchmarkId::new("encode", "cbor"), |b| {
+            b.iter(|| cbor_encode(&sample, &mut cbor))
+        });
         codec::encode_sample(&sample, &mut kpl).unwrap();
         cbor_encode(&sample, &mut cbor);
-        group.bench_function(BenchmarkId::new("decode", "kpl"), |b| b.iter(|| codec::decode(&kpl, &ty).unwrap()));
+        group.bench_function(BenchmarkId::new("decode", "kpl"), |b| {
+            b.iter(|| codec::decode(&kpl, &ty).unwrap())
+        });
         group.bench_function(BenchmarkId::new("decode", "cbor"), |b| b.iter(|| cbor_decode(&cbor)));
         group.finish();
     }

@@ -572,14 +572,21 @@ mod tests {
         v1.extend_from_slice(&1.5f64.to_le_bytes());
         v1.push(b'r');
         v1.extend_from_slice(&(-2.0f64).to_le_bytes());
-        assert_eq!(decode(&v1, &ValueType::List(Box::new(ValueType::Float))), Ok(Message::Sample(Sample::new(0, 0, floats))));
+        assert_eq!(
+            decode(&v1, &ValueType::List(Box::new(ValueType::Float))),
+            Ok(Message::Sample(Sample::new(0, 0, floats)))
+        );
         // A NaN among packed floats, or a count past the end, is an error.
         let mut nan = bytes.clone();
         nan[34..42].copy_from_slice(&f64::NAN.to_le_bytes());
-        assert!(matches!(decode(&nan, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("not finite at byte 34")));
+        assert!(
+            matches!(decode(&nan, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("not finite at byte 34"))
+        );
         let mut huge = bytes[..22].to_vec();
         huge.extend_from_slice(&u32::MAX.to_le_bytes());
-        assert!(matches!(decode(&huge, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("cut short")));
+        assert!(
+            matches!(decode(&huge, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("cut short"))
+        );
     }
 
     #[test]

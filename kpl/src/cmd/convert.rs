@@ -52,13 +52,19 @@ pub fn run(args: Args) -> ExitCode {
         }
         ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
         (from, to) => {
-            eprintln!("error: kpl convert goes from .jsonl to .mcap or from .mcap to .jsonl, not from `.{from}` to `.{to}`");
+            eprintln!(
+                "error: kpl convert goes from .jsonl to .mcap or from .mcap to .jsonl, not from `.{from}` to `.{to}`"
+            );
             return ExitCode::from(2);
         }
     };
     match result {
         Ok(Converted { samples, skipped }) => {
-            eprintln!("{}: {samples} sample(s){}", args.output.display(), if skipped > 0 { format!(", {skipped} skipped") } else { String::new() });
+            eprintln!(
+                "{}: {samples} sample(s){}",
+                args.output.display(),
+                if skipped > 0 { format!(", {skipped} skipped") } else { String::new() }
+            );
             if skipped > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS }
         }
         Err(error) => {

@@ -21,8 +21,8 @@ use kpl_core::{Time, Value, ValueType};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 use serde::{Deserialize, Serialize};
 
-use crate::clock::ClockKind;
 use super::replay::{ReplayTimes, StreamFilter};
+use crate::clock::ClockKind;
 use crate::context::SourceContext;
 use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
 use crate::registry::Registry;

@@ -3,10 +3,10 @@
 //! `vec2`).
 
 mod console;
-mod replay;
 mod functions;
 mod jsonl;
 mod merge;
+mod replay;
 mod timer;
 
 use crate::registry::Registry;
@@ -19,5 +19,5 @@ pub(crate) fn register(registry: &mut Registry) {
     functions::register(registry);
 }
 
-pub use replay::{ReplayTimes, StreamFilter};
 pub use jsonl::{SampleLine, decode_line, encode_line, line_stream};
+pub use replay::{ReplayTimes, StreamFilter};

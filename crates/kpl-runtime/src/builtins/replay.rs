@@ -32,10 +32,7 @@ impl StreamFilter {
 
     /// A filter for `stream` (empty: every stream).
     pub fn new(stream: &str) -> StreamFilter {
-        StreamFilter {
-            stream: (!stream.is_empty()).then(|| stream.to_string()),
-            ..StreamFilter::default()
-        }
+        StreamFilter { stream: (!stream.is_empty()).then(|| stream.to_string()), ..StreamFilter::default() }
     }
 
     /// Whether a sample of `stream` is kept (and counts it).
