@@ -148,6 +148,7 @@ fn every_command_has_help_with_an_example() {
         "list",
         "run",
         "convert",
+        "score",
         "mtl",
         "mtl eval",
         "cater",

@@ -48,6 +48,8 @@ enum Command {
     Run(cmd::run::Args),
     /// Convert a recording between JSON lines and MCAP, losing nothing.
     Convert(cmd::convert::Args),
+    /// Score recorded object streams against ground truth: MOTA, IDF1, HOTA, ... per stream.
+    Score(cmd::score::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -93,6 +95,7 @@ pub fn main() -> ExitCode {
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::Convert(args) => cmd::convert::run(args),
+        Command::Score(args) => cmd::score::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

@@ -12,3 +12,4 @@ pub mod graph;
 pub mod list;
 pub mod mtl;
 pub mod run;
+pub mod score;

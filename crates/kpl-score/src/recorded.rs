@@ -1,0 +1,66 @@
+//! Scoring a recording as `kpl score` does: choose the ground truth and the streams, align each
+//! with the ground truth, score it, and collect the report.
+
+use crate::align::{AlignOptions, Aligned, align};
+use crate::error::SelectError;
+use crate::recording::Recording;
+use crate::report::{Failed, Report, StreamReport};
+use crate::scores::{Config, Evaluation, evaluate};
+
+/// What to score and how.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// The ground-truth stream (found by itself when `None`).
+    pub truth: Option<String>,
+    /// The streams to score (every object stream but the truth when empty).
+    pub streams: Vec<String>,
+    pub config: Config,
+    pub align: AlignOptions,
+}
+
+/// One stream, scored.
+#[derive(Debug, Clone)]
+pub struct ScoredStream {
+    pub stream: String,
+    pub aligned: Aligned,
+    pub evaluation: Evaluation,
+}
+
+/// The report and, per stream scored, what it was scored on.
+#[derive(Debug, Clone)]
+pub struct Scored {
+    pub report: Report,
+    pub streams: Vec<ScoredStream>,
+}
+
+/// Scores the chosen streams of `recording`. A stream that cannot be aligned with the ground
+/// truth is listed in [`Report::failed`]; choosing the streams can fail as a whole.
+pub fn score_recording(recording: &Recording, options: &Options) -> Result<Scored, SelectError> {
+    let truth = recording.truth(options.truth.as_deref())?;
+    let chosen = recording.hypotheses(&options.streams, &truth.name)?;
+    let mut report = Report::new(&truth.name, &options.config);
+    report.problems = recording.problems().into();
+    report.notes = recording.notes().to_vec();
+    let mut streams = Vec::new();
+    for stream in chosen {
+        if stream.name == truth.name {
+            report
+                .notes
+                .push(format!("`{}` is the ground truth; it is not scored against itself", truth.name));
+            continue;
+        }
+        match align(truth, stream, &options.align) {
+            Ok(aligned) => {
+                let evaluation = evaluate(&aligned.sequence, &options.config);
+                report.streams.push(StreamReport {
+                    stream: stream.name.clone(),
+                    alignment: aligned.alignment.clone(),
+                    scores: evaluation.scores.clone(),
+                });
+                streams.push(ScoredStream { stream: stream.name.clone(), aligned, evaluation });
+            }
+            Err(e) => report.failed.push(Failed { stream: stream.name.clone(), error: e.to_string() }),
+        }
+    }
+    Ok(Scored { report, streams })
+}
