@@ -7,7 +7,7 @@
 //!   lines gives back the same bytes;
 //! - replaying the percepts from the MCAP file anchors the same cars as replaying them from the
 //!   JSON lines, and as the live run.
-#![allow(clippy::unwrap_used, clippy::expect_used)] // tests
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests: they unwrap, and say what they skip
 
 mod common;
 
