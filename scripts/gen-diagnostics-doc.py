@@ -41,10 +41,14 @@ codes = [
 ("E0152","No producer of a type","A link from type A (or a monitor quantifying over A) needs a process that produces objects of exactly type A: a source or compute declared with that type, or a link `... -> A`. Name another stream with `input`.",["no_producer"]),
 ("E0153","`to` in an establish condition","Establish decides whether to create a new object, so only `from` exists there.",["to_in_establish"]),
 ("E0154","Link input of the wrong type","The stream named by `input` must carry objects of the link's from-type (or a subtype).",["link_input_type"]),
+("E0155","Reserved attribute name","Every object has the attributes `id` (its symbol), `measured` (whether anchoring measured its state at this state) and `predicted_since` (since when it has not), and the branches of a prediction `likelihood` and `branch_of`; a type cannot declare attributes of these names.",["reserved_attribute"]),
+("E0156","Link objects only through feedback","A link process steps at the states of its inputs, and a `feedback` input is never waited for, so a link whose `from` streams are all `feedback` would never step.",["link_input_feedback"]),
 ("E0160","Empty interval","An interval's lower bound is above its upper bound.",["bad_interval"]),
 ("E0161","Invalid interval bound","`inf` as a lower bound, or a bound too large. In a spec a bare integer bound counts milliseconds (the DyKnow paper's unit).",["bad_bound"]),
 ("W0201","Unused stream","A declared stream that no process consumes. Reported only for files without errors.",["unused_stream"]),
 ("W0202","Unused output","A source or computational unit whose output nothing consumes. Reported only for files without errors.",["unused_output"]),
+("W0203","Bare number in a time bound","A bare number in an interval bound counts milliseconds (the DyKnow paper's unit), so `eventually[0, 3]` is 3 ms, which is rarely what was meant. The hint writes the interval with units; write `ms` to keep milliseconds, `s` or `min` otherwise. A bare `0` is fine.",["bare_bound"]),
+("W0204","Attribute nothing sets","Every process that produces objects of the type is a link unit that declares which attributes it sets (`kpl list`), and none sets this one: it keeps its default (0, false, \"\") for ever, so a formula reading it is silently wrong. `anchor.copy` sets what the linked-from object also has, `anchor.snap_to_lane` adds `road` and `lane_offset`. Sources and units that do not declare what they set count as setting everything. Reported only for files without errors.",["unset_attribute"]),
 ]
 def example(name, code):
     for d in ("specs/err","specs/warn"):
@@ -64,7 +68,10 @@ out=["# Diagnostics","","Every problem `kpl check` (and `kpl graph`, `kpl fmt`) 
 "`kpl/tests/specs.rs` keeps those outputs (and this list of codes) in step with the code.","",
 "`--format json` prints the same diagnostics as one JSON array of objects with the fields `file`, `line`,",
 "`column`, `end_line`, `end_column` (1-based; the end column is just past the span), `severity` (`error` or",
-"`warning`), `code`, `message` and, when there is one, `hint`.",""]
+"`warning`), `code`, `message`, when there is one, `hint`, and `labels`: every marked place, the primary span",
+"first and the others in source order, each with `line`, `column`, `end_line`, `end_column`, `primary` and",
+"`message` (the text under the span; empty when there is none).","",
+"`kpl explain CODE` prints the section of a code below (the text is built into `kpl`).",""]
 for code,title,text,examples in codes:
     out.append(f"## {code}: {title}")
     out.append("")

@@ -61,36 +61,17 @@ fn record(dir: &Path) -> PathBuf {
     out
 }
 
-/// The bridge scenario's anchoring, its percepts replayed by `source` from `file`.
+/// The bridge scenario's anchoring (`specs/traffic/bridge.kpl` itself: its links, predictions and
+/// forgetting), its percepts replayed by `source` instead of simulated, the cars recorded.
 fn replay(dir: &Path, name: &str, source: &str) -> Vec<Value> {
+    let bridge = std::fs::read_to_string(root().join("specs/traffic/bridge.kpl")).unwrap();
+    let (head, rest) = bridge.split_once("source tracker ").expect("bridge.kpl simulates `tracker`");
+    let (_, links) = rest
+        .split_once("stream percepts = tracker with strict order\n")
+        .expect("bridge.kpl orders `percepts`");
+    let links = links.split("\nsink ").next().unwrap();
     let spec = format!(
-        r#"type VisionPercept symbol vp {{ pos: vec2, vel: vec2, size: float }}
-type WorldObject symbol wo {{ pos: vec2, vel: vec2 }}
-type OnRoadObject : WorldObject symbol oo {{ road: int, lane_offset: float }}
-type Car : OnRoadObject symbol co {{ }}
-source percepts : list<VisionPercept> = {source}
-link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {{
-  input       percepts
-  establish   eventually[1s, inf] true
-  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0 and norm(from.vel - to.vel) < 5.0)
-  maintain    true
-}}
-link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario: "bridge") {{
-  establish   eventually[1s, inf] always[0, 1s] on_road(from.pos)
-  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0)
-  maintain    always eventually[0, 10s] always[0, 1s] on_road(from.pos)
-}}
-link onroad_car : OnRoadObject -> Car via anchor.copy {{
-  establish   eventually[2s, inf] always[0, 2s] (norm(from.vel) > 2.0)
-  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 5.0)
-  maintain    true
-}}
-predict WorldObject = constant_velocity
-predict OnRoadObject = along_roads(scenario: "bridge")
-forget after 10s
-forget VisionPercept after 600ms
-sink cars = file.jsonl(onroad_car, path: "cars.jsonl")
-"#
+        "{head}source percepts : list<VisionPercept> = {source}\n{links}\nsink cars = file.jsonl(onroad_car, path: \"cars.jsonl\")\n"
     );
     let spec_path = dir.join(format!("{name}.kpl"));
     std::fs::write(&spec_path, spec).unwrap();

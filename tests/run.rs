@@ -115,7 +115,12 @@ fn malformed_input_is_counted_reported_and_survived() {
         .iter()
         .map(|m| format!("{}: {}", m["location"].as_str().unwrap(), m["error"].as_str().unwrap()))
         .collect();
-    assert!(examples[0].starts_with("specs/run/data/malformed.jsonl:3: not a sample line"), "{examples:?}");
+    assert!(
+        examples[0].starts_with(
+            "specs/run/data/malformed.jsonl:3: the line is not JSON (unexpected text at column 2)"
+        ),
+        "{examples:?}"
+    );
     assert_eq!(
         examples[1],
         "specs/run/data/malformed.jsonl:4: value at `.pos[0]`: expected a finite number, found the string \"NaN\""
@@ -244,4 +249,146 @@ fn a_spec_with_errors_does_not_run() {
     let result = run("specs/err/unknown_stream.kpl", &out, &[]);
     assert_eq!(result.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&result.stderr).contains("E0101"));
+}
+
+#[test]
+fn a_monitor_over_forall_reports_each_binding_once_per_decision() {
+    let out = out_dir("bindings");
+    let result = run("specs/run/bindings.kpl", &out, &[]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let verdicts: Vec<(i64, String, bool)> = lines(&out.join("verdicts.jsonl"))
+        .iter()
+        .map(|r| {
+            let v = &r["value"];
+            (
+                r["valid"].as_i64().unwrap() / 1000,
+                v["c"].as_str().unwrap().to_string(),
+                v["verdict"].as_bool().unwrap(),
+            )
+        })
+        .collect();
+    // No car at 0 s: nothing (not a vacuous `true`). car1 too fast at 2 s and 3 s: one `false`;
+    // fine at 4 s and gone at 5 s: `true` as of 4 s. car2 too fast at 5 s.
+    assert_eq!(
+        verdicts,
+        [
+            (2000, "car1".to_string(), false),
+            (4000, "car1".to_string(), true),
+            (5000, "car2".to_string(), false)
+        ]
+    );
+}
+
+#[test]
+fn for_on_the_wall_clock_lasts_its_time_even_when_the_last_sample_comes_earlier() {
+    // A 1 s timer: its sample after 1.5 s would come at 2 s; the run still lasts 1.5 s.
+    let out = out_dir("for-last-sample");
+    let spec = out.join("slow.kpl");
+    std::fs::write(
+        &spec,
+        "source ticks : int = timer(period: 1s)\nsink record = file.jsonl(ticks, path: \"t.jsonl\")\n",
+    )
+    .unwrap();
+    let result = run(spec.to_str().unwrap(), &out, &["--clock", "wall", "--for", "1500ms"]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let report = summary(&out);
+    assert_eq!(report["ending"], "duration_reached");
+    assert!(report["clock_elapsed"].as_i64().unwrap() >= 1_500_000, "{report}");
+    assert_eq!(lines(&out.join("t.jsonl")).len(), 2, "ticks at 0 s and 1 s");
+}
+
+#[test]
+fn a_host_that_receives_nothing_stops_at_the_end_of_for() {
+    // Host `b` of two_hosts waits for `a`, which never comes; with the transport's wait far
+    // longer than --for, the run must still end at --for and say so.
+    let out = out_dir("for-alone");
+    let result = kpl(&[
+        "run",
+        "--quiet",
+        "specs/zenoh/two_hosts.kpl",
+        "--host",
+        "b",
+        "--clock",
+        "wall",
+        "--for",
+        "2s",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+    .env("KPL_ZENOH_WAIT", "600")
+    .env("KPL_ZENOH_PORT_BASE", "27447")
+    .output()
+    .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let report = summary(&out);
+    assert_eq!(report["ending"], "duration_reached");
+    let elapsed = report["clock_elapsed"].as_i64().unwrap();
+    assert!(
+        (2_000_000..600_000_000).contains(&elapsed),
+        "stopped at --for, not after the wait: {elapsed} us"
+    );
+}
+
+#[test]
+fn a_host_the_deploy_section_does_not_have_is_a_usage_error() {
+    let out = out_dir("no-such-host");
+    let result = run("specs/zenoh/two_hosts.kpl", &out, &["--host", "mars", "--clock", "wall"]);
+    assert_eq!(result.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("--host mars") && stderr.contains("`a`, `b`"), "{stderr}");
+}
+
+#[test]
+fn a_run_lists_its_outputs_and_what_the_links_achieved() {
+    let out = out_dir("report");
+    let result = kpl(&["run", "specs/traffic/bridge.kpl", "--for", "30s", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains(&format!("outputs in {}:", out.display())), "{stderr}");
+    for file in ["tracks.jsonl", "changes.jsonl", "summary.json"] {
+        assert!(stderr.lines().any(|l| l.trim_start().starts_with(file)), "{file} listed:\n{stderr}");
+        assert!(out.join(file).exists());
+    }
+    assert!(stderr.contains("new Car objects (establish)"), "{stderr}");
+    // The counts are the changes the links recorded.
+    let changes = lines(&out.join("changes.jsonl"));
+    let reestablished = changes
+        .iter()
+        .flat_map(|r| r["value"].as_array().unwrap().clone())
+        .filter(|c| c["kind"] == "linked" && c["cause"] == "reestablish" && c["link"] == "vision_world")
+        .count() as u64;
+    let report = summary(&out);
+    let vision_world = report["summary"]["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["process"] == "vision_world")
+        .unwrap()
+        .clone();
+    let result = vision_world["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["what"].as_str().unwrap().starts_with("links reestablished"))
+        .unwrap()
+        .clone();
+    assert_eq!(result["count"].as_u64().unwrap(), reestablished);
+    assert!(reestablished > 0, "the bridge makes the tracker lose cars");
+}
+
+#[test]
+fn a_spec_that_never_ends_says_so_at_the_start() {
+    let out = out_dir("endless-note");
+    let mut child = kpl(&["run", "specs/run/endless.kpl", "--clock", "wall", "--out", out.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut stderr, &mut first).unwrap();
+    child.kill().unwrap();
+    let _ = child.wait();
+    assert!(first.starts_with("note: this run does not end by itself (`ticks` never ends)"), "{first}");
 }

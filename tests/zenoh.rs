@@ -174,7 +174,7 @@ fn a_consumer_ends_when_its_producer_is_killed() {
             panic!("the consumer saw no samples:\n{seen}");
         }
         seen.push_str(&line);
-        if line.contains("samples/s") && !line.contains("(0 samples)") {
+        if line.contains("samples/s") && !line.contains("(0 samples,") {
             break;
         }
     }

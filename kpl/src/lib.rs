@@ -32,14 +32,19 @@ mod transport;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Colour diagnostics and logs: on a terminal (auto, unless NO_COLOR is set), always, never.
+    #[arg(long, global = true, value_enum, default_value = "auto", value_name = "WHEN")]
+    color: report::ColorChoice,
 }
 
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Parse and check specs: names, types, units, policies, links, cycles, deployment.
     Check(cmd::check::Args),
-    /// Draw the process graph of a spec (dot, mermaid or json), with streams and policies.
+    /// Draw the process graph of a spec (svg, dot, mermaid or json), with streams and policies.
     Graph(cmd::graph::Args),
+    /// Explain a diagnostic code (E0101, W0201, ...): what it means, with an example.
+    Explain(cmd::explain::Args),
     /// Rewrite specs in the canonical layout, keeping comments.
     Fmt(cmd::fmt::Args),
     /// List the sources, units, sinks, prediction models and functions the runtime provides.
@@ -59,9 +64,17 @@ enum Command {
     /// Metric temporal logic: evaluate formulas over traces.
     #[command(
         subcommand,
-        after_help = "Examples:\n  kpl mtl eval --formula 'always[0, 10] (p -> eventually[0, 3] q)' --trace trace.jsonl\n  kpl mtl eval --formula 'p until[0, 5s] q' --trace trace.jsonl --every"
+        after_help = "Examples:\n  kpl mtl eval --formula 'always[0, 10] (p -> eventually[0, 3] q)' --trace specs/mtl/trace.jsonl\n  kpl mtl eval --formula 'p until[0, 5s] q' --trace specs/mtl/trace.jsonl --every"
     )]
     Mtl(cmd::mtl::Command),
+    /// Print a shell completion script (bash, zsh, fish, elvish or powershell).
+    #[command(
+        after_help = "Examples:\n  source <(kpl completions bash)     # bash: put this line in ~/.bashrc\n  kpl completions zsh > _kpl         # zsh: move _kpl into a directory of $fpath\n  kpl completions fish > kpl.fish    # fish: move it to ~/.config/fish/completions/"
+    )]
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
     /// Benchmarks whose figures go to docs/performance.md.
     #[command(
         subcommand,
@@ -79,7 +92,6 @@ pub fn main_with(extend: fn(&mut kpl_runtime::Registry)) -> ExitCode {
 
 /// Runs the `kpl` command.
 pub fn main() -> ExitCode {
-    init_tracing();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(err) => {
@@ -88,9 +100,12 @@ pub fn main() -> ExitCode {
             return if err.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
         }
     };
+    report::set_color(cli.color);
+    init_tracing();
     match cli.command {
         Command::Check(args) => cmd::check::run(args),
         Command::Graph(args) => cmd::graph::run(args),
+        Command::Explain(args) => cmd::explain::run(args),
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
@@ -99,17 +114,32 @@ pub fn main() -> ExitCode {
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),
+        Command::Completions { shell } => {
+            let mut command = <Cli as clap::CommandFactory>::command();
+            clap_complete::generate(shell, &mut command, "kpl", &mut std::io::stdout());
+            ExitCode::SUCCESS
+        }
     }
 }
 
-/// Logs go to stderr; `RUST_LOG` selects what is shown (default: warnings).
+/// Logs go to stderr; `RUST_LOG` selects what is shown. By default: KPL's warnings, and only the
+/// errors of zenoh's own crates (their warnings, such as a scouting delay, are about zenoh's
+/// internals; `kpl-zenoh` reports what a user can act on in its own words).
 fn init_tracing() {
     use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
-    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(ansi)
-        .with_writer(std::io::stderr)
-        .try_init();
+    const DEFAULT: &str = "warn,zenoh=error,zenoh_transport=error,zenoh_link=error,zenoh_link_tcp=error,\
+                           zenoh_config=error,zenoh_runtime=error";
+    let ansi = report::colour();
+    let builder = tracing_subscriber::fmt().with_ansi(ansi).with_writer(std::io::stderr);
+    match EnvFilter::try_from_default_env() {
+        // Asked for: the full detail (times, modules), for debugging.
+        Ok(filter) => {
+            let _ = builder.with_env_filter(filter).try_init();
+        }
+        // By default, a warning reads as one line of text.
+        Err(_) => {
+            let filter = EnvFilter::new(DEFAULT);
+            let _ = builder.with_env_filter(filter).with_target(false).without_time().try_init();
+        }
+    }
 }

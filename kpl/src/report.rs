@@ -1,5 +1,5 @@
-//! Loading spec files and reporting their diagnostics, as text on stderr or as one JSON array
-//! on stdout (`--format json`).
+//! Loading spec files and reporting their diagnostics, as text on stderr (in colour on a
+//! terminal, see [`colour`]) or as one JSON array on stdout (`--format json`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -71,7 +71,17 @@ fn collect_kpl(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
 pub enum DiagnosticFormat {
     /// Human-readable, with the source line and the span marked.
     Text,
-    /// A JSON array of {file, line, column, end_line, end_column, severity, code, message}.
+    /// A JSON array of {file, line, column, end_line, end_column, severity, code, message, hint,
+    /// labels} (docs/diagnostics.md).
+    Json,
+}
+
+/// The output of commands that print a result (`kpl list`, `kpl run`, `kpl bench zenoh`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OutputFormat {
+    /// For people.
+    Text,
+    /// JSON on stdout, for programs.
     Json,
 }
 
@@ -79,19 +89,22 @@ pub enum DiagnosticFormat {
 pub struct Reporter {
     format: DiagnosticFormat,
     json: Vec<JsonDiagnostic>,
+    /// The first code reported (for the `kpl explain` pointer under the summary).
+    first_code: Option<&'static str>,
     pub errors: usize,
     pub warnings: usize,
 }
 
 impl Reporter {
     pub fn new(format: DiagnosticFormat) -> Reporter {
-        Reporter { format, json: Vec::new(), errors: 0, warnings: 0 }
+        Reporter { format, json: Vec::new(), first_code: None, errors: 0, warnings: 0 }
     }
 
     pub fn report(&mut self, file: &SourceFile, diagnostics: &[Diagnostic]) {
         let index = LineIndex::new(&file.text);
         let name = file.display_name();
         for d in diagnostics {
+            self.first_code.get_or_insert(d.code);
             if d.is_error() {
                 self.errors += 1;
             } else {
@@ -100,7 +113,7 @@ impl Reporter {
             match self.format {
                 DiagnosticFormat::Text => {
                     let mut stderr = std::io::stderr().lock();
-                    let _ = writeln!(stderr, "{}", d.render(&name, &file.text, &index));
+                    let _ = write!(stderr, "{}", d.render_styled(&name, &file.text, &index, colour()));
                 }
                 DiagnosticFormat::Json => self.json.push(d.to_json(&name, &file.text, &index)),
             }
@@ -128,6 +141,9 @@ impl Reporter {
                     plural(self.errors, "error"),
                     plural(self.warnings, "warning")
                 );
+                if let Some(code) = self.first_code {
+                    let _ = writeln!(stderr, "For more about a code, try `kpl explain {code}`.");
+                }
             }
             DiagnosticFormat::Text => {}
         }
@@ -138,4 +154,34 @@ impl Reporter {
 pub fn io_error(path: &Path, err: &std::io::Error) {
     let mut stderr = std::io::stderr().lock();
     let _ = writeln!(stderr, "error: cannot read {}: {err}", path.display());
+}
+
+/// When to colour what goes to the terminal (`--color`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ColorChoice {
+    /// On a terminal, unless `NO_COLOR` is set; never in a pipe or a file.
+    #[default]
+    Auto,
+    Always,
+    Never,
+}
+
+static COLOR: std::sync::OnceLock<ColorChoice> = std::sync::OnceLock::new();
+
+/// Sets the `--color` choice (once, at start).
+pub fn set_color(choice: ColorChoice) {
+    let _ = COLOR.set(choice);
+}
+
+/// Whether text for stderr is coloured: `--color always`, or `auto` on a terminal without
+/// `NO_COLOR` (<https://no-color.org>).
+pub fn colour() -> bool {
+    match COLOR.get().copied().unwrap_or_default() {
+        ColorChoice::Always => true,
+        ColorChoice::Never => false,
+        ColorChoice::Auto => {
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+        }
+    }
 }

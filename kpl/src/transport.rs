@@ -43,8 +43,11 @@ pub struct BenchArgs {
     /// What a KPL sample carries: a string of SIZE bytes, or a list of SIZE/8 floats.
     #[arg(long, value_enum, default_value = "string")]
     value: ValueArg,
-    /// Print the report as JSON.
-    #[arg(long)]
+    /// Output format: a table, or the report as JSON.
+    #[arg(long, value_enum, default_value = "text")]
+    format: crate::report::OutputFormat,
+    /// The same as `--format json` (kept for scripts written before `--format`).
+    #[arg(long, hide = true)]
     json: bool,
     /// Run as the other process of the benchmark (a task in JSON; started by `kpl bench zenoh`).
     #[arg(long, hide = true)]
@@ -84,7 +87,7 @@ pub fn bench(args: BenchArgs) -> ExitCode {
             return ExitCode::from(1);
         }
     };
-    if args.json {
+    if args.json || args.format == crate::report::OutputFormat::Json {
         match serde_json::to_string_pretty(&report) {
             Ok(json) => println!("{json}"),
             Err(err) => eprintln!("error: {err}"),

@@ -39,7 +39,7 @@ fn bridge_run() -> &'static Path {
         let dir = scratch("bridge");
         let spec = std::fs::read_to_string(workspace().join("specs/traffic/bridge.kpl")).unwrap();
         let spec = format!(
-            "{spec}\ncompute world = anchor.world_model(onroad_car)\nsink world_model = file.jsonl(world, path: \"bridge/world.jsonl\")\n"
+            "{spec}\ncompute world = anchor.world_model(onroad_car)\nsink world_model = file.jsonl(world, path: \"world.jsonl\")\n"
         );
         let spec_path = dir.join("bridge_world.kpl");
         std::fs::write(&spec_path, spec).unwrap();
@@ -52,7 +52,7 @@ fn bridge_run() -> &'static Path {
 
 /// The plain bridge recording alone (tracks.jsonl), as `kpl run specs/traffic/bridge.kpl` writes it.
 fn tracks() -> PathBuf {
-    bridge_run().join("bridge/tracks.jsonl")
+    bridge_run().join("tracks.jsonl")
 }
 
 fn score_json(args: &[&str]) -> Value {
@@ -177,14 +177,18 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     assert!(n(&only["alignment"]["left_out"]) > 100, "{}", only["alignment"]);
     assert!(n(&only["clear"]["false_positives"]) < n(&all["clear"]["false_positives"]) / 4);
     assert!(n(&only["clear"]["misses"]) > n(&all["clear"]["misses"]), "predicted states matched cars too");
-    // Streams without a `measured` field are scored whole, and the report says so.
-    assert_eq!(stream(&measured, "vision_world")["alignment"]["measured"], "not_available");
-    let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "vision_world"]);
+    // A link's output says per object whether it was measured, as the world model does: the two
+    // agree with only measured states too.
+    assert_eq!(stream(&measured, "vision_world")["alignment"]["measured"], "applied");
+    for part in ["clear", "identity", "hota"] {
+        assert_eq!(stream(&measured, "vision_world")[part], only[part], "{part}");
+    }
+    // Streams without a `measured` field (a tracker's percepts) are scored whole, and the report
+    // says so.
+    assert_eq!(stream(&measured, "tracker")["alignment"]["measured"], "not_available");
+    let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "tracker"]);
     let text = String::from_utf8(o.stdout).unwrap();
-    assert!(
-        text.contains("--measured-only: vision_world say nothing about which states were measured"),
-        "{text}"
-    );
+    assert!(text.contains("--measured-only: tracker say nothing about which states were measured"), "{text}");
 }
 
 #[test]
@@ -326,7 +330,7 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
         "{}",
         stderr(&o)
     );
-    let changes = bridge_run().join("bridge/changes.jsonl");
+    let changes = bridge_run().join("changes.jsonl");
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--stream", "onroad_car.changes"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("`onroad_car.changes` is not an object stream"), "{}", stderr(&o));

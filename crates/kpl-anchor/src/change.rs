@@ -65,8 +65,11 @@ pub enum Cause {
     ToRemoved,
     /// The structure has no incoming link: its state is predicted.
     NoIncomingLink,
-    /// The prediction split into more hypotheses (or fewer: routes that left the map merge).
+    /// The prediction split into more hypotheses (or fewer: routes that left the map merge); a
+    /// branch object was created for a new hypothesis.
     Branch,
+    /// A branch object whose structure was reacquired (or fed again), or whose hypothesis ended.
+    Pruned,
     /// A percept no longer listed by its source.
     Lost,
     /// Not anchored for the forget time.
@@ -91,6 +94,7 @@ impl Cause {
             Cause::Lost => "lost",
             Cause::Forgotten => "forgotten",
             Cause::Resolved => "resolved",
+            Cause::Pruned => "pruned",
         }
     }
 }
@@ -117,6 +121,8 @@ pub struct Change {
     pub hypothesis: Option<u32>,
     /// `identified` and `created` by an identification: the name asked for.
     pub name: Option<Arc<str>>,
+    /// `created` and `removed` of a branch object: the object whose prediction it branches from.
+    pub branch_of: Option<Arc<str>>,
 }
 
 impl Change {
@@ -133,6 +139,7 @@ impl Change {
             hypotheses: None,
             hypothesis: None,
             name: None,
+            branch_of: None,
         }
     }
 
@@ -166,8 +173,13 @@ impl Change {
         self
     }
 
+    pub fn branch_of(mut self, owner: &Arc<str>) -> Change {
+        self.branch_of = Some(owner.clone());
+        self
+    }
+
     /// The record a `changes` stream carries: `kind`, `time`, `symbol`, `type`, `cause`, then
-    /// `link`, `from`, `model`, `hypotheses`, `hypothesis`, `name` when set.
+    /// `link`, `from`, `model`, `name`, `branch_of`, `hypotheses`, `hypothesis` when set.
     pub fn to_value(&self) -> Value {
         let s = |x: &str| Value::str(x);
         let mut fields: Vec<(Arc<str>, Value)> = vec![
@@ -177,8 +189,13 @@ impl Change {
             ("type".into(), Value::Str(self.ty.clone())),
             ("cause".into(), s(self.cause.as_str())),
         ];
-        let optional =
-            [("link", &self.link), ("from", &self.from), ("model", &self.model), ("name", &self.name)];
+        let optional = [
+            ("link", &self.link),
+            ("from", &self.from),
+            ("model", &self.model),
+            ("name", &self.name),
+            ("branch_of", &self.branch_of),
+        ];
         for (name, value) in optional {
             if let Some(v) = value {
                 fields.push((name.into(), Value::Str(v.clone())));
@@ -216,6 +233,9 @@ impl fmt::Display for Change {
         }
         if let Some(name) = &self.name {
             write!(f, ", {name}")?;
+        }
+        if let Some(owner) = &self.branch_of {
+            write!(f, ", branch of {owner}")?;
         }
         f.write_str(")")
     }

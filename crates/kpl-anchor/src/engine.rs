@@ -38,6 +38,7 @@ use kpl_mtl::Formula;
 use kpl_semantic::hir;
 use kpl_syntax::ast;
 
+use crate::branches;
 use crate::change::{Cause, Change, ChangeKind};
 use crate::conditions::{LinkConditions, LinkState, description_formula};
 use crate::error::{BuildError, IdentifyError, StepError};
@@ -46,7 +47,8 @@ use crate::link::{Condition, LinkIdentification, LinkProcess};
 use crate::networks::Networks;
 use crate::predict::PredictionModel;
 use crate::records::{check_fields, overlay};
-use crate::store::{LinkId, ObjectKey, Origin, PredictionRun, Store, TypeId};
+use crate::status;
+use crate::store::{LinkId, ObjectKey, Origin, PredictionRun, StateOrigin, Store, TypeId};
 
 /// What an engine is built with besides the spec.
 #[derive(Debug, Clone, Default)]
@@ -107,6 +109,9 @@ pub(crate) struct TypeInfo {
     pub links_into: Vec<LinkId>,
     pub model: Option<Arc<dyn PredictionModel>>,
     pub forget: Option<Time>,
+    /// Links of the spec lead into the type, but none of this engine's (they run on another
+    /// host): its objects come from snapshots that say whether they were measured.
+    pub made_elsewhere: bool,
 }
 
 /// A pending or completed identification.
@@ -125,10 +130,22 @@ pub(crate) struct Identification {
     existing: BTreeMap<ObjectKey, Condition>,
 }
 
+/// One `from` stream of a link at the state of one of its steps ([`Anchoring::step_link`]): the
+/// stream's name (for a type fed by snapshots, the source its objects belong to), the valid time
+/// of its sample (earlier than the step's when the sample is held over, `use most recent`), and
+/// the snapshot.
+#[derive(Debug, Clone, Copy)]
+pub struct FromSnapshot<'a> {
+    pub stream: &'a str,
+    pub valid: Time,
+    pub objects: &'a Value,
+}
+
 /// What a link process reads and writes during a step.
 pub(crate) struct StepCtx<'a> {
     pub time: Time,
-    pub step: u64,
+    /// Branch objects whose structure was reacquired: removed after the link's step.
+    pub pruned: Vec<ObjectKey>,
     pub store: &'a mut Store,
     pub types: &'a [TypeInfo],
     pub identifications: &'a mut [Identification],
@@ -148,11 +165,14 @@ pub struct Anchoring {
     pub(crate) store: Store,
     source_ids: BTreeMap<String, u32>,
     source_percepts: Vec<Vec<ObjectKey>>,
+    /// The valid time of each source's last snapshot taken in.
+    source_times: Vec<Option<Time>>,
     pub(crate) identifications: Vec<Identification>,
     pub(crate) last_time: Option<Time>,
     step: u64,
-    /// Changes made between steps (identifications asked), reported with the next step.
-    pending: Vec<Change>,
+    /// Changes made between steps (identifications asked), reported with the next step of the
+    /// link that reports them (the first link into the type), or of any link when there is none.
+    pending: Vec<(Option<LinkId>, Change)>,
     notes: Vec<String>,
     keys: Vec<ObjectKey>,
     hypotheses: Vec<Record>,
@@ -183,6 +203,7 @@ impl Anchoring {
                 links_into: Vec::new(),
                 model: None,
                 forget: spec.forget.after(&record.name),
+                made_elsewhere: false,
             })
             .collect();
         let type_id =
@@ -218,14 +239,22 @@ impl Anchoring {
                 })?;
             let id = links.len() as LinkId;
             types[to_ty as usize].links_into.push(id);
-            links.push(LinkProcess::new(
+            let mut link_process = LinkProcess::new(
                 Arc::from(process.name.as_str()),
                 from_ty,
                 to_ty,
                 link.via.entry.clone(),
                 unit,
                 conditions,
-            ));
+            );
+            // The names a source of its `from` objects goes by: each input stream and its producer.
+            for input in process.inputs.iter().filter(|i| i.port == "from") {
+                link_process.from_sources.push(input.stream.name.clone());
+                if let Some(producer) = spec.processes.get(input.stream.producer) {
+                    link_process.from_sources.push(producer.name.clone());
+                }
+            }
+            links.push(link_process);
         }
 
         // The hierarchy: types ordered so that every link goes forward (Kahn's algorithm,
@@ -273,6 +302,14 @@ impl Anchoring {
             types[ty as usize].model = Some(model);
         }
 
+        for ty in &mut types {
+            ty.made_elsewhere = ty.links_into.is_empty()
+                && spec
+                    .processes
+                    .iter()
+                    .any(|p| matches!(&p.kind, hir::ProcessKind::Link(l) if *l.to_type == *ty.name));
+        }
+
         // A percept type is forgotten only when the spec says so for that type (`forget
         // VisionPercept after 600ms`): the default forget time is about derived objects.
         for ty in &mut types {
@@ -301,6 +338,7 @@ impl Anchoring {
             store,
             source_ids: BTreeMap::new(),
             source_percepts: Vec::new(),
+            source_times: Vec::new(),
             identifications: Vec::new(),
             last_time: None,
             step: 0,
@@ -433,7 +471,8 @@ impl Anchoring {
             description: description_only,
             existing: BTreeMap::new(),
         });
-        self.pending.push(
+        self.pending.push((
+            links_into.first().copied(),
             Change::new(
                 time,
                 ChangeKind::Created,
@@ -442,7 +481,7 @@ impl Anchoring {
                 Cause::Identify,
             )
             .name(&name),
-        );
+        ));
         Ok(symbol)
     }
 
@@ -472,12 +511,17 @@ impl Anchoring {
         let id = self.source_percepts.len() as u32;
         self.source_ids.insert(source.to_string(), id);
         self.source_percepts.push(Vec::new());
+        self.source_times.push(None);
         id
     }
 
-    /// Advances to `time` (after the previous step's) with the snapshots of the sources that
-    /// report at this time (at most one per source); sources without a snapshot keep their
-    /// percepts as they were. On error nothing changes.
+    /// Advances every link to `time` (after the previous step's) with the snapshots of the
+    /// sources that report at this time (at most one per source): each link, in the order of
+    /// the hierarchy, takes one step ([`Anchoring::step_link`]) whose `from` objects are the
+    /// percepts listed at this time, or for a link from a type made by links, every object of
+    /// that type as the links before it left it. A source without a snapshot at this time has
+    /// no state now: its percepts are not stepped (nothing is held over). On error nothing
+    /// changes.
     pub fn step(&mut self, time: Time, inputs: &[Snapshot<'_>]) -> Result<StepOutput, StepError> {
         if let Some(previous) = self.last_time
             && time <= previous
@@ -502,41 +546,172 @@ impl Anchoring {
         self.last_time = Some(time);
         self.step += 1;
         let mut out = StepOutput { time, ..StepOutput::default() };
-        for mut change in self.pending.drain(..) {
+        for (_, mut change) in self.pending.drain(..) {
             change.time = time;
             out.changes.push(change);
         }
-        self.store.for_each_mut(|o| {
-            if !matches!(o.origin, Origin::Percept { .. }) {
-                o.measured_at = None;
-                o.predicted = false;
-                o.on_prediction_path = false;
-            }
-        });
         for (input, ty) in resolved {
             self.ingest(time, input.source, ty, input.objects, &mut out);
         }
-        self.predict(time, &mut out);
+        let mut from = Vec::new();
         for k in 0..self.link_order.len() {
             let l = self.link_order[k];
-            let mut cx = StepCtx {
-                time,
-                step: self.step,
-                store: &mut self.store,
-                types: &self.types,
-                identifications: &mut self.identifications,
-                out: &mut out,
-            };
-            self.links[l as usize].run(l, &mut cx, &mut self.keys);
+            from.clear();
+            self.current_objects(l, time, &mut from);
+            self.run_link(l, time, &from, &[], &mut out);
         }
-        self.match_descriptions(time, &mut out);
-        self.ground(time);
-        self.forget(time, &mut out);
         Ok(out)
+    }
+
+    /// One step of one link process at `time`, with its own input state, as the runtime runs a
+    /// link process: the snapshots of its `from` streams at this state (a stream without a
+    /// sample now is left out; a snapshot held over from an earlier valid time, `use most
+    /// recent`, counts as not measured now) and its unit's extra inputs. Snapshots of a type no
+    /// link of this engine leads into (percepts, or objects made on another host) are taken into
+    /// the store first (once per stream and time). Then: objects of the link's type due to be
+    /// forgotten are not predicted, the others without an incoming link are; the link's
+    /// instances of the objects in the state progress their conditions; identifications of its
+    /// type are matched; grounding and forgetting follow. Each link steps in strictly increasing
+    /// time; links step independently (a link downstream may lag behind). On error nothing
+    /// changes.
+    pub fn step_link(
+        &mut self,
+        link: &str,
+        time: Time,
+        from: &[FromSnapshot<'_>],
+        extra: &[Option<Value>],
+    ) -> Result<StepOutput, StepError> {
+        let l = self
+            .links
+            .iter()
+            .position(|x| &*x.name == link)
+            .ok_or_else(|| StepError::UnknownLink(link.to_string()))? as LinkId;
+        if let Some(previous) = self.links[l as usize].last_time
+            && time <= previous
+        {
+            return Err(StepError::TimeNotIncreasing { time, previous });
+        }
+        self.last_time = Some(self.last_time.map_or(time, |t| t.max(time)));
+        self.step += 1;
+        let mut out = StepOutput { time, ..StepOutput::default() };
+        let from_ty = self.links[l as usize].from_ty;
+        let fed = self.types[from_ty as usize].links_into.is_empty();
+        let mut objects = Vec::new();
+        for snapshot in from {
+            let current = snapshot.valid == time;
+            if fed && current {
+                let source = self.source_id(snapshot.stream);
+                if self.source_times[source as usize].is_none_or(|t| t < time) {
+                    self.ingest(time, snapshot.stream, from_ty, snapshot.objects, &mut out);
+                }
+            }
+            let Value::List(items) = snapshot.objects else {
+                if !fed {
+                    out.warn(
+                        time,
+                        format!(
+                            "link `{link}`: input `{}` is {}, expected a list of objects; ignored",
+                            snapshot.stream,
+                            with_article(snapshot.objects.kind())
+                        ),
+                    );
+                }
+                continue;
+            };
+            for item in items.iter() {
+                let Some(id) = item.as_record().and_then(|r| r.id.as_deref()) else { continue };
+                let Some(key) = self.store.by_symbol(from_ty, id) else { continue };
+                if objects.iter().any(|(k, _)| *k == key) {
+                    continue;
+                }
+                let Some(object) = self.store.get(key) else { continue };
+                let value = if fed && current {
+                    // What the store took in (its status attributes set), unless it is another
+                    // source's object.
+                    if object.last_seen != time || !object.present {
+                        continue;
+                    }
+                    object.value.clone()
+                } else if current {
+                    item.clone()
+                } else {
+                    status::held(item, time)
+                };
+                objects.push((key, value));
+            }
+        }
+        self.run_link(l, time, &objects, extra, &mut out);
+        Ok(out)
+    }
+
+    /// The `from` objects of link `l` in [`Anchoring::step`]: the percepts listed at `time` by the
+    /// sources the link reads (a source no link from the type names goes to all of them), or
+    /// every (not partial) object of a type made by links.
+    fn current_objects(&self, l: LinkId, time: Time, out: &mut Vec<(ObjectKey, Value)>) {
+        let ty = self.links[l as usize].from_ty;
+        let fed = self.types[ty as usize].links_into.is_empty();
+        let read_by = |source: u32, link: &LinkProcess| {
+            let name = self.source_ids.iter().find(|(_, id)| **id == source).map(|(n, _)| n.as_str());
+            name.is_some_and(|n| link.from_sources.iter().any(|s| s == n))
+        };
+        for key in self.store.objects_of(ty) {
+            let Some(object) = self.store.get(key) else { continue };
+            let current = match object.origin {
+                Origin::Percept { source } if fed => {
+                    object.present
+                        && object.last_seen == time
+                        && (read_by(source, &self.links[l as usize])
+                            || !self.links.iter().any(|other| other.from_ty == ty && read_by(source, other)))
+                }
+                _ => !object.is_partial(),
+            };
+            if current {
+                out.push((key, object.value.clone()));
+            }
+        }
+    }
+
+    /// A link's step on the objects of its state (see [`Anchoring::step_link`]).
+    fn run_link(
+        &mut self,
+        l: LinkId,
+        time: Time,
+        from: &[(ObjectKey, Value)],
+        extra: &[Option<Value>],
+        out: &mut StepOutput,
+    ) {
+        let mut k = 0;
+        while k < self.pending.len() {
+            if self.pending[k].0 == Some(l) {
+                let (_, mut change) = self.pending.remove(k);
+                change.time = time;
+                out.changes.push(change);
+            } else {
+                k += 1;
+            }
+        }
+        let to_ty = self.links[l as usize].to_ty;
+        self.predict(to_ty, time, out);
+        let mut cx = StepCtx {
+            time,
+            pruned: Vec::new(),
+            store: &mut self.store,
+            types: &self.types,
+            identifications: &mut self.identifications,
+            out,
+        };
+        self.links[l as usize].run(l, &mut cx, from, extra);
+        let pruned = std::mem::take(&mut cx.pruned);
+        self.prune(pruned, time, out);
+        self.links[l as usize].last_time = Some(time);
+        self.match_descriptions(to_ty, time, out);
+        self.ground(to_ty, time);
+        self.forget(to_ty, time, out);
     }
 
     fn ingest(&mut self, time: Time, source: &str, ty: TypeId, objects: &Value, out: &mut StepOutput) {
         let source_id = self.source_id(source);
+        self.source_times[source_id as usize] = Some(time);
         let Value::List(items) = objects else {
             out.warn(
                 time,
@@ -549,6 +724,9 @@ impl Anchoring {
         };
         let type_record = self.types[ty as usize].record.clone();
         let type_name = self.types[ty as usize].name.clone();
+        // Objects of a type links make elsewhere (another host) say whether they were measured;
+        // percepts listed now are.
+        let derived_elsewhere = self.types[ty as usize].made_elsewhere;
         let mut listed = Vec::with_capacity(items.len());
         for item in items.iter() {
             let Value::Record(record) = item else {
@@ -569,7 +747,12 @@ impl Anchoring {
                 out.warn(time, format!("snapshot from `{source}`: {id} {problem}; skipped"));
                 continue;
             }
-            match self.store.by_symbol(ty, &id) {
+            let origin = if derived_elsewhere && !status::is_measured(item) {
+                StateOrigin::HELD
+            } else {
+                StateOrigin::MEASURED
+            };
+            let key = match self.store.by_symbol(ty, &id) {
                 Some(key) => {
                     let step = self.step;
                     let Some(object) = self.store.get_mut(key) else { continue };
@@ -584,28 +767,19 @@ impl Anchoring {
                         );
                         continue;
                     }
-                    object.value = item.clone();
-                    object.state_time = time;
-                    object.measured_at = Some(time);
-                    object.seen_step = step;
-                    object.present = true;
-                    object.last_seen = time;
-                    listed.push(key);
+                    key
                 }
                 None => {
                     let key = self.store.insert(
                         ty,
                         id.clone(),
                         Origin::Percept { source: source_id },
-                        (**record).clone(),
+                        Record::default(),
                         time,
                     );
                     if let Some(object) = self.store.get_mut(key) {
-                        object.measured_at = Some(time);
-                        object.seen_step = self.step;
                         object.anchored = true;
                     }
-                    listed.push(key);
                     out.changes.push(Change::new(
                         time,
                         ChangeKind::Created,
@@ -613,8 +787,16 @@ impl Anchoring {
                         type_name.clone(),
                         Cause::Source,
                     ));
+                    key
                 }
-            }
+            };
+            let step = self.step;
+            let Some(object) = self.store.get_mut(key) else { continue };
+            object.set_state_value(item, time, origin);
+            object.seen_step = step;
+            object.present = true;
+            object.last_seen = time;
+            listed.push(key);
         }
         // Percepts not listed: absent until the type's forget time has passed, then removed.
         let grace = self.types[ty as usize].forget.unwrap_or(0);
@@ -628,6 +810,7 @@ impl Anchoring {
                 self.remove_object(key, Cause::Lost, time, out);
             } else {
                 object.present = false;
+                object.keep_state_unmeasured(time);
                 listed.push(key);
             }
         }
@@ -640,6 +823,7 @@ impl Anchoring {
         let Some(object) = self.store.get(key) else { return };
         let (symbol, ty) = (object.symbol.clone(), object.ty);
         let (incoming, outgoing) = (object.incoming.clone(), object.outgoing.clone());
+        let branches = object.prediction.as_ref().map(|run| run.branches.clone()).unwrap_or_default();
         let type_name = self.types[ty as usize].name.clone();
         for (l, to) in outgoing {
             if let Some(target) = self.store.get(to) {
@@ -680,6 +864,23 @@ impl Anchoring {
         }
         self.store.remove(key);
         out.changes.push(Change::new(time, ChangeKind::Removed, symbol, type_name, cause));
+        self.prune(branches, time, out);
+    }
+
+    /// Removes branch objects (`removed`, cause `pruned`).
+    fn prune(&mut self, mut branches: Vec<ObjectKey>, time: Time, out: &mut StepOutput) {
+        branches.sort_by_key(|k| self.store.get(*k).map(|o| o.seq));
+        for key in branches {
+            let owner = self.store.get(key).and_then(|b| b.branch_of).and_then(|o| self.store.get(o));
+            let owner = owner.map(|o| o.symbol.clone());
+            let before = out.changes.len();
+            self.remove_object(key, Cause::Pruned, time, out);
+            if let (Some(owner), Some(change)) =
+                (owner, out.changes.get_mut(before..).and_then(|c| c.last_mut()))
+            {
+                change.branch_of = Some(owner);
+            }
+        }
     }
 
     /// The structure predicted from `root`: the path from the root to the object whose model
@@ -709,40 +910,53 @@ impl Anchoring {
         (path, owner)
     }
 
-    fn predict(&mut self, time: Time, out: &mut StepOutput) {
-        for ti in 0..self.type_order.len() {
-            let ty = self.type_order[ti];
-            if self.types[ty as usize].links_into.is_empty() {
+    /// Whether `key` is on the predicted structure of its root: its state then comes from the
+    /// root's prediction, not from its link unit.
+    pub(crate) fn on_prediction_path(store: &Store, key: ObjectKey) -> bool {
+        let Some(root) = store.get(key).and_then(|o| o.prediction_root) else { return false };
+        store.get(root).and_then(|r| r.prediction.as_ref()).is_some_and(|run| run.path.contains(&key))
+    }
+
+    /// Predicts the objects of type `ty` that have no incoming link from a present object (the
+    /// roots of structures nothing feeds), with their structures; ends the prediction of those
+    /// fed again. An object due to be forgotten at this step is left alone.
+    fn predict(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
+        let forget = self.types[ty as usize].forget;
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.clear();
+        keys.extend(self.store.objects_of(ty));
+        for &root in &keys {
+            let Some(object) = self.store.get(root) else { continue };
+            // Branch objects are predicted with the structure they branch from.
+            if object.origin != Origin::Derived || object.branch_of.is_some() {
                 continue;
             }
-            let mut keys = std::mem::take(&mut self.keys);
-            keys.clear();
-            keys.extend(self.store.objects_of(ty));
-            for &root in &keys {
-                let Some(object) = self.store.get(root) else { continue };
-                if object.origin != Origin::Derived {
-                    continue;
+            let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
+            if fed {
+                if object.prediction.is_some()
+                    && let Some(run) = self.store.get_mut(root).and_then(|o| o.prediction.take())
+                {
+                    self.prune(run.branches, time, out);
                 }
-                let fed = object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.present));
-                if fed {
-                    if object.prediction.is_some()
-                        && let Some(o) = self.store.get_mut(root)
-                    {
-                        o.prediction = None;
-                    }
-                    continue;
-                }
+                continue;
+            }
+            let doomed = !object.anchored
+                && forget.is_some_and(|after| time.saturating_sub(object.last_anchored) >= after);
+            if !doomed {
                 self.predict_structure(root, time, out);
             }
-            self.keys = keys;
         }
+        self.keys = keys;
     }
 
     fn predict_structure(&mut self, root: ObjectKey, time: Time, out: &mut StepOutput) {
         let (mut path, owner_index) = self.prediction_path(root);
         let Some(owner_index) = owner_index else {
+            // No model: the last state is kept, no longer measured.
             if let Some(o) = self.store.get_mut(root) {
-                o.prediction = None;
+                let run = o.prediction.take();
+                o.keep_state_unmeasured(time);
+                self.prune(run.map(|r| r.branches).unwrap_or_default(), time, out);
             }
             return;
         };
@@ -756,18 +970,34 @@ impl Anchoring {
             (root_obj.symbol.clone(), self.types[root_obj.ty as usize].name.clone());
         let mut run = match root_obj.prediction.take() {
             Some(run) if run.owner == owner && run.path == path => run,
-            _ => {
+            previous => {
+                self.prune(previous.map(|r| r.branches).unwrap_or_default(), time, out);
                 let Some(state) = owner_state else { return };
+                let state = Arc::new(status::without_branch((*state).clone()));
                 let start = model.start(state, owner_time);
-                Box::new(PredictionRun { owner, path: path.clone(), start, n_hypotheses: 0 })
+                Box::new(PredictionRun {
+                    owner,
+                    path: path.clone(),
+                    start,
+                    n_hypotheses: 0,
+                    branches: Vec::new(),
+                })
             }
         };
-        let mut hypotheses = std::mem::take(&mut self.hypotheses);
-        hypotheses.clear();
-        model.predict(&run.start, time, &mut hypotheses);
-        if hypotheses.is_empty() {
-            hypotheses.push((*run.start.state).clone());
+        let mut raw = std::mem::take(&mut self.hypotheses);
+        raw.clear();
+        model.predict(&run.start, time, &mut raw);
+        if raw.is_empty() {
+            raw.push((*run.start.state).clone());
         }
+        // Most likely first.
+        let likely =
+            branches::likelihoods(run.start.lane.as_ref().map(|l| l.heading), &run.start.state, &raw);
+        let mut order: Vec<usize> = (0..raw.len()).collect();
+        order.sort_by(|&a, &b| likely[b].total_cmp(&likely[a]).then(a.cmp(&b)));
+        let hypotheses: Vec<(Record, f64)> =
+            order.iter().map(|&i| (status::without_branch(raw[i].clone()), likely[i])).collect();
+        self.hypotheses = raw;
         if run.n_hypotheses == 0 {
             let mut change =
                 Change::new(time, ChangeKind::Predicted, root_symbol, root_type, Cause::NoIncomingLink)
@@ -784,41 +1014,116 @@ impl Anchoring {
             );
         }
         run.n_hypotheses = hypotheses.len();
+        let followers = self.follow_branches(&mut run, root, &hypotheses, model.name(), time, out);
+        let split = hypotheses.len() > 1;
+        let mine = followers.iter().position(|f| *f == Some(owner)).unwrap_or(0);
         for (i, &key) in path.iter().enumerate() {
             let Some(object) = self.store.get_mut(key) else { continue };
-            let values: Vec<Value> = if i == owner_index {
-                hypotheses
-                    .iter()
-                    .map(|h| {
-                        Value::Record(Arc::new(Record {
-                            id: Some(object.symbol.clone()),
-                            fields: h.fields.clone(),
-                        }))
-                    })
-                    .collect()
-            } else {
-                let base = object.record().cloned().unwrap_or_default();
-                hypotheses.iter().map(|h| Value::Record(Arc::new(overlay(&base, h)))).collect()
+            let base = status::without_branch(object.record().map(|r| (**r).clone()).unwrap_or_default());
+            let state_of = |h: &Record, likelihood: f64| {
+                if i == owner_index {
+                    let record = Record { id: Some(object.symbol.clone()), fields: h.fields.clone() };
+                    if split { status::with_branch(record, likelihood, None) } else { record }
+                } else {
+                    overlay(&base, h)
+                }
             };
-            object.value = values[0].clone();
-            object.hypotheses = if values.len() > 1 { values } else { Vec::new() };
-            object.state_time = time;
-            object.measured_at = None;
-            object.predicted = true;
-            object.on_prediction_path = true;
+            let (h, likelihood) = &hypotheses[mine];
+            let own = state_of(h, *likelihood);
+            let all: Vec<Record> =
+                if split { hypotheses.iter().map(|(h, l)| state_of(h, *l)).collect() } else { Vec::new() };
+            object.set_state(own, time, StateOrigin::PREDICTED);
+            let status = object.status();
+            object.hypotheses =
+                all.into_iter().map(|r| Value::Record(Arc::new(status::with_status(r, status)))).collect();
+            object.prediction_root = Some(root);
+        }
+        // The branch objects follow their hypotheses.
+        let owner_symbol = self.store.get(owner).map(|o| o.symbol.clone());
+        for (h, follower) in followers.iter().enumerate() {
+            let Some(key) = *follower else { continue };
+            if key == owner {
+                continue;
+            }
+            let Some(object) = self.store.get_mut(key) else { continue };
+            let (state, likelihood) = &hypotheses[h];
+            let record = Record { id: Some(object.symbol.clone()), fields: state.fields.clone() };
+            let record = status::with_branch(record, *likelihood, owner_symbol.as_ref());
+            object.set_state(record, time, StateOrigin::PREDICTED);
+            object.prediction_root = Some(root);
         }
         if let Some(o) = self.store.get_mut(root) {
             o.prediction = Some(run);
         }
-        self.hypotheses = hypotheses;
     }
 
-    fn match_descriptions(&mut self, time: Time, out: &mut StepOutput) {
-        for i in 0..self.identifications.len() {
-            if self.identifications[i].done {
+    /// Which object follows each hypothesis (most likely first): the owner and the run's branch
+    /// objects keep following theirs (matched by state distance), a hypothesis no object follows
+    /// gets a new branch object (`created`, cause `branch`), and a branch object whose hypothesis
+    /// ended is pruned. Updates `run.branches`.
+    fn follow_branches(
+        &mut self,
+        run: &mut PredictionRun,
+        root: ObjectKey,
+        hypotheses: &[(Record, f64)],
+        model: &str,
+        time: Time,
+        out: &mut StepOutput,
+    ) -> Vec<Option<ObjectKey>> {
+        let owner = run.owner;
+        let mut followers: Vec<Option<ObjectKey>> = vec![None; hypotheses.len()];
+        let previous: Vec<ObjectKey> = std::iter::once(owner).chain(run.branches.iter().copied()).collect();
+        let values: Vec<Value> = previous
+            .iter()
+            .map(|k| self.store.get(*k).map_or(Value::Bool(false), |o| o.value.clone()))
+            .collect();
+        let refs: Vec<&Value> = values.iter().collect();
+        let records: Vec<Record> = hypotheses.iter().map(|(h, _)| h.clone()).collect();
+        let assignment = branches::assign(&refs, &records, |v, h| {
+            crate::link::state_distance(v, &Value::Record(Arc::new(h.clone())))
+        });
+        let mut ended = Vec::new();
+        for (i, a) in assignment.into_iter().enumerate() {
+            match a {
+                Some(h) => followers[h] = Some(previous[i]),
+                None if i > 0 => ended.push(previous[i]),
+                None => {}
+            }
+        }
+        self.prune(ended, time, out);
+        // New hypotheses get branch objects of the owner's type.
+        let Some(owner_obj) = self.store.get(owner) else { return followers };
+        let (ty, owner_symbol, last_anchored) =
+            (owner_obj.ty, owner_obj.symbol.clone(), owner_obj.last_anchored);
+        let type_name = self.types[ty as usize].name.clone();
+        for (h, follower) in followers.iter_mut().enumerate() {
+            if follower.is_some() || hypotheses.len() < 2 {
                 continue;
             }
-            let ty = self.identifications[i].ty;
+            let symbol = self.store.new_symbol(ty);
+            let key = self.store.insert(ty, symbol.clone(), Origin::Derived, hypotheses[h].0.clone(), time);
+            if let Some(branch) = self.store.get_mut(key) {
+                branch.branch_of = Some(owner);
+                branch.prediction_root = Some(root);
+                branch.last_anchored = last_anchored;
+            }
+            out.changes.push(
+                Change::new(time, ChangeKind::Created, symbol, type_name.clone(), Cause::Branch)
+                    .model(model)
+                    .branch_of(&owner_symbol),
+            );
+            *follower = Some(key);
+        }
+        run.branches = followers.iter().flatten().copied().filter(|k| *k != owner).collect();
+        followers
+    }
+
+    /// Pending identifications of type `ty` that an existing object's state satisfies.
+    fn match_descriptions(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
+        for i in 0..self.identifications.len() {
+            if self.identifications[i].done || self.identifications[i].ty != ty {
+                continue;
+            }
             let mut keys = std::mem::take(&mut self.keys);
             keys.clear();
             keys.extend(self.store.objects_of(ty));
@@ -828,7 +1133,7 @@ impl Anchoring {
             let mut found = None;
             for &key in &keys {
                 let Some(object) = store.get(key) else { continue };
-                if object.origin != Origin::Derived {
+                if object.origin != Origin::Derived || object.branch_of.is_some() {
                     continue;
                 }
                 let condition =
@@ -869,44 +1174,43 @@ impl Anchoring {
         }
     }
 
-    fn ground(&mut self, time: Time) {
-        for ti in 0..self.type_order.len() {
-            let ty = self.type_order[ti];
-            let mut keys = std::mem::take(&mut self.keys);
-            keys.clear();
-            keys.extend(self.store.objects_of(ty));
-            for &key in &keys {
-                let Some(object) = self.store.get(key) else { continue };
-                let anchored = match object.origin {
-                    Origin::Percept { .. } => true,
-                    Origin::Partial => false,
-                    Origin::Derived => {
-                        object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.anchored))
-                    }
-                };
-                if let Some(object) = self.store.get_mut(key) {
-                    object.anchored = anchored;
-                    if anchored {
-                        object.last_anchored = time;
-                    }
+    /// Grounds the objects of `ty` (the type of the link that stepped; the types after it are
+    /// grounded by the steps of the links into them): anchored exactly when a percept, or linked
+    /// from an anchored object.
+    fn ground(&mut self, ty: TypeId, time: Time) {
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.clear();
+        keys.extend(self.store.objects_of(ty));
+        for &key in &keys {
+            let Some(object) = self.store.get(key) else { continue };
+            let anchored = match object.origin {
+                Origin::Percept { .. } => true,
+                Origin::Partial => false,
+                Origin::Derived => {
+                    object.incoming.iter().any(|(_, p)| self.store.get(*p).is_some_and(|p| p.anchored))
+                }
+            };
+            if let Some(object) = self.store.get_mut(key) {
+                object.anchored = anchored;
+                if anchored {
+                    object.last_anchored = object.last_anchored.max(time);
                 }
             }
-            self.keys = keys;
         }
+        self.keys = keys;
     }
 
-    fn forget(&mut self, time: Time, out: &mut StepOutput) {
+    /// Removes the objects of `ty` not anchored for its forget time.
+    fn forget(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
+        let Some(after) = self.types[ty as usize].forget else { return };
         let mut doomed = Vec::new();
-        for &ty in &self.type_order {
-            let Some(after) = self.types[ty as usize].forget else { continue };
-            for key in self.store.objects_of(ty) {
-                let Some(object) = self.store.get(key) else { continue };
-                if object.origin == Origin::Derived
-                    && !object.anchored
-                    && time.saturating_sub(object.last_anchored) >= after
-                {
-                    doomed.push(key);
-                }
+        for key in self.store.objects_of(ty) {
+            let Some(object) = self.store.get(key) else { continue };
+            if object.origin == Origin::Derived
+                && !object.anchored
+                && time.saturating_sub(object.last_anchored) >= after
+            {
+                doomed.push(key);
             }
         }
         for key in doomed {

@@ -25,6 +25,8 @@ pub enum BuildError {
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum StepError {
+    #[error("no link `{0}` in this engine")]
+    UnknownLink(String),
     #[error("time {time} is not after the previous step's time {previous}")]
     TimeNotIncreasing { time: Time, previous: Time },
     #[error("snapshot from `{source_name}`: type `{ty}` is not declared")]

@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use kpl_core::Value;
 
+use crate::kalman::{FuseParams, Kalman, KalmanParams};
 use crate::networks::Networks;
 use crate::predict::{AlongRoads, ConstantVelocity, DEFAULT_MAX_HYPOTHESES, PredictionModel, Stationary};
 use crate::units::{Copy, LinkUnit, SnapToLane, WorldFromPercept};
@@ -48,6 +49,15 @@ impl Default for Implementations {
         i.add_link_unit("anchor.snap_to_lane", |params, networks| {
             Ok(Arc::new(SnapToLane::new(networks.resolve(params)?)))
         });
+        i.add_link_unit("anchor.kalman", |params, _| Ok(Arc::new(Kalman::new(kalman_params(params)?, None))));
+        i.add_link_unit("anchor.fuse", |params, _| {
+            let defaults = FuseParams::default();
+            let fuse = FuseParams {
+                other_noise_m: positive(params, "other_noise_m", defaults.other_noise_m)?,
+                gate_m: positive(params, "gate_m", defaults.gate_m)?,
+            };
+            Ok(Arc::new(Kalman::new(kalman_params(params)?, Some(fuse))))
+        });
         i.add_model("constant_velocity", |_, _| Ok(Arc::new(ConstantVelocity)));
         i.add_model("stationary", |_, _| Ok(Arc::new(Stationary)));
         i.add_model("along_roads", |params, networks| {
@@ -62,6 +72,31 @@ impl Default for Implementations {
         });
         i
     }
+}
+
+/// A float parameter that must be finite and positive (its default when not given).
+fn positive(params: &Params, name: &str, default: f64) -> Result<f64, String> {
+    match params.get(name) {
+        None => Ok(default),
+        Some(v) => match v.as_f64() {
+            Some(x) if x.is_finite() && x > 0.0 => Ok(x),
+            _ => Err(format!("`{name}` must be a positive number, found {v}")),
+        },
+    }
+}
+
+/// The filter parameters of `anchor.kalman` and `anchor.fuse`.
+fn kalman_params(params: &Params) -> Result<KalmanParams, String> {
+    let defaults = KalmanParams::default();
+    Ok(KalmanParams {
+        position_noise_m: positive(params, "position_noise_m", defaults.position_noise_m)?,
+        initial_velocity_sd_mps: positive(
+            params,
+            "initial_velocity_sd_mps",
+            defaults.initial_velocity_sd_mps,
+        )?,
+        acceleration_noise: positive(params, "acceleration_noise", defaults.acceleration_noise)?,
+    })
 }
 
 impl Implementations {

@@ -48,13 +48,16 @@
 //! ```
 //!
 //! Modules: [`engine`] (the engine and its step), [`link`] (link processes and their per-object
-//! instances), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
-//! [`gate`] (the spatial index of gating), [`units`] (link units), [`predict`] (prediction
+//! instances), [`branches`] (the objects of a prediction's branches), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
+//! [`gate`] (the spatial index of gating), [`units`] (link units), [`stateful`] (what stateful
+//! units see: time, extra inputs, memory), [`kalman`] (the Kalman units), [`predict`] (prediction
 //! models), [`implementations`] (both by name), [`networks`] (road networks), [`change`] (change
-//! records), [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
+//! records), [`status`] (the `measured` / `predicted_since` attributes of object records),
+//! [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
 //! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
 //! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
 
+pub mod branches;
 pub mod change;
 pub mod conditions;
 pub mod driver;
@@ -62,6 +65,7 @@ pub mod engine;
 mod error;
 pub mod gate;
 pub mod implementations;
+pub mod kalman;
 pub mod link;
 pub mod networks;
 pub mod predict;
@@ -69,12 +73,14 @@ pub mod records;
 pub mod registry;
 pub mod runtime;
 pub mod scale;
+pub mod stateful;
+pub mod status;
 pub mod store;
 pub mod units;
 pub mod views;
 
 pub use change::{Cause, Change, ChangeKind};
-pub use engine::{AnchorConfig, Anchoring, Snapshot, StepOutput, Warning};
+pub use engine::{AnchorConfig, Anchoring, FromSnapshot, Snapshot, StepOutput, Warning};
 pub use error::{BuildError, IdentifyError, StepError};
 pub use implementations::Implementations;
 pub use networks::Networks;

@@ -20,15 +20,17 @@
 
 use std::sync::Arc;
 
-use kpl_core::{Record, RecordType, Value};
+use kpl_core::{Record, RecordType, Time, Value};
 use kpl_mtl::{Formula, Progressor};
 
 use crate::change::{Cause, Change, ChangeKind};
 use crate::conditions::{LinkConditions, LinkState};
-use crate::engine::{Identification, StepCtx};
+use crate::engine::{Anchoring, Identification, StepCtx};
 use crate::gate::GateGrid;
 use crate::records::{position, value_position, velocity};
-use crate::store::{LinkId, ObjectKey, Origin, TypeId};
+use crate::stateful::{UnitCall, UnitMemory};
+use crate::status;
+use crate::store::{LinkId, ObjectKey, Origin, StateOrigin, TypeId};
 use crate::units::LinkUnit;
 
 /// A condition being progressed, or its verdict.
@@ -196,6 +198,21 @@ pub struct LinkProcess {
     pools: Pools,
     grid: GateGrid<ObjectKey>,
     pub stats: LinkStats,
+    /// The valid time of the link's last step.
+    pub last_time: Option<Time>,
+    /// The names its `from` objects' sources go by (its input streams and their producers), so
+    /// that [`crate::Anchoring::step`] gives it the percepts of its own sources.
+    pub from_sources: Vec<String>,
+    /// The `from` objects of the current step (reused buffer).
+    stepped: Vec<ObjectKey>,
+}
+
+/// What a link unit computes from at one step: the time, the linked-from object's state, and
+/// the unit's extra inputs.
+struct StateIn<'a> {
+    time: Time,
+    from: &'a Record,
+    inputs: &'a [Option<Value>],
 }
 
 /// A reestablish condition that became true.
@@ -223,7 +240,7 @@ struct Decisions {
 pub const VELOCITY_WEIGHT_S: f64 = 1.0;
 
 /// The distance used to pair `p` with a candidate state (`INFINITY` without positions).
-fn state_distance(p: &Value, o: &Value) -> f64 {
+pub(crate) fn state_distance(p: &Value, o: &Value) -> f64 {
     let (Some(a), Some(b)) = (p.as_record(), o.as_record()) else { return f64::INFINITY };
     let (Some(pa), Some(pb)) = (position(a), position(b)) else { return f64::INFINITY };
     let mut d = (pa[0] - pb[0]).hypot(pa[1] - pb[1]);
@@ -273,6 +290,9 @@ impl LinkProcess {
             pools,
             grid,
             stats: LinkStats::default(),
+            last_time: None,
+            from_sources: Vec::new(),
+            stepped: Vec::new(),
         }
     }
 
@@ -328,7 +348,8 @@ impl LinkProcess {
         let gated = self.conditions.gate.is_some();
         for key in cx.store.objects_of(self.to_ty) {
             let Some(o) = cx.store.get(key) else { continue };
-            if o.is_partial() || o.incoming_via(id).is_some() {
+            // Partial objects have no state; branch objects are reacquired through their root.
+            if o.is_partial() || o.branch_of.is_some() || o.incoming_via(id).is_some() {
                 continue;
             }
             if !gated {
@@ -350,11 +371,17 @@ impl LinkProcess {
         self.grid.finish();
     }
 
-    /// One step of the link process at `cx.time`: the link unit for every linked pair, every
-    /// instance's conditions, then the decisions.
-    pub(crate) fn run(&mut self, id: LinkId, cx: &mut StepCtx<'_>, keys: &mut Vec<ObjectKey>) {
-        keys.clear();
-        keys.extend(cx.store.objects_of(self.from_ty));
+    /// One step of the link process at `cx.time` on the objects of its state (`from`: each A
+    /// object's key and its state now): the link unit for every linked pair, every instance's
+    /// conditions, then the decisions. Linked-to objects whose `from` object is not in the state
+    /// keep their state, no longer measured.
+    pub(crate) fn run(
+        &mut self,
+        id: LinkId,
+        cx: &mut StepCtx<'_>,
+        from: &[(ObjectKey, Value)],
+        extra: &[Option<Value>],
+    ) {
         let to_type = cx.types[self.to_ty as usize].record.clone();
         let mut decisions = Decisions::default();
         let mut grid_ready = false;
@@ -362,16 +389,18 @@ impl LinkProcess {
         // Maintain conditions are progressed after the loop, all together: stepping them between
         // link-unit computations made each step miss the caches the other left.
         let mut maintains: Vec<(usize, ObjectKey, ObjectKey, Value, Value)> = Vec::new();
-        for &p in keys.iter() {
+        self.stepped.clear();
+        for (p, p_value) in from {
+            let p = *p;
             let Some(p_obj) = cx.store.get(p) else { continue };
-            // A partial object has no state yet; an absent percept has none at this time (its
-            // conditions resume when it is listed again).
-            if p_obj.is_partial() || !p_obj.present {
+            // A partial object has no state yet.
+            if p_obj.is_partial() {
                 continue;
             }
-            let p_value = p_obj.value.clone();
-            let (p_measured, p_predicted, p_seq) = (p_obj.measured_at, p_obj.predicted, p_obj.seq);
-            let Some(p_record) = p_obj.record().cloned() else { continue };
+            let p_value = p_value.clone();
+            let origin = origin_of(&p_value, p_obj.predicted);
+            let p_seq = p_obj.seq;
+            let Some(p_record) = p_value.as_record().cloned() else { continue };
             let p_pos = value_position(&p_value);
 
             // The instance of p, created when p is first seen.
@@ -383,6 +412,7 @@ impl LinkProcess {
                 self.stats.instances_created += 1;
                 self.set_unlinked(p);
             }
+            self.stepped.push(p);
             let linked_to = match &self.instances[i] {
                 Some(Instance { state: InstanceState::Linked { to, .. }, .. }) => Some(*to),
                 _ => None,
@@ -390,24 +420,31 @@ impl LinkProcess {
 
             if let Some(to) = linked_to {
                 // Linked: the unit computes B's state, then maintain.
-                let Some(o) = cx.store.get_mut(to) else {
+                if cx.store.get(to).is_none() {
                     self.set_unlinked(p);
                     continue;
-                };
+                }
+                let on_path = Anchoring::on_prediction_path(cx.store, to);
+                let Some(o) = cx.store.get_mut(to) else { continue };
                 let fresher = match o.computed {
-                    Some((step, measured)) if step == cx.step => p_measured >= measured,
+                    Some((time, measured)) if time == cx.time => origin.measured >= measured,
                     _ => true,
                 };
-                if !o.on_prediction_path && fresher {
-                    self.stats.unit_computations += 1;
+                if !on_path && fresher {
                     let previous = o.record().cloned();
-                    match self.unit.compute(&p_record, previous.as_deref(), &to_type, &o.symbol) {
+                    let symbol = o.symbol.clone();
+                    let mut scratch = UnitMemory::default();
+                    let memory = match self.unit.memory_key().cloned() {
+                        Some(key) => o.memory_mut(&key),
+                        None => &mut scratch,
+                    };
+                    let state = StateIn { time: cx.time, from: &p_record, inputs: extra };
+                    let result = self.compute(&state, previous.as_deref(), &to_type, &symbol, memory);
+                    match result {
                         Ok(record) => {
-                            o.set_state(record, cx.time);
-                            o.measured_at = p_measured;
-                            o.predicted = p_predicted;
+                            o.set_state(record, cx.time, origin);
                             o.hypotheses.clear();
-                            o.computed = Some((cx.step, p_measured));
+                            o.computed = Some((cx.time, origin.measured));
                         }
                         Err(message) => cx
                             .out
@@ -527,7 +564,17 @@ impl LinkProcess {
                 };
                 let Condition::Pending(progressor) = &mut u.identifications[position].1 else { continue };
                 self.stats.unit_computations += 1;
-                let made = match self.unit.compute(&p_record, None, &to_type, &ident.symbol) {
+                let mut scratch = UnitMemory::default();
+                let mut call = UnitCall {
+                    time: cx.time,
+                    from: &p_record,
+                    previous: None,
+                    to: &to_type,
+                    symbol: &ident.symbol,
+                    inputs: extra,
+                    memory: &mut scratch,
+                };
+                let made = match self.unit.compute_with(&mut call) {
                     Ok(record) => Value::Record(Arc::new(record)),
                     Err(message) => {
                         cx.out.warn(cx.time, format!("link `{}` ({}): {message}", self.name, self.unit_name));
@@ -583,7 +630,47 @@ impl LinkProcess {
                 ),
             }
         }
-        self.apply(id, cx, decisions, &to_type);
+        self.keep_unstepped(cx);
+        self.apply(id, cx, decisions, &to_type, from, extra);
+    }
+
+    /// The objects this link is linked to from an object that is not in this state (its source
+    /// did not report) keep their state, no longer measured, unless something else set it now.
+    fn keep_unstepped(&mut self, cx: &mut StepCtx<'_>) {
+        self.stepped.sort_unstable();
+        for instance in self.instances.iter().flatten() {
+            let InstanceState::Linked { to, .. } = instance.state else { continue };
+            if self.stepped.binary_search(&instance.from).is_ok() {
+                continue;
+            }
+            if let Some(o) = cx.store.get_mut(to)
+                && o.state_time < cx.time
+            {
+                o.keep_state_unmeasured(cx.time);
+            }
+        }
+    }
+
+    /// The linked-to object's state computed by the link unit.
+    fn compute(
+        &mut self,
+        state: &StateIn<'_>,
+        previous: Option<&Record>,
+        to: &RecordType,
+        symbol: &Arc<str>,
+        memory: &mut UnitMemory,
+    ) -> Result<Record, String> {
+        self.stats.unit_computations += 1;
+        let mut call = UnitCall {
+            time: state.time,
+            from: state.from,
+            previous,
+            to,
+            symbol,
+            inputs: state.inputs,
+            memory,
+        };
+        self.unit.compute_with(&mut call)
     }
 
     fn is_unlinked(&self, p: ObjectKey) -> bool {
@@ -596,7 +683,11 @@ impl LinkProcess {
         cx: &mut StepCtx<'_>,
         mut decisions: Decisions,
         to_type: &Arc<RecordType>,
+        from: &[(ObjectKey, Value)],
+        extra: &[Option<Value>],
     ) {
+        // The state of a linked-from object in this step's state.
+        let state_of = |p: ObjectKey| from.iter().find(|(k, _)| *k == p).map(|(_, v)| v);
         let b_name = cx.types[self.to_ty as usize].name.clone();
         // Maintain conditions that became false.
         for (p, o) in decisions.unlink {
@@ -625,7 +716,7 @@ impl LinkProcess {
             if !free || !self.is_unlinked(m.from) {
                 continue;
             }
-            self.link_existing(id, cx, m.from, m.to, to_type);
+            self.link_existing(id, cx, (m.from, state_of(m.from)), m.to, to_type, extra);
             let (Some(po), Some(oo)) = (cx.store.get(m.from), cx.store.get(m.to)) else { continue };
             let mut change = Change::new(
                 cx.time,
@@ -650,7 +741,7 @@ impl LinkProcess {
             let partial = cx.identifications[ident].partial;
             let Some(obj) = cx.store.get_mut(partial) else { continue };
             obj.origin = Origin::Derived;
-            self.link_existing(id, cx, p, partial, to_type);
+            self.link_existing(id, cx, (p, state_of(p)), partial, to_type, extra);
             let ident_name = cx.identifications[ident].name.clone();
             cx.identifications[ident].done = true;
             cx.identifications[ident].object = Some(partial);
@@ -679,11 +770,14 @@ impl LinkProcess {
                 continue;
             }
             let Some(po) = cx.store.get(p) else { continue };
-            let (p_symbol, p_measured, p_predicted) = (po.symbol.clone(), po.measured_at, po.predicted);
-            let Some(p_record) = po.record().cloned() else { continue };
+            let p_symbol = po.symbol.clone();
+            let Some(p_value) = state_of(p) else { continue };
+            let Some(p_record) = p_value.as_record() else { continue };
+            let origin = origin_of(p_value, po.predicted);
             let symbol = cx.store.new_symbol(self.to_ty);
-            self.stats.unit_computations += 1;
-            let record = match self.unit.compute(&p_record, None, to_type, &symbol) {
+            let mut memory = UnitMemory::default();
+            let state = StateIn { time: cx.time, from: p_record, inputs: extra };
+            let record = match self.compute(&state, None, to_type, &symbol, &mut memory) {
                 Ok(record) => record,
                 Err(message) => {
                     cx.out.warn(
@@ -698,11 +792,14 @@ impl LinkProcess {
                     continue;
                 }
             };
-            let key = cx.store.insert(self.to_ty, symbol.clone(), Origin::Derived, record, cx.time);
+            let key =
+                cx.store.insert(self.to_ty, symbol.clone(), Origin::Derived, Record::default(), cx.time);
             if let Some(o) = cx.store.get_mut(key) {
-                o.measured_at = p_measured;
-                o.predicted = p_predicted;
-                o.computed = Some((cx.step, p_measured));
+                o.set_state(record, cx.time, origin);
+                o.computed = Some((cx.time, origin.measured));
+                if let Some(key) = self.unit.memory_key() {
+                    *o.memory_mut(key) = memory;
+                }
             }
             cx.store.link(id, p, key);
             self.set_linked(p, key);
@@ -719,49 +816,63 @@ impl LinkProcess {
         }
     }
 
-    /// Links `p` to the existing object `o`: o's state is computed from p, its prediction ends.
+    /// Links `p` (with its state now) to the existing object `o`: o's state is computed from p,
+    /// its prediction ends.
     fn link_existing(
         &mut self,
         id: LinkId,
         cx: &mut StepCtx<'_>,
-        p: ObjectKey,
+        (p, p_value): (ObjectKey, Option<&Value>),
         o: ObjectKey,
         to_type: &Arc<RecordType>,
+        extra: &[Option<Value>],
     ) {
         cx.store.link(id, p, o);
         self.set_linked(p, o);
         let Some(po) = cx.store.get(p) else { return };
-        let (p_measured, p_predicted) = (po.measured_at, po.predicted);
-        let p_record: Option<Arc<Record>> = po.record().cloned();
+        let p_predicted = po.predicted;
+        let Some(p_value) = p_value else { return };
+        let origin = origin_of(p_value, p_predicted);
         let Some(oo) = cx.store.get_mut(o) else { return };
         let previous = if oo.value.as_record().is_some_and(|r| !r.fields.is_empty()) {
             oo.record().cloned()
         } else {
             None
         };
-        if let Some(p_record) = p_record {
-            self.stats.unit_computations += 1;
-            match self.unit.compute(&p_record, previous.as_deref(), to_type, &oo.symbol) {
-                Ok(record) => oo.set_state(record, cx.time),
+        if let Some(p_record) = p_value.as_record() {
+            let symbol = oo.symbol.clone();
+            let mut scratch = UnitMemory::default();
+            let memory = match self.unit.memory_key().cloned() {
+                Some(key) => oo.memory_mut(&key),
+                None => &mut scratch,
+            };
+            let state = StateIn { time: cx.time, from: p_record, inputs: extra };
+            match self.compute(&state, previous.as_deref(), to_type, &symbol, memory) {
+                Ok(record) => oo.set_state(record, cx.time, origin),
                 Err(message) => {
                     cx.out.warn(cx.time, format!("link `{}` ({}): {message}", self.name, self.unit_name))
                 }
             }
         }
-        oo.measured_at = p_measured;
-        oo.predicted = p_predicted;
-        oo.computed = Some((cx.step, p_measured));
+        oo.computed = Some((cx.time, origin.measured));
         oo.hypotheses.clear();
-        oo.on_prediction_path = false;
+        oo.prediction_root = None;
         if let Some(run) = oo.prediction.take() {
             for k in run.path {
                 if let Some(x) = cx.store.get_mut(k) {
-                    x.on_prediction_path = false;
+                    x.prediction_root = None;
                     x.hypotheses.clear();
                 }
             }
+            cx.pruned.extend(run.branches);
         }
     }
+}
+
+/// How a state computed from the linked-from object's `value` is known.
+fn origin_of(value: &Value, predicted: bool) -> StateOrigin {
+    let measured = status::is_measured(value);
+    StateOrigin { measured, predicted: predicted && !measured }
 }
 
 fn p_value_symbol(value: &Value) -> String {

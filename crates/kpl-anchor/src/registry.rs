@@ -29,6 +29,30 @@ fn network_params(entry: Entry) -> Entry {
         ))
 }
 
+/// The filter parameters of `anchor.kalman` and `anchor.fuse`.
+fn kalman_params(entry: Entry) -> Entry {
+    let defaults = crate::kalman::KalmanParams::default();
+    entry
+        .param(Param::optional(
+            "position_noise_m",
+            ParamType::Float,
+            Value::Float(defaults.position_noise_m),
+            "standard deviation of the linked-from object's position, per axis (m)",
+        ))
+        .param(Param::optional(
+            "initial_velocity_sd_mps",
+            ParamType::Float,
+            Value::Float(defaults.initial_velocity_sd_mps),
+            "standard deviation of the first velocity (the linked-from object's `vel`), per axis (m/s)",
+        ))
+        .param(Param::optional(
+            "acceleration_noise",
+            ParamType::Float,
+            Value::Float(defaults.acceleration_noise),
+            "spectral density of the white-noise acceleration (m²/s³): how fast the velocity may change",
+        ))
+}
+
 /// `on_road(pos)`, provided by `anchor.snap_to_lane`.
 pub fn on_road_signature() -> Function {
     Function::new(
@@ -44,20 +68,52 @@ pub fn entries() -> Vec<Entry> {
     use ValueType::{Float, Int, Vec2};
     vec![
         Entry::new(EntryKind::Link, "anchor.copy", "Copies the attributes the two types share.")
-            .output(TypeReq::Any),
+            .output(TypeReq::Any)
+            .computes(&[], true),
         Entry::new(
             EntryKind::Link,
             "anchor.world_from_percept",
             "World position and velocity from a vision percept.",
         )
-        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)]))
+        .computes(&["pos", "vel"], true),
         network_params(Entry::new(
             EntryKind::Link,
             "anchor.snap_to_lane",
             "Snaps a world object to the centre of the nearest lane of the road network.",
         ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
+        .computes(&["pos", "vel", "road", "lane_offset"], true)
         .provides(on_road_signature()),
+        kalman_params(Entry::new(
+            EntryKind::Link,
+            "anchor.kalman",
+            "Position and velocity estimated from the linked-from objects' positions by a constant-velocity Kalman filter (shared by every Kalman link into the object).",
+        ))
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
+        kalman_params(Entry::new(
+            EntryKind::Link,
+            "anchor.fuse",
+            "As anchor.kalman, also updated with the closest object of a second source (an extra input stream) within a gate.",
+        ))
+        .input(
+            "other",
+            TypeReq::Objects(vec![("pos".to_string(), Vec2)]),
+            "the second source's objects (positions in the same frame), one snapshot per time",
+        )
+        .param(Param::optional(
+            "other_noise_m",
+            ParamType::Float,
+            Value::Float(crate::kalman::FuseParams::default().other_noise_m),
+            "standard deviation of the second source's positions, per axis (m)",
+        ))
+        .param(Param::optional(
+            "gate_m",
+            ParamType::Float,
+            Value::Float(crate::kalman::FuseParams::default().gate_m),
+            "a second-source object farther than this from the estimate is another object (m)",
+        ))
+        .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
         Entry::new(EntryKind::Predict, "constant_velocity", "Moves on with the velocity it last had.")
             .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
         Entry::new(EntryKind::Predict, "stationary", "Stays where it was last seen.")

@@ -3,35 +3,32 @@
 //! to a runtime registry, and `anchor.identify`, through which a running system asks for an
 //! object by description (top-down identification).
 //!
+//! Every link process is a knowledge process of its own, as in DyKnow: it subscribes to its input
+//! streams (its `from` streams and its unit's extra inputs), each with the policy the spec gives
+//! it, and the runtime's state synchronization merges them into one state per valid time (`max
+//! delay` and approximation honoured; a stream with no sample at that time and no approximation
+//! is missing, and its objects are not stepped then). At each state the link process takes one
+//! step of the engine ([`Anchoring::step_link`]) and emits, at the state's valid time, the
+//! snapshot of its `to` type and the changes the step made. So a link downstream (world_onroad)
+//! runs at the states of its own input: `stream wos = vision_world with sample every 2s` makes it
+//! step every 2 s.
+//!
 //! The link processes of one run (on one host) share one [`Anchoring`] engine, kept in the run's
 //! shared extensions: the object store is shared, as several links may lead into one type and
-//! chains of links build the hierarchy. The engine is built at the first sample, from the links
+//! chains of links build the hierarchy. The engine is built at the first state, from the links
 //! that were built for this run; a type no local link leads into is fed by its snapshots (the
-//! percepts, or objects made on another host).
-//!
-//! A link process whose `from` objects are fed by snapshots (vision_world, from the tracker) steps
-//! the engine with each snapshot it receives, at the snapshot's valid time: that one step runs
-//! every local link (the engine's step). The engine then leaves, for every local link, its output
-//! at that time in the link's queue: the snapshot of its `to` type and its change records. Each
-//! link process emits its queue when its own input arrives (a link downstream, such as
-//! world_onroad, is triggered by the upstream link's output of the same time) and when its inputs
-//! end. So the samples every link emits are the engine's, in order, whatever the scheduling.
-//!
-//! Snapshots of two sources with the same valid time are taken as two steps one microsecond
-//! apart (the engine steps in strictly increasing time); a snapshot older than the engine's last
-//! step is refused and counted as an error of the link process. Per-object instances (the
-//! paper's process per object) are state machines inside the engine, not tasks.
+//! percepts, or objects made on another host). Per-object instances (the paper's process per
+//! object) are state machines inside the engine, not tasks.
 
-use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use kpl_core::{Time, Value};
+use kpl_core::Value;
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Trigger, Unit};
 use kpl_runtime::registry::{BuildContext, BuildError};
 use kpl_semantic::hir;
 use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
 
-use crate::engine::{AnchorConfig, Anchoring, Snapshot};
+use crate::engine::{AnchorConfig, Anchoring, FromSnapshot};
 use crate::error::IdentifyError;
 use crate::networks::Networks;
 
@@ -71,14 +68,6 @@ fn identify_entry() -> Entry {
     .output(TypeReq::Any)
 }
 
-/// One link's output at one time.
-#[derive(Debug)]
-struct LinkOutput {
-    time: Time,
-    objects: Value,
-    changes: Value,
-}
-
 /// What the link processes of a run share.
 #[derive(Debug)]
 struct Shared {
@@ -87,13 +76,6 @@ struct Shared {
     /// The links built for this run.
     links: Vec<String>,
     engine: Option<Anchoring>,
-    /// Outputs not yet emitted, by link.
-    queues: BTreeMap<String, VecDeque<LinkOutput>>,
-    /// World models not yet emitted, by `anchor.world_model` unit.
-    worlds: Vec<VecDeque<(Time, Value)>>,
-    /// The last (stream, valid time) a snapshot was taken from, so that two links reading the
-    /// same stream step the engine once.
-    taken: BTreeMap<String, Time>,
 }
 
 #[derive(Debug, Clone)]
@@ -109,9 +91,6 @@ impl SharedHandle {
                     spec_dir: spec_dir.to_path_buf(),
                     links: Vec::new(),
                     engine: None,
-                    queues: BTreeMap::new(),
-                    worlds: Vec::new(),
-                    taken: BTreeMap::new(),
                 })))
             })
             .clone()
@@ -138,106 +117,116 @@ impl Shared {
             None => Err(ProcessError::failed("anchoring: no engine")),
         }
     }
+}
 
-    /// One engine step with a snapshot; the outputs go to the queues.
-    fn step(&mut self, stream: &str, ty: &str, valid: Time, objects: &Value) -> Result<(), ProcessError> {
-        if self.taken.get(stream) == Some(&valid) {
-            return Ok(());
+/// What a link process achieved, counted from the changes of its own decisions: the run's result
+/// (`kpl run` prints it; summary.json has it under each link's `results`).
+#[derive(Debug, Default, Clone, Copy)]
+struct Tally {
+    /// New objects created by the establish condition.
+    established: u64,
+    /// Links to a waiting object made by the reestablish condition: the object kept its symbol.
+    reestablished: u64,
+    /// Links dropped because the maintain condition became false.
+    dropped: u64,
+}
+
+impl Tally {
+    fn count(&mut self, change: &crate::change::Change) {
+        use crate::change::{Cause, ChangeKind};
+        match (change.kind, change.cause) {
+            (ChangeKind::Created, Cause::Establish) => self.established += 1,
+            (ChangeKind::Linked, Cause::Reestablish) => self.reestablished += 1,
+            (ChangeKind::Unlinked, Cause::Maintain) => self.dropped += 1,
+            _ => {}
         }
-        self.engine()?;
-        let Shared { engine: Some(engine), links, queues, worlds, taken, .. } = self else {
-            return Err(ProcessError::failed("anchoring: no engine"));
-        };
-        let time = match engine.time() {
-            Some(last) if valid < last => {
-                return Err(ProcessError::failed(format!(
-                    "snapshot of `{stream}` at {valid} is older than the anchoring's last step ({last}); skipped"
-                )));
-            }
-            Some(last) if valid == last => last + 1,
-            _ => valid,
-        };
-        let output = engine
-            .step(time, &[Snapshot { source: stream, ty, objects }])
-            .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
-        let mut changes: BTreeMap<&str, Vec<Value>> = BTreeMap::new();
-        for change in &output.changes {
-            if let Some(link) = engine.link_of_change(change) {
-                changes.entry(link).or_default().push(change.to_value());
-            }
-        }
-        let mut outputs = Vec::new();
-        for link in links.iter() {
-            let objects = engine
-                .link_to_type(link)
-                .and_then(|ty| engine.snapshot(ty))
-                .unwrap_or_else(|| Value::List(Vec::new().into()));
-            let changes = Value::List(changes.remove(link.as_str()).unwrap_or_default().into());
-            outputs.push((link.clone(), LinkOutput { time, objects, changes }));
-        }
-        let world = (!worlds.is_empty()).then(|| engine.world_model());
-        for (link, output) in outputs {
-            queues.entry(link).or_default().push_back(output);
-        }
-        if let Some(world) = world {
-            for queue in worlds.iter_mut() {
-                queue.push_back((time, world.clone()));
-            }
-        }
-        taken.insert(stream.to_string(), valid);
-        Ok(())
     }
 }
 
-/// A link process of the runtime.
+/// What an input port of a link process carries.
+#[derive(Debug, Clone)]
+enum Port {
+    /// `from` objects, from the stream of this name.
+    From(Arc<str>),
+    /// The link unit's extra input of this index.
+    Extra(usize),
+}
+
+/// A link process of the runtime: a synchronized unit over its input streams.
 struct LinkProcess {
     name: String,
-    from_type: String,
-    /// For each input port: the stream's name if it carries `from` objects.
-    from_ports: Vec<Option<String>>,
+    ports: Vec<Port>,
+    n_extra: usize,
     shared: SharedHandle,
     /// The run's counters for this process: the per-object instances the link process created
-    /// and removed are reported there.
+    /// and removed are reported there, and the engine's warnings are counted as its errors.
     stats: Arc<kpl_runtime::stats::ProcessStats>,
+    /// What its decisions achieved so far.
+    tally: Tally,
 }
 
 impl LinkProcess {
-    /// Copies the engine's count of per-object instances into the run's statistics.
-    fn count_instances(&self, shared: &Shared) {
+    /// Copies the engine's count of per-object instances and what the link achieved into the
+    /// run's statistics.
+    fn count_instances(&self, engine: &Anchoring) {
         use std::sync::atomic::Ordering;
-        if let Some(stats) = shared.engine.as_ref().and_then(|e| e.link_stats(&self.name)) {
+        if let Some(stats) = engine.link_stats(&self.name) {
             self.stats.instances_created.store(stats.instances_created, Ordering::Relaxed);
             self.stats.instances_removed.store(stats.instances_removed, Ordering::Relaxed);
         }
-    }
-
-    fn emit_queue(&self, shared: &mut Shared, out: &mut Emitter) {
-        let Some(queue) = shared.queues.get_mut(&self.name) else { return };
-        for output in queue.drain(..) {
-            out.emit_at(output.time, output.objects);
-            if matches!(&output.changes, Value::List(items) if !items.is_empty()) {
-                out.emit_port("changes", output.time, output.changes);
-            }
-        }
+        let tally = self.tally;
+        let to = engine.link_to_type(&self.name).unwrap_or("linked");
+        self.stats.result(&format!("new {to} objects (establish)"), tally.established);
+        self.stats
+            .result(&format!("links reestablished: a waiting {to} kept its symbol"), tally.reestablished);
+        self.stats.result("links dropped (maintain became false)", tally.dropped);
     }
 }
 
 impl Unit for LinkProcess {
-    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
-        let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-        let Some(Some(stream)) = self.from_ports.get(port) else { return Ok(()) };
-        let Some(objects) = input.value(port) else { return Ok(()) };
-        let mut shared = self.shared.lock()?;
-        let fed = shared.engine()?.is_fed_by_snapshots(&self.from_type);
-        let result = if fed { shared.step(stream, &self.from_type, input.valid, objects) } else { Ok(()) };
-        self.emit_queue(&mut shared, out);
-        self.count_instances(&shared);
-        result
+    fn synchronized(&self) -> bool {
+        true
     }
 
-    fn on_end(&mut self, out: &mut Emitter) -> Result<(), ProcessError> {
+    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+        let Trigger::State = input.trigger else { return Ok(()) };
+        let mut from = Vec::new();
+        let mut extra = vec![None; self.n_extra];
+        for (port, sample) in self.ports.iter().zip(input.values) {
+            let Some(sample) = sample else { continue };
+            match port {
+                Port::From(stream) => {
+                    from.push(FromSnapshot { stream, valid: sample.valid, objects: &sample.value })
+                }
+                Port::Extra(i) => extra[*i] = Some(sample.value.clone()),
+            }
+        }
         let mut shared = self.shared.lock()?;
-        self.emit_queue(&mut shared, out);
+        let engine = shared.engine()?;
+        let output = engine
+            .step_link(&self.name, input.valid, &from, &extra)
+            .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
+        let objects = engine
+            .link_to_type(&self.name)
+            .and_then(|ty| engine.snapshot(ty))
+            .unwrap_or_else(|| Value::List(Vec::new().into()));
+        out.emit_at(input.valid, objects);
+        if !output.changes.is_empty() {
+            out.emit_port("changes", input.valid, output.changes_value());
+        }
+        for change in output.changes.iter().filter(|c| c.link.as_deref() == Some(self.name.as_str())) {
+            self.tally.count(change);
+        }
+        for warning in &output.warnings {
+            self.stats.error(format!("at {}: {}", warning.time, warning.message));
+        }
+        if output.suppressed_warnings > 0 {
+            self.stats.error(format!(
+                "at {}: {} more warnings of this step",
+                input.valid, output.suppressed_warnings
+            ));
+        }
+        self.count_instances(engine);
         Ok(())
     }
 }
@@ -246,10 +235,21 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
     let hir::ProcessKind::Link(link) = &ctx.process.kind else {
         return Err(ctx.error("not a link"));
     };
-    let from_type = link.from_type.clone();
     let name = ctx.process.name.clone();
-    let from_ports =
-        ctx.process.inputs.iter().map(|i| (i.port == "from").then(|| i.stream.name.clone())).collect();
+    let mut n_extra = 0;
+    let ports = ctx
+        .process
+        .inputs
+        .iter()
+        .map(|i| {
+            if i.port == "from" {
+                Port::From(Arc::from(i.stream.name.as_str()))
+            } else {
+                n_extra += 1;
+                Port::Extra(n_extra - 1)
+            }
+        })
+        .collect();
     if crate::Implementations::default().link_unit(&link.via.entry).is_none() {
         return Err(ctx.error(format!("no implementation of the link unit `{}`", link.via.entry)));
     }
@@ -264,34 +264,22 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
         Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
     }
     let stats = ctx.stats.clone();
-    Ok(Box::new(SyncUnit(LinkProcess { name, from_type, from_ports, shared, stats })))
+    Ok(Box::new(SyncUnit(LinkProcess { name, ports, n_extra, shared, stats, tally: Tally::default() })))
 }
 
-/// `anchor.world_model`: emits the world models the engine left for it when its trigger arrives.
+/// `anchor.world_model`: emits the run's world model, at the valid time of each sample of its
+/// trigger (a link's output: the world model once that link has stepped).
 struct WorldModel {
-    index: usize,
     shared: SharedHandle,
 }
 
-impl WorldModel {
-    fn emit(&self, out: &mut Emitter) -> Result<(), ProcessError> {
-        let mut shared = self.shared.lock()?;
-        if let Some(queue) = shared.worlds.get_mut(self.index) {
-            for (time, world) in queue.drain(..) {
-                out.emit_at(time, world);
-            }
-        }
-        Ok(())
-    }
-}
-
 impl Unit for WorldModel {
-    fn on_input(&mut self, _input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
-        self.emit(out)
-    }
-
-    fn on_end(&mut self, out: &mut Emitter) -> Result<(), ProcessError> {
-        self.emit(out)
+    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+        let Trigger::Sample(_) = input.trigger else { return Ok(()) };
+        let mut shared = self.shared.lock()?;
+        let world = shared.engine()?.world_model();
+        out.emit_at(input.valid, world);
+        Ok(())
     }
 }
 
@@ -299,14 +287,7 @@ fn build_world_model(
     ctx: &mut BuildContext<'_>,
 ) -> Result<Box<dyn kpl_runtime::process::AsyncUnit>, BuildError> {
     let shared = SharedHandle::get(ctx);
-    let index = match shared.0.lock() {
-        Ok(mut s) => {
-            s.worlds.push(VecDeque::new());
-            s.worlds.len() - 1
-        }
-        Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
-    };
-    Ok(Box::new(SyncUnit(WorldModel { index, shared })))
+    Ok(Box::new(SyncUnit(WorldModel { shared })))
 }
 
 /// `anchor.identify`: hands each request to the run's anchoring engine

@@ -13,6 +13,8 @@ use std::sync::Arc;
 use kpl_core::{Record, Time, Value};
 
 use crate::predict::PredictionStart;
+use crate::stateful::UnitMemory;
+use crate::status::{ObjectStatus, with_status};
 
 /// Index of a link specification in the engine.
 pub type LinkId = u32;
@@ -53,6 +55,8 @@ pub struct PredictionRun {
     pub path: Vec<ObjectKey>,
     pub start: PredictionStart,
     pub n_hypotheses: usize,
+    /// The branch objects following the hypotheses the owner does not (`crate::branches`).
+    pub branches: Vec<ObjectKey>,
 }
 
 #[derive(Debug, Clone)]
@@ -71,12 +75,18 @@ pub struct Object {
     pub hypotheses: Vec<Value>,
     /// The valid time of the state.
     pub state_time: Time,
-    /// The valid time of the percept sample this state derives from, when it derives from one.
-    pub measured_at: Option<Time>,
+    /// The state derives, through links, from a percept sample of its valid time.
+    pub measured: bool,
     /// The state comes from a prediction model (directly or through links).
     pub predicted: bool,
-    /// The state was set by the prediction of its structure this step (link units leave it).
-    pub(crate) on_prediction_path: bool,
+    /// When the state was last measured, since when it has not been: the valid time of the
+    /// first state after that (predicted, or held at its last value). `None` while measured.
+    pub predicted_since: Option<Time>,
+    /// The root of the predicted structure this object is on (its state then comes from the
+    /// root's prediction, not from its link unit); stale once the root's prediction ended.
+    pub(crate) prediction_root: Option<ObjectKey>,
+    /// A branch object: the object whose prediction it branches from (`crate::branches`).
+    pub branch_of: Option<ObjectKey>,
     /// Links into this object: (link, from object).
     pub incoming: Vec<(LinkId, ObjectKey)>,
     /// Links out of this object: (link, to object).
@@ -95,8 +105,26 @@ pub struct Object {
     pub present: bool,
     /// When a source last listed this percept (its creation time for other objects).
     pub last_seen: Time,
-    /// Step and measurement time of the last link-unit computation (several links into one object).
-    pub(crate) computed: Option<(u64, Option<Time>)>,
+    /// Time of the last link-unit computation and whether it was measured (several links into
+    /// one object at one time: a measured state is not replaced by one that is not).
+    pub(crate) computed: Option<(Time, bool)>,
+    /// What stateful link units keep about this object (a Kalman filter's estimate), by the key
+    /// the unit names, so that every link into the object with such a unit shares it.
+    pub(crate) memory: Vec<(Arc<str>, UnitMemory)>,
+}
+
+/// How a new state of an object is known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StateOrigin {
+    pub measured: bool,
+    pub predicted: bool,
+}
+
+impl StateOrigin {
+    pub const MEASURED: StateOrigin = StateOrigin { measured: true, predicted: false };
+    pub const PREDICTED: StateOrigin = StateOrigin { measured: false, predicted: true };
+    /// Computed from an object that was neither measured nor predicted (its state was held).
+    pub const HELD: StateOrigin = StateOrigin { measured: false, predicted: false };
 }
 
 impl Object {
@@ -107,9 +135,63 @@ impl Object {
         }
     }
 
-    pub fn set_state(&mut self, record: Record, time: Time) {
-        self.value = Value::Record(Arc::new(record));
+    /// Sets the state at `time`, with its status attributes (`measured`, `predicted_since`).
+    pub fn set_state(&mut self, record: Record, time: Time, origin: StateOrigin) {
         self.state_time = time;
+        self.note_origin(time, origin);
+        self.value = Value::Record(Arc::new(with_status(record, self.status())));
+    }
+
+    /// Sets the state from a value that is a record (anything else is kept as it is: an
+    /// ingested object is checked before).
+    pub fn set_state_value(&mut self, value: &Value, time: Time, origin: StateOrigin) {
+        match value {
+            Value::Record(record) => self.set_state((**record).clone(), time, origin),
+            other => {
+                self.state_time = time;
+                self.note_origin(time, origin);
+                self.value = other.clone();
+            }
+        }
+    }
+
+    /// The state was not renewed at `time` (its source did not report, its model gave nothing):
+    /// it is kept, and is no longer measured.
+    pub fn keep_state_unmeasured(&mut self, time: Time) {
+        if !self.measured && self.predicted_since.is_some() {
+            return;
+        }
+        self.note_origin(time, StateOrigin { measured: false, predicted: self.predicted });
+        if let Value::Record(record) = &self.value {
+            self.value = Value::Record(Arc::new(with_status((**record).clone(), self.status())));
+        }
+    }
+
+    fn note_origin(&mut self, time: Time, origin: StateOrigin) {
+        self.measured = origin.measured;
+        self.predicted = origin.predicted;
+        if origin.measured {
+            self.predicted_since = None;
+        } else if self.predicted_since.is_none() {
+            self.predicted_since = Some(time);
+        }
+    }
+
+    /// The status attributes of the current state.
+    pub fn status(&self) -> ObjectStatus {
+        ObjectStatus { measured: self.measured, predicted_since: self.predicted_since }
+    }
+
+    /// The memory a stateful link unit keeps under `key`.
+    pub(crate) fn memory_mut(&mut self, key: &Arc<str>) -> &mut UnitMemory {
+        let i = match self.memory.iter().position(|(k, _)| k == key) {
+            Some(i) => i,
+            None => {
+                self.memory.push((key.clone(), UnitMemory::default()));
+                self.memory.len() - 1
+            }
+        };
+        &mut self.memory[i].1
     }
 
     pub fn incoming_via(&self, link: LinkId) -> Option<ObjectKey> {
@@ -250,9 +332,11 @@ impl Store {
             value: Value::Record(Arc::new(record)),
             hypotheses: Vec::new(),
             state_time: time,
-            measured_at: None,
+            measured: false,
             predicted: false,
-            on_prediction_path: false,
+            predicted_since: Some(time),
+            prediction_root: None,
+            branch_of: None,
             incoming: Vec::new(),
             outgoing: Vec::new(),
             anchored: false,
@@ -263,6 +347,7 @@ impl Store {
             present: true,
             last_seen: time,
             computed: None,
+            memory: Vec::new(),
         });
         self.by_type[ty as usize].insert(seq, key);
         self.symbols[ty as usize].insert(symbol, key);

@@ -17,6 +17,7 @@ use kpl_sim::RoadNetwork;
 use kpl_sim::geom;
 
 use crate::records::{fill, position, velocity};
+use crate::stateful::UnitCall;
 
 /// Computes the state of a linked-to object (type `to`) from the state of the object linked to it.
 pub trait LinkUnit: fmt::Debug + Send + Sync {
@@ -33,6 +34,19 @@ pub trait LinkUnit: fmt::Debug + Send + Sync {
     /// Functions this unit adds to the conditions of its link (`on_road`).
     fn functions(&self) -> Vec<Function> {
         Vec::new()
+    }
+
+    /// The new state with everything the engine knows at this state: the time, the unit's
+    /// extra input streams and its memory of the object ([`crate::stateful`]). Stateful units
+    /// override this; the default is [`LinkUnit::compute`].
+    fn compute_with(&self, call: &mut UnitCall<'_>) -> Result<Record, String> {
+        self.compute(call.from, call.previous, call.to, call.symbol)
+    }
+
+    /// The key under which this unit keeps a memory of each object it computes (shared by every
+    /// link into the object whose unit names the same key); `None` for a stateless unit.
+    fn memory_key(&self) -> Option<&Arc<str>> {
+        None
     }
 }
 

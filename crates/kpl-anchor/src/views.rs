@@ -9,6 +9,7 @@ use kpl_core::{Record, Time, Value};
 
 use crate::engine::Anchoring;
 use crate::link::InstanceState;
+use crate::status;
 use crate::store::{Object, ObjectKey, Origin};
 
 /// How an object's state is known.
@@ -42,9 +43,11 @@ pub struct ObjectView {
     pub ty: Arc<str>,
     pub status: Status,
     pub anchored: bool,
-    /// Its state derives from a percept sample of the current step.
+    /// Its state derives, through links, from a percept sample of its valid time.
     pub measured: bool,
     pub predicted: bool,
+    /// Since when it has not been measured (`None` while measured).
+    pub predicted_since: Option<Time>,
     pub state: Value,
     /// All prediction hypotheses when there are several (`state` is the first).
     pub hypotheses: Vec<Value>,
@@ -99,8 +102,9 @@ impl Anchoring {
             ty: self.types[object.ty as usize].name.clone(),
             status: self.status(object),
             anchored: object.anchored,
-            measured: object.measured_at.is_some() && object.measured_at == self.last_time,
+            measured: object.measured,
             predicted: object.predicted,
+            predicted_since: object.predicted_since,
             state: object.value.clone(),
             hypotheses: object.hypotheses.clone(),
             from: object.incoming.iter().map(|(l, k)| (link_name(*l), symbol_of(*k))).collect(),
@@ -193,7 +197,8 @@ impl Anchoring {
     }
 
     /// The world model: one record per object (`docs/anchoring.md`: `id`, `type`, `status`,
-    /// `anchored`, `measured`, `predicted`, `state`, `from`, `to`, `grounded_in`,
+    /// `anchored`, `measured`, `predicted`, `predicted_since` when not measured, `state`, `from`,
+    /// `to`, `grounded_in`,
     /// `last_anchored`, and `hypotheses` / `names` when there are any).
     pub fn world_model(&self) -> Value {
         let symbols = |list: &[(Arc<str>, Arc<str>)]| {
@@ -209,6 +214,17 @@ impl Anchoring {
                     ("anchored".into(), Value::Bool(v.anchored)),
                     ("measured".into(), Value::Bool(v.measured)),
                     ("predicted".into(), Value::Bool(v.predicted)),
+                ];
+                if let Some(since) = v.predicted_since.filter(|_| !v.measured) {
+                    fields.push(("predicted_since".into(), Value::Int(since)));
+                }
+                // A branch of a prediction: how likely, and of which object.
+                for name in [status::LIKELIHOOD, status::BRANCH_OF] {
+                    if let Some(value) = v.state.as_record().and_then(|r| r.get(name)) {
+                        fields.push((name.into(), value.clone()));
+                    }
+                }
+                fields.extend([
                     ("state".into(), state_without_id(&v.state)),
                     ("from".into(), symbols(&v.from)),
                     ("to".into(), symbols(&v.to)),
@@ -217,7 +233,7 @@ impl Anchoring {
                         Value::List(self.grounded_in(&v.symbol).into_iter().map(Value::Str).collect()),
                     ),
                     ("last_anchored".into(), Value::Int(v.last_anchored)),
-                ];
+                ]);
                 if !v.hypotheses.is_empty() {
                     fields.push((
                         "hypotheses".into(),
@@ -275,6 +291,9 @@ impl Anchoring {
             for key in self.store.objects_of(ty) {
                 let Some(object) = self.store.get(key) else { continue };
                 let _ = write!(text, "{} {}", object.symbol, self.status(object).as_str());
+                if let Some(owner) = object.branch_of.and_then(|o| self.store.get(o)) {
+                    let _ = write!(text, " (branch of {})", owner.symbol);
+                }
                 if object.hypotheses.len() > 1 {
                     let _ = write!(text, " ({} hypotheses)", object.hypotheses.len());
                 }
@@ -307,10 +326,13 @@ impl Anchoring {
     }
 }
 
+/// An object's state as the world model shows it: its attributes, without `id` and the status
+/// attributes (the world model's record has those itself).
 fn state_without_id(value: &Value) -> Value {
     match value {
-        Value::Record(r) if r.id.is_some() => {
-            Value::Record(Arc::new(Record { id: None, fields: r.fields.clone() }))
+        Value::Record(r) => {
+            let fields = r.fields.iter().filter(|(name, _)| !status::is_status(name)).cloned().collect();
+            Value::Record(Arc::new(Record { id: None, fields }))
         }
         other => other.clone(),
     }

@@ -1,8 +1,10 @@
 //! Prediction along the road network through a crossing: a car is lost before a four-way
 //! crossing, its on-road object (and the world object with it) is predicted along the road and
-//! splits into three hypotheses past the crossing (left, straight on, right); the car comes back
-//! after turning left, the new percept is linked to the waiting world object through the left
-//! hypothesis, and that branch is the one kept: the on-road object is on the north road again.
+//! splits into three hypotheses past the crossing (left, straight on, right), each an on-road
+//! object of its own (oo1 straight on, two branch objects `branch_of: oo1`), in the type's
+//! snapshot and seen by `exists`; the car comes back after turning left, the new percept is linked
+//! to the waiting world object through the left hypothesis, the two branch objects are pruned,
+//! and oo1 keeps the branch that was reacquired: it is on the north road again.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
 mod common;
@@ -40,6 +42,20 @@ fn step(engine: &mut Anchoring, i: i64, items: Vec<Value>) -> kpl_anchor::StepOu
     common::step(engine, i * 100_000, &Value::List(items.into()))
 }
 
+/// Whether `exists o: OnRoadObject . o.vel.y > 9.0` holds over this snapshot of on-road objects.
+fn heads_north(snapshot: &Value) -> bool {
+    let mut context = kpl_mtl::Context::new(kpl_core::TimeUnit::Us, kpl_core::TimeUnit::Ms);
+    let domain = context.declare_object_type("OnRoadObject");
+    let expr = kpl_syntax::parse_formula("exists o: OnRoadObject . o.vel.y > 9.0").unwrap();
+    let formula = kpl_mtl::Formula::from_ast(&expr, &mut context).unwrap();
+    let mut progressor = kpl_mtl::Progressor::new(Arc::new(formula));
+    let Value::List(items) = snapshot else { panic!("{snapshot:?}") };
+    let mut objects = vec![Vec::new(); domain as usize + 1];
+    objects[domain as usize] = items.to_vec();
+    let state = kpl_mtl::SlotState { values: Vec::new(), objects };
+    progressor.step(0, &state).unwrap().unwrap()
+}
+
 fn record_field(value: &Value, name: &str) -> Value {
     value.as_record().unwrap().get(name).unwrap().clone()
 }
@@ -54,6 +70,7 @@ fn the_reacquired_branch_is_kept() {
     // Eastbound on `west` (lane at y = -1.75) at 10 m/s from x = -90; seen until 4.9 s (x = -41).
     for i in 0..50 {
         step(&mut engine, i, vec![percept("vp1", [-90.0 + i as f64, -1.75], [10.0, 0.0])]);
+        assert!(!heads_north(&engine.snapshot("OnRoadObject").unwrap()));
     }
     assert_eq!(engine.chain("vp1").len(), 2, "vp1 -> wo1 -> oo1");
     assert_eq!(record_field(&engine.object("OnRoadObject", "oo1").unwrap().state, "road"), Value::Int(west));
@@ -70,6 +87,24 @@ fn the_reacquired_branch_is_kept() {
     }
     assert_eq!(splits[0], (50, "predicted wo1 (no_incoming_link, along_roads)".to_string()));
     assert_eq!(splits.last().unwrap().1, "predicted wo1 (branch, along_roads, 3 hypotheses)");
+    // Three on-road objects, one per branch: oo1 straight on, the two others branch objects.
+    let Value::List(onroad) = engine.snapshot("OnRoadObject").unwrap() else { panic!() };
+    assert_eq!(onroad.len(), 3, "{onroad:?}");
+    let field = |o: &Value, name: &str| o.as_record().unwrap().get(name).cloned();
+    assert_eq!(field(&onroad[0], "branch_of"), None);
+    assert!(record_field(&onroad[0], "vel").as_vec2().unwrap()[0] > 9.0, "oo1 goes straight on");
+    for branch in &onroad[1..] {
+        assert_eq!(field(branch, "branch_of"), Some(Value::str("oo1")));
+        assert_eq!(field(branch, "measured"), Some(Value::Bool(false)));
+    }
+    let likelihoods: Vec<f64> =
+        onroad.iter().map(|o| field(o, "likelihood").unwrap().as_f64().unwrap()).collect();
+    assert!((likelihoods.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{likelihoods:?}");
+    assert!(likelihoods[0] > likelihoods[1] && likelihoods[0] > likelihoods[2], "{likelihoods:?}");
+    // `exists o: OnRoadObject` sees them: one heads north (the left branch), as no object did before.
+    assert!(heads_north(&Value::List(onroad.clone())));
+    let branches: Vec<String> =
+        onroad[1..].iter().map(|o| o.as_record().unwrap().id.as_deref().unwrap().to_string()).collect();
     let wo1 = engine.object("WorldObject", "wo1").unwrap();
     assert_eq!(wo1.status, Status::Predicted);
     assert_eq!(wo1.hypotheses.len(), 3);
@@ -94,6 +129,12 @@ fn the_reacquired_branch_is_kept() {
         )),
         "{text:?}"
     );
+    // The two branch objects are pruned; oo1 continues on the reacquired branch.
+    let pruned: Vec<String> =
+        output.changes.iter().filter(|c| c.kind == ChangeKind::Removed).map(|c| c.to_string()).collect();
+    let expected: Vec<String> =
+        branches.iter().map(|b| format!("removed {b} (pruned, branch of oo1)")).collect();
+    assert_eq!(pruned, expected);
     let wo1 = engine.object("WorldObject", "wo1").unwrap();
     assert_eq!(wo1.status, Status::Anchored);
     assert!(wo1.hypotheses.is_empty());

@@ -1,13 +1,15 @@
 //! Anchoring on the stream runtime, as `kpl run specs/traffic/bridge.kpl` runs it: the spec checks
 //! against the runtime's registry (built-ins, `kpl-std`, anchoring), runs with simulated time, and
 //! every sample its link processes emitted (the objects of each link's type and its changes) is
-//! what the pure engine computes from the same tracker snapshots, recorded in the same run.
+//! what the pure engine computes when each link steps on its own input (the tracker's recorded
+//! snapshots, then each link's recorded output), and what `Anchoring::step` computes from the
+//! tracker snapshots alone (all links at once).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use kpl_anchor::{AnchorConfig, Anchoring, Snapshot};
+use kpl_anchor::{AnchorConfig, Anchoring, FromSnapshot, Snapshot};
 use kpl_core::{Time, Value};
 use kpl_runtime::{Ending, RunConfig, RunReport};
 
@@ -92,44 +94,49 @@ fn the_bridge_spec_runs_on_the_runtime_as_the_engine_computes_it() {
     let frames = by_stream["tracker"].len();
     assert!(frames >= 390, "{frames} tracker frames");
 
-    // The same snapshots through the pure engine give the same outputs at every time.
+    // Each link process stepped the engine on its own input: the same steps on the pure engine
+    // give the same outputs at every time, and so does `step` with the tracker's snapshots.
     let mut engine = Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap();
-    let link_types =
-        [("vision_world", "WorldObject"), ("world_onroad", "OnRoadObject"), ("onroad_car", "Car")];
+    let mut all_at_once = Anchoring::from_spec(&spec, AnchorConfig::default()).unwrap();
+    let links = [
+        ("vision_world", "percepts", "WorldObject"),
+        ("world_onroad", "vision_world", "OnRoadObject"),
+        ("onroad_car", "world_onroad", "Car"),
+    ];
     let percepts_type = kpl_core::ValueType::List(Box::new(kpl_core::ValueType::Record(
         spec.types.get("VisionPercept").unwrap().clone(),
     )));
     let mut compared = 0;
     let mut cars = 0;
     for (&time, value) in &by_stream["tracker"] {
-        let objects = Value::from_json(value, &percepts_type).unwrap();
-        let output = engine
-            .step(time, &[Snapshot { source: "percepts", ty: "VisionPercept", objects: &objects }])
-            .unwrap();
-        assert!(output.warnings.is_empty(), "{:?}", output.warnings);
-        for (link, ty) in link_types {
+        let percepts = Value::from_json(value, &percepts_type).unwrap();
+        let mut input = percepts.clone();
+        for (link, stream, ty) in links {
+            let output = engine
+                .step_link(link, time, &[FromSnapshot { stream, valid: time, objects: &input }], &[])
+                .unwrap();
+            assert!(output.warnings.is_empty(), "{:?}", output.warnings);
+            let objects = engine.snapshot(ty).unwrap();
             let Some(emitted) = by_stream.get(link).and_then(|s| s.get(&time)) else {
                 // The run may end between the tracker's last frame and the links' outputs.
-                continue;
+                break;
             };
-            assert_eq!(**emitted, engine.snapshot(ty).unwrap().to_json(), "{link} at {time}");
-            let changes: Vec<serde_json::Value> = output
-                .changes
-                .iter()
-                .filter(|c| engine.link_of_change(c) == Some(link))
-                .map(|c| c.to_value().to_json())
-                .collect();
-            let recorded = by_stream.get(format!("{link}.changes").as_str()).and_then(|s| s.get(&time));
-            match recorded {
-                Some(recorded) => {
-                    assert_eq!(**recorded, serde_json::Value::Array(changes), "{link}.changes at {time}")
-                }
+            assert_eq!(**emitted, objects.to_json(), "{link} at {time}");
+            let changes = output.changes_value().to_json();
+            match by_stream.get(format!("{link}.changes").as_str()).and_then(|s| s.get(&time)) {
+                Some(recorded) => assert_eq!(**recorded, changes, "{link}.changes at {time}"),
                 None => {
-                    assert!(changes.is_empty(), "{link} changed at {time} but emitted nothing: {changes:?}")
+                    assert_eq!(changes, serde_json::json!([]), "{link} changed at {time}, emitted nothing")
                 }
             }
             compared += 1;
+            input = objects;
         }
+        all_at_once
+            .step(time, &[Snapshot { source: "percepts", ty: "VisionPercept", objects: &percepts }])
+            .unwrap();
+        assert_eq!(all_at_once.describe(), engine.describe(), "at {time}");
+        assert_eq!(all_at_once.world_model(), engine.world_model(), "at {time}");
         if let Some(world) = by_stream.get("world").and_then(|s| s.get(&time)) {
             assert_eq!(**world, engine.world_model().to_json(), "world model at {time}");
         }

@@ -15,4 +15,6 @@ mod time;
 mod value;
 
 pub use time::{Time, TimeUnit, format_micros};
-pub use value::{BBox, FieldType, JsonError, Record, RecordType, Value, ValueType};
+pub use value::{
+    BBox, FieldType, JsonError, OBJECT_STATUS, Record, RecordType, Value, ValueType, object_status_type,
+};

@@ -69,6 +69,23 @@ impl RecordType {
     }
 }
 
+/// Attributes every object record may carry besides its type's own: how anchoring knows the
+/// object's state (`measured`: derived from a percept sample of this time; `predicted_since`:
+/// since when it has not been, in microseconds; `likelihood` and `branch_of` on the branches of a
+/// prediction). Decoders keep them, when they have these types, on records of any type; declared
+/// types cannot use the names.
+pub const OBJECT_STATUS: [(&str, ValueType); 4] = [
+    ("measured", ValueType::Bool),
+    ("predicted_since", ValueType::Int),
+    ("likelihood", ValueType::Float),
+    ("branch_of", ValueType::Str),
+];
+
+/// The type of an [`OBJECT_STATUS`] attribute.
+pub fn object_status_type(name: &str) -> Option<&'static ValueType> {
+    OBJECT_STATUS.iter().find(|(n, _)| *n == name).map(|(_, t)| t)
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldType {
     pub name: Arc<str>,
@@ -266,7 +283,8 @@ impl Value {
 
     /// Decodes JSON following `ty`. Ints widen to floats; a float where an int is needed, a
     /// missing field, `null`, or a string such as `"NaN"` where a number is needed is an error.
-    /// Records may carry an `"id"` string; fields not in the type are ignored.
+    /// Records may carry an `"id"` string and the [`OBJECT_STATUS`] attributes; other fields not
+    /// in the type are ignored.
     pub fn from_json(json: &serde_json::Value, ty: &ValueType) -> Result<Value, JsonError> {
         let mut path = String::new();
         decode(json, ty, &mut path)
@@ -386,6 +404,16 @@ fn decode(json: &serde_json::Value, ty: &ValueType, path: &mut String) -> Result
                 path.truncate(len);
                 fields.push((field.name.clone(), value));
             }
+            for (name, status_ty) in &OBJECT_STATUS {
+                if let Some(v) = map.get(*name).filter(|_| record.field(name).is_none()) {
+                    let len = path.len();
+                    path.push('.');
+                    path.push_str(name);
+                    let value = decode(v, status_ty, path)?;
+                    path.truncate(len);
+                    fields.push((Arc::from(*name), value));
+                }
+            }
             Ok(Value::Record(Arc::new(Record { id, fields })))
         }
     }
@@ -449,6 +477,20 @@ mod tests {
         assert_eq!(record.get("pos"), Some(&Value::vec2(1.5, -2.0)));
         assert_eq!(record.get("size"), Some(&Value::Float(4.0)));
         assert_eq!(value.to_json(), json!({"id": "vp3", "pos": [1.5, -2.0], "size": 4.0}));
+    }
+
+    #[test]
+    fn object_status_attributes_are_kept_others_dropped() {
+        let json =
+            json!({"id": "wo1", "pos": [1, 2], "size": 4, "measured": false, "predicted_since": 700, "x": 1});
+        let value = Value::from_json(&json, &percept_type()).unwrap();
+        assert_eq!(
+            value.to_json(),
+            json!({"id": "wo1", "pos": [1.0, 2.0], "size": 4.0, "measured": false, "predicted_since": 700})
+        );
+        let err =
+            Value::from_json(&json!({"pos": [1, 2], "size": 4, "measured": 1}), &percept_type()).unwrap_err();
+        assert_eq!(err.path, ".measured");
     }
 
     #[test]

@@ -138,10 +138,19 @@ impl SourceContext {
     }
 
     /// Waits until clock time `t`. Returns false if the run stops first, or if `t` is past the
-    /// run's end (the sample at `t` must then not be emitted).
+    /// run's end (the sample at `t` must then not be emitted): the source then waits for the
+    /// end itself, so a run lasts its `--for` on either clock, even when its last sample came
+    /// earlier.
     pub async fn wait_until(&self, t: Time) -> bool {
-        if self.end.is_some_and(|end| t > end) {
+        if let Some(end) = self.end
+            && t > end
+        {
             self.run_stats.reached_end.store(true, Ordering::Relaxed);
+            tokio::select! {
+                biased;
+                () = self.stop.stopped() => {}
+                () = self.clock.sleep_until(end) => {}
+            }
             return false;
         }
         tokio::select! {
@@ -162,12 +171,14 @@ impl SourceContext {
     pub async fn emit_port(&mut self, port: usize, valid: Time, value: Value) {
         let now = self.clock.now();
         self.run_stats.observe_time(now);
+        self.run_stats.count_samples(1);
         self.outputs.send(port, Sample::new(valid, now, value)).await;
     }
 
     /// Emits a sample on the default output as it is (replay keeps recorded times).
     pub async fn emit_sample(&mut self, sample: Sample) {
         self.run_stats.observe_time(sample.available);
+        self.run_stats.count_samples(1);
         self.outputs.send(0, sample).await;
     }
 

@@ -216,4 +216,11 @@ pub trait Source: Send + 'static {
         &'a mut self,
         ctx: &'a mut crate::context::SourceContext,
     ) -> BoxFuture<'a, Result<(), ProcessError>>;
+
+    /// Whether the source ends by itself (a file at its end, a timer with a `count`). A run with
+    /// a source that does not, and no `--for`, goes on until it is interrupted; `kpl run` says
+    /// so when it starts.
+    fn ends_by_itself(&self) -> bool {
+        true
+    }
 }

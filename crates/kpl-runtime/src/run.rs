@@ -48,8 +48,9 @@ pub struct RunConfig {
     pub strict: bool,
     /// Run only this host's processes (`--host`).
     pub host: Option<String>,
-    /// Print a progress line on stderr once a second.
-    pub progress: bool,
+    /// The counters to fill, when the caller wants to watch them while the run goes (the
+    /// progress line of `kpl run`); a run without them counts in its own.
+    pub stats: Option<Arc<RunStats>>,
 }
 
 impl Default for RunConfig {
@@ -63,7 +64,7 @@ impl Default for RunConfig {
             spec_name: "spec".into(),
             strict: false,
             host: None,
-            progress: false,
+            stats: None,
         }
     }
 }
@@ -168,11 +169,17 @@ pub async fn run_async(
 ) -> Result<RunReport, RunError> {
     let wall_start = Instant::now();
     let clock = Clock::new(config.clock);
-    let stats = Arc::new(RunStats::default());
+    let stats = config.stats.clone().unwrap_or_default();
+    stats.start.store(clock.start(), Ordering::Relaxed);
+    stats.observe_time(clock.start());
     let stop = StopSignal::default();
     let end = config.duration.map(|d| clock.start() + d);
-
     let local = local_processes(spec, config.host.as_deref())?;
+
+    // Ctrl-C and --for, from the start: waiting for other hosts counts in the run's time.
+    let interrupted = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let watchers = watch_for_the_end(&clock, end, &stop, &interrupted);
+
     let transport = match (&config.host, transport_factory) {
         (Some(host), Some(factory)) if needs_transport(spec, &local) => Some(factory.open(spec, host).await?),
         (Some(_), None) if needs_transport(spec, &local) => {
@@ -267,10 +274,12 @@ pub async fn run_async(
         for (producer, port, hosts) in remote_streams(spec, &local) {
             let key = stream_key(config, spec, producer, port.clone());
             let mut publisher = transport.publisher(&key).await?;
-            let ready = publisher.wait_for_subscribers(hosts).await;
-            if ready < hosts {
-                tracing::warn!(stream = ?key, ready, hosts, "not every consuming host subscribed in time");
-            }
+            // The transport says which hosts are missing; a stop (Ctrl-C, --for) ends the wait.
+            let ready = tokio::select! {
+                ready = publisher.wait_for_subscribers(hosts) => ready,
+                () = stop.stopped() => 0,
+            };
+            tracing::debug!(stream = %key, ready, hosts, "consuming hosts subscribed");
             if let Some(task) = tasks.get_mut(&producer) {
                 let index = port_index(&spec.processes[producer], port.as_deref());
                 task.outputs.ports[index].remote.push(publisher);
@@ -284,35 +293,21 @@ pub async fn run_async(
             let key = stream_key(config, spec, producer, port);
             let receiver = transport.subscriber(&key).await?;
             let feed_stats = stats.process(&format!("{}@remote", key.producer));
-            let stop = stop.clone();
+            let (stop, run_stats) = (stop.clone(), stats.clone());
             join.spawn(async move {
-                feed_remote(receiver, senders, feed_stats, stop).await;
+                feed_remote(receiver, senders, feed_stats, run_stats, stop).await;
                 Ok::<(), (String, ProcessError)>(())
             });
         }
     }
 
-    // Ctrl-C and --for.
-    let interrupted = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let watchers = {
-        let stop = stop.clone();
-        let interrupted = interrupted.clone();
-        let clock = clock.clone();
-        tokio::spawn(async move {
-            let duration = async {
-                match end {
-                    Some(end) => clock.sleep_until(end).await,
-                    None => std::future::pending().await,
-                }
-            };
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => interrupted.store(true, Ordering::SeqCst),
-                () = duration => {}
-            }
-            stop.stop();
-        })
-    };
-    let progress = config.progress.then(|| Progress::start(stats.clone(), clock.kind(), clock.start()));
+    stats.set_endless(
+        tasks
+            .values()
+            .filter(|t| matches!(&t.kind, TaskKind::Source(source) if !source.ends_by_itself()))
+            .map(|t| spec.processes[t.id].name.clone())
+            .collect(),
+    );
 
     for (id, task) in tasks {
         let name = spec.processes[id].name.clone();
@@ -378,9 +373,6 @@ pub async fn run_async(
         && !interrupted.load(Ordering::SeqCst)
         && !strict_failure;
     watchers.abort();
-    if let Some(progress) = progress {
-        progress.finish();
-    }
     if let Some(transport) = transport {
         transport.close().await;
     }
@@ -399,6 +391,29 @@ pub async fn run_async(
         wall_elapsed: i64::try_from(wall_start.elapsed().as_micros()).unwrap_or(i64::MAX),
         failures,
         summary: stats.summary(),
+    })
+}
+
+/// Stops the run on Ctrl-C (setting `interrupted`) or when the clock reaches `end` (`--for`).
+fn watch_for_the_end(
+    clock: &Clock,
+    end: Option<Time>,
+    stop: &StopSignal,
+    interrupted: &Arc<std::sync::atomic::AtomicBool>,
+) -> tokio::task::JoinHandle<()> {
+    let (stop, interrupted, clock) = (stop.clone(), interrupted.clone(), clock.clone());
+    tokio::spawn(async move {
+        let duration = async {
+            match end {
+                Some(end) => clock.sleep_until(end).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => interrupted.store(true, Ordering::SeqCst),
+            () = duration => {}
+        }
+        stop.stop();
     })
 }
 
@@ -460,6 +475,7 @@ async fn feed_remote(
     mut receiver: Box<dyn crate::transport::RemoteReceiver>,
     senders: Vec<EdgeSender>,
     stats: Arc<ProcessStats>,
+    run_stats: Arc<RunStats>,
     stop: StopSignal,
 ) {
     loop {
@@ -470,6 +486,8 @@ async fn feed_remote(
         };
         match received {
             Some(Remote::Sample(sample)) => {
+                run_stats.count_samples(1);
+                run_stats.observe_time(sample.available);
                 for sender in &senders {
                     let _ = sender.send(sample.clone()).await;
                 }
@@ -491,6 +509,7 @@ async fn run_unit(mut caller: Caller, mut inputs: Vec<InputEdge>, clock: Clock) 
                 .iter()
                 .map(|i| SyncInput {
                     max_delay: i.filter.policy().max_delay,
+                    approximate: i.filter.policy().approximation == hir::Approximation::UseMostRecent,
                     feedback: i.feedback,
                     stats: i.rx.stats().clone(),
                 })
@@ -652,7 +671,7 @@ impl Caller {
                 self.stats.error(format!("emitted on `{port}`, which is not an output of this process"));
             }
         }
-        self.run_stats.delivered.fetch_add(emitter.out.len() as u64, Ordering::Relaxed);
+        self.run_stats.count_samples(emitter.out.len() as u64);
         for (port, sample) in emitter.drain() {
             self.outputs.send(port, sample).await;
         }
@@ -684,51 +703,5 @@ impl Caller {
             self.outputs.send(port, sample).await;
         }
         self.outputs.close().await;
-    }
-}
-
-/// The progress line: clock and wall time and the rate of samples, once a second on stderr,
-/// from its own thread (so a simulated run is not disturbed).
-struct Progress {
-    done: Arc<std::sync::atomic::AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Progress {
-    fn start(stats: Arc<RunStats>, kind: ClockKind, clock_start: Time) -> Progress {
-        let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let flag = done.clone();
-        let thread = std::thread::spawn(move || {
-            use std::io::Write;
-            let start = Instant::now();
-            let mut last_count = 0u64;
-            let mut last_tick = Instant::now();
-            while !flag.load(Ordering::Relaxed) {
-                std::thread::sleep(Duration::from_millis(100));
-                if last_tick.elapsed() < Duration::from_secs(1) {
-                    continue;
-                }
-                let count = stats.delivered.load(Ordering::Relaxed);
-                let rate = (count - last_count) as f64 / last_tick.elapsed().as_secs_f64();
-                last_count = count;
-                last_tick = Instant::now();
-                let clock = (stats.now.load(Ordering::Relaxed) - clock_start).max(0) as f64 / 1e6;
-                let label = if kind == ClockKind::Sim { "sim" } else { "clock" };
-                let mut stderr = std::io::stderr().lock();
-                let _ = writeln!(
-                    stderr,
-                    "{label} {clock:.1}s  wall {:.1}s  {rate:.0} samples/s  ({count} samples)",
-                    start.elapsed().as_secs_f64()
-                );
-            }
-        });
-        Progress { done, thread: Some(thread) }
-    }
-
-    fn finish(mut self) {
-        self.done.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
     }
 }

@@ -101,10 +101,29 @@ pub struct ProcessStats {
     /// Things the process could do but that are probably not what the spec meant (a replay
     /// filter that matched nothing), each said once.
     pub warnings: Mutex<Vec<String>>,
+    /// What the process achieved, in its own words and counts (`new Car objects (establish)`:
+    /// 4), in the order first reported; `kpl run` prints them as the run's result.
+    pub results: Mutex<Vec<Outcome>>,
+}
+
+/// One count of what a process achieved.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Outcome {
+    pub what: String,
+    pub count: u64,
 }
 
 impl ProcessStats {
     pub const KEEP: usize = 5;
+
+    /// Sets the count of one thing the process achieved (a total so far, not an increment).
+    pub fn result(&self, what: &str, count: u64) {
+        let Ok(mut results) = self.results.lock() else { return };
+        match results.iter_mut().find(|o| o.what == what) {
+            Some(outcome) => outcome.count = count,
+            None => results.push(Outcome { what: what.to_string(), count }),
+        }
+    }
 
     pub fn malformed(&self, malformed: Malformed) {
         count(&self.malformed, &self.malformed_examples, malformed);
@@ -141,10 +160,17 @@ pub struct RunStats {
     /// By `(stream, consumer)` name, in graph order.
     pub edges: Mutex<Vec<(String, String, Arc<EdgeStats>)>>,
     pub processes: Mutex<BTreeMap<String, Arc<ProcessStats>>>,
+    /// The clock time the run started at (0 for simulated time, the UNIX time in microseconds
+    /// for the wall clock).
+    pub start: AtomicI64,
     /// The latest clock time any process reported (for the progress line).
     pub now: AtomicI64,
-    /// Samples delivered to consumers, all edges.
-    pub delivered: AtomicU64,
+    /// Samples produced on every stream of this host: by sources, units, links and monitors,
+    /// and received from other hosts. Each sample counts once, however many consume it.
+    pub samples: AtomicU64,
+    /// The sources that do not end by themselves (set once the processes are built); a run with
+    /// one of them and no `--for` goes on until it is interrupted.
+    pub endless: Mutex<Option<Vec<String>>>,
     /// A source stopped because its next sample would be past the end of the run (`--for`).
     pub reached_end: std::sync::atomic::AtomicBool,
 }
@@ -161,6 +187,18 @@ impl RunStats {
     pub fn process(&self, name: &str) -> Arc<ProcessStats> {
         let Ok(mut processes) = self.processes.lock() else { return Arc::default() };
         processes.entry(name.to_string()).or_default().clone()
+    }
+
+    /// Records which sources never end by themselves (see [`RunStats::endless`]).
+    pub fn set_endless(&self, sources: Vec<String>) {
+        if let Ok(mut endless) = self.endless.lock() {
+            *endless = Some(sources);
+        }
+    }
+
+    /// Counts samples produced on a stream.
+    pub fn count_samples(&self, n: u64) {
+        self.samples.fetch_add(n, Ordering::Relaxed);
     }
 
     pub fn observe_time(&self, t: Time) {
@@ -205,8 +243,13 @@ impl RunStats {
                         instances_created: s.instances_created.load(Ordering::Relaxed),
                         instances_removed: s.instances_removed.load(Ordering::Relaxed),
                         warnings: snapshot(&s.warnings),
+                        results: snapshot(&s.results),
                     })
-                    .filter(|p| p.malformed + p.errors + p.instances_created > 0 || !p.warnings.is_empty())
+                    .filter(|p| {
+                        p.malformed + p.errors + p.instances_created > 0
+                            || !p.warnings.is_empty()
+                            || !p.results.is_empty()
+                    })
                     .collect()
             })
             .unwrap_or_default();
@@ -241,6 +284,7 @@ pub struct ProcessSummary {
     pub instances_removed: u64,
     /// What the process warned about (`kpl run` prints them even with `--quiet`).
     pub warnings: Vec<String>,
+    pub results: Vec<Outcome>,
 }
 
 /// The end-of-run summary (`kpl run` prints it and writes it as `summary.json`).

@@ -3,8 +3,10 @@
 //!
 //! A state for valid time `t` is emitted, in increasing `t`, when it is complete (every input has
 //! a sample at `t`), or when every missing input has moved past `t` or ended, or when `t` plus
-//! the input's `max delay` has passed; missing values are then the most recent ones before `t`.
-//! `feedback` inputs are never waited for: they contribute their most recent sample before `t`.
+//! the input's `max delay` has passed. A value still missing then stays missing (`None`) unless
+//! the input's policy says `use most recent`: then it is the most recent sample before `t` (which
+//! keeps its own valid time, so the consumer can tell it is approximated). `feedback` inputs are
+//! never waited for: they contribute their most recent sample before `t`.
 //! Samples for a time whose state is already out are late ([`DropReason::LateForState`]) but
 //! still update the most recent value.
 //!
@@ -23,6 +25,8 @@ use crate::stats::{DropReason, EdgeStats};
 #[derive(Debug, Clone)]
 pub struct SyncInput {
     pub max_delay: Option<Time>,
+    /// `use most recent`: a missing value is filled with the most recent sample.
+    pub approximate: bool,
     pub feedback: bool,
     pub stats: Arc<EdgeStats>,
 }
@@ -156,7 +160,7 @@ impl StateSync {
             if upto > 1 {
                 history.drain(..upto - 1);
             }
-            if value.is_none() {
+            if value.is_none() && (self.inputs[i].approximate || self.inputs[i].feedback) {
                 // Approximate with the most recent value at or before t.
                 *value = history.front().filter(|h| h.valid <= t).cloned();
                 if value.is_some() {
@@ -176,7 +180,11 @@ mod tests {
     use kpl_core::Value;
 
     fn input(max_delay: Option<Time>) -> SyncInput {
-        SyncInput { max_delay, feedback: false, stats: Arc::default() }
+        SyncInput { max_delay, approximate: false, stats: Arc::default(), feedback: false }
+    }
+
+    fn approximated(max_delay: Option<Time>) -> SyncInput {
+        SyncInput { approximate: true, ..input(max_delay) }
     }
 
     fn s(t: Time, v: i64) -> Sample {
@@ -203,14 +211,29 @@ mod tests {
     }
 
     #[test]
-    fn an_input_moving_past_fills_with_the_most_recent_value() {
-        let mut sync = StateSync::new(vec![input(None), input(None)]);
+    fn with_use_most_recent_a_missing_value_is_the_most_recent_one() {
+        let mut sync = StateSync::new(vec![input(None), approximated(None)]);
         let mut out = Vec::new();
         sync.push(0, s(0, 1), 0, &mut out);
         sync.push(1, s(0, 5), 0, &mut out);
         sync.push(0, s(10, 2), 10, &mut out); // input 1 has no sample at 10 yet
         sync.push(1, s(20, 6), 20, &mut out); // now it has moved past 10
         assert_eq!(shape(&out), [(0, vec![Some(1), Some(5)]), (10, vec![Some(2), Some(5)])]);
+        // The filled-in sample keeps its own valid time: the consumer sees it is older.
+        assert_eq!(out[1].values[1].as_ref().map(|s| s.valid), Some(0));
+        assert_eq!(sync.inputs[1].stats.approximated.load(std::sync::atomic::Ordering::Relaxed), 1);
+    }
+
+    #[test]
+    fn without_approximation_a_missing_value_stays_missing() {
+        let mut sync = StateSync::new(vec![input(None), input(None)]);
+        let mut out = Vec::new();
+        sync.push(0, s(0, 1), 0, &mut out);
+        sync.push(1, s(0, 5), 0, &mut out);
+        sync.push(0, s(10, 2), 10, &mut out);
+        sync.push(1, s(20, 6), 20, &mut out);
+        assert_eq!(shape(&out), [(0, vec![Some(1), Some(5)]), (10, vec![Some(2), None])]);
+        assert_eq!(sync.inputs[1].stats.approximated.load(std::sync::atomic::Ordering::Relaxed), 0);
     }
 
     #[test]

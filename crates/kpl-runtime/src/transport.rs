@@ -19,6 +19,16 @@ pub struct StreamKey {
     pub port: Option<String>,
 }
 
+impl std::fmt::Display for StreamKey {
+    /// `spec/producer` or `spec/producer.port`: the stream as the spec names it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.port {
+            None => write!(f, "{}/{}", self.spec, self.producer),
+            Some(port) => write!(f, "{}/{}.{port}", self.spec, self.producer),
+        }
+    }
+}
+
 /// What arrives from another host.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Remote {

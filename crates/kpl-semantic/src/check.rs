@@ -59,8 +59,11 @@ pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
         Checker { registry, diagnostics: Vec::new(), types: TypeTable::default(), names: BTreeMap::new() };
     let result = checker.run(spec);
     let mut diagnostics = checker.diagnostics;
-    diagnostics.sort_by_key(|d| (d.span.start, d.span.end));
     let has_errors = diagnostics.iter().any(Diagnostic::is_error);
+    if !has_errors {
+        diagnostics.extend(crate::attributes::unset(spec, &result, registry));
+    }
+    diagnostics.sort_by_key(|d| (d.span.start, d.span.end));
     if has_errors {
         // With errors, "never used" is mostly a consequence of an input that did not resolve.
         diagnostics.retain(|d| !matches!(d.code, diag::UNUSED_STREAM | diag::UNUSED_OUTPUT));
@@ -309,7 +312,10 @@ impl<'a> Checker<'a> {
                     self.types.get(&l.to_type.name).map_or(ValueType::Any, |t| ValueType::Record(t.clone()));
                 (Some(ValueType::List(Box::new(to))), vec![("changes".to_string(), ValueType::Any)])
             }
-            Decl::Monitor(_) => (Some(ValueType::Bool), Vec::new()),
+            Decl::Monitor(m) => match hir::monitor_binding(&m.formula) {
+                Some((var, ..)) => (Some(hir::binding_verdict_type(&m.name.name, var)), Vec::new()),
+                None => (Some(ValueType::Bool), Vec::new()),
+            },
         }
     }
 
@@ -968,6 +974,11 @@ impl Resolver<'_, '_, '_> {
                 }
                 inputs.push(hir::Input { port: "from".into(), stream });
             }
+        }
+
+        // A link steps at the states of its inputs; `feedback` inputs are never waited for.
+        if !inputs.is_empty() && inputs.iter().all(|i: &hir::Input| i.stream.policy.feedback) {
+            self.checker.diagnostics.push(diag::link_input_feedback(l.name.span, &l.name.name));
         }
 
         // The link unit: its own inputs and parameters; it must be able to fill `to` objects.

@@ -39,10 +39,14 @@ pub const CONDITION_TWICE: &str = "E0151";
 pub const NO_PRODUCER: &str = "E0152";
 pub const TO_IN_ESTABLISH: &str = "E0153";
 pub const LINK_INPUT_TYPE: &str = "E0154";
+pub const RESERVED_ATTRIBUTE: &str = "E0155";
+pub const LINK_INPUT_FEEDBACK: &str = "E0156";
 pub const BAD_INTERVAL: &str = "E0160";
 pub const BAD_BOUND: &str = "E0161";
 pub const UNUSED_STREAM: &str = "W0201";
 pub const UNUSED_OUTPUT: &str = "W0202";
+pub const BARE_BOUND: &str = "W0203";
+pub const UNSET_ATTRIBUTE: &str = "W0204";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
@@ -309,6 +313,22 @@ pub fn link_input_type(span: Span, stream: &str, found: &str, expected: &str) ->
     .with_hint(format!("give the link a stream of `{expected}` (or of a subtype)"))
 }
 
+pub fn reserved_attribute(span: Span, name: &str, meaning: &str) -> Diagnostic {
+    Diagnostic::error(RESERVED_ATTRIBUTE, span, format!("`{name}` is an attribute every object has"))
+        .with_label(format!("anchoring sets `{name}`: {meaning}"))
+        .with_hint("choose another name for this attribute")
+}
+
+pub fn link_input_feedback(span: Span, link: &str) -> Diagnostic {
+    Diagnostic::error(
+        LINK_INPUT_FEEDBACK,
+        span,
+        format!("link `{link}` takes its objects only through `feedback` streams"),
+    )
+    .with_label("a link steps at the states of its inputs, and a `feedback` input starts none")
+    .with_hint("give the link an input without `feedback` (drop `feedback` from this stream's policy)")
+}
+
 pub fn bad_interval(span: Span, lo: &str, hi: &str) -> Diagnostic {
     Diagnostic::error(
         BAD_INTERVAL,
@@ -335,4 +355,33 @@ pub fn unused_output(span: Span, name: &str, kind: &str) -> Diagnostic {
     Diagnostic::warning(UNUSED_OUTPUT, span, format!("the output of {kind} `{name}` is never used"))
         .with_label("nothing consumes this")
         .with_hint("connect it to a sink or another process, or remove it")
+}
+
+pub fn bare_bound(span: Span, bare: &[u64], fixed: &str) -> Diagnostic {
+    let numbers: Vec<String> = bare.iter().map(|n| format!("`{n}`")).collect();
+    let message = if bare.len() == 1 {
+        format!("the bare number {} in a time bound counts milliseconds", numbers[0])
+    } else {
+        format!("the bare numbers {} in a time bound count milliseconds", numbers.join(" and "))
+    };
+    Diagnostic::warning(BARE_BOUND, span, message)
+        .with_label("milliseconds")
+        .with_hint(format!("write the unit: `{fixed}` (or `s`, `min` where that is meant)"))
+}
+
+pub fn unset_attribute(
+    span: Span,
+    ty: &str,
+    attribute: &str,
+    link: (Span, &str),
+    unit: &str,
+    sets: &[String],
+) -> Diagnostic {
+    let sets = if sets.is_empty() { "nothing".to_string() } else { sets.join(", ") };
+    Diagnostic::warning(UNSET_ATTRIBUTE, span, format!("nothing sets `{ty}.{attribute}`: it keeps its default"))
+        .with_label("declared here")
+        .with_secondary(link.0, format!("`{ty}` objects come from `{}`", link.1))
+        .with_hint(format!(
+            "`{unit}` sets {sets} of a `{ty}`; compute `{attribute}` in a link unit that sets it (see `kpl list`), or remove the attribute"
+        ))
 }

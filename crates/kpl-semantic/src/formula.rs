@@ -308,6 +308,10 @@ impl<'a> FormulaChecker<'a> {
                 if field.name == "id" {
                     return ValueType::Str;
                 }
+                // Set by anchoring on percepts and the objects of links (`docs/language.md`).
+                if field.name == "measured" {
+                    return ValueType::Bool;
+                }
                 if let Some(f) = record.field(&field.name) {
                     return f.ty.clone();
                 }
@@ -393,8 +397,33 @@ impl<'a> FormulaChecker<'a> {
                 self.diagnostics
                     .push(diag::bad_bound(interval.span, "`inf` can only be the upper bound of an interval"));
             }
-            _ => {}
+            _ => self.bare_bounds(interval),
         }
+    }
+
+    /// Warns about bare numbers other than 0 in an interval (they count milliseconds, which is
+    /// easy to miss: `eventually[0, 3]` is 3 ms), with the interval written with units.
+    fn bare_bounds(&mut self, interval: &ast::Interval) {
+        let bare: Vec<u64> = [interval.lo, interval.hi]
+            .iter()
+            .filter_map(|b| match b {
+                ast::Bound::Ticks(n) if *n != 0 => Some(*n),
+                _ => None,
+            })
+            .collect();
+        if bare.is_empty() {
+            return;
+        }
+        let text = |b: &ast::Bound| match b {
+            ast::Bound::Ticks(0) => "0".to_string(),
+            ast::Bound::Ticks(n) => format!("{n}ms"),
+            ast::Bound::Inf => "inf".to_string(),
+            ast::Bound::Duration(_) => {
+                bound_micros(b).ok().flatten().map_or("?".to_string(), kpl_core::format_micros)
+            }
+        };
+        let fixed = format!("[{}, {}]", text(&interval.lo), text(&interval.hi));
+        self.diagnostics.push(diag::bare_bound(interval.span, &bare, &fixed));
     }
 }
 

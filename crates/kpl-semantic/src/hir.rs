@@ -178,6 +178,39 @@ pub struct Monitor {
     pub object_types: Vec<String>,
 }
 
+impl Monitor {
+    /// For a formula `forall x: T . φ`: the variable, the type and φ. Such a monitor keeps one
+    /// progression of φ per object of type `T` (a binding), from the object's first state to its
+    /// last, and each verdict names the object (see [`binding_verdict_type`]).
+    pub fn binding(&self) -> Option<(&str, &str, &ast::Expr)> {
+        monitor_binding(&self.formula)
+    }
+}
+
+/// The binding of a monitor's formula, if it is `forall x: T . φ` (see [`Monitor::binding`]).
+pub fn monitor_binding(formula: &ast::Expr) -> Option<(&str, &str, &ast::Expr)> {
+    match &formula.kind {
+        ast::ExprKind::Quantified { quantifier: ast::Quantifier::Forall, var, ty, body } => {
+            Some((var.name.as_str(), ty.name.as_str(), body))
+        }
+        _ => None,
+    }
+}
+
+/// The type of a verdict of a monitor with a binding: `{ VAR: string, verdict: bool }`, the
+/// object's symbol and the verdict for it.
+pub fn binding_verdict_type(monitor: &str, var: &str) -> ValueType {
+    ValueType::Record(Arc::new(RecordType {
+        name: Arc::from(format!("{monitor}.verdict")),
+        parent: None,
+        symbol: Arc::from(""),
+        fields: vec![
+            kpl_core::FieldType { name: Arc::from(var), ty: ValueType::Str },
+            kpl_core::FieldType { name: Arc::from("verdict"), ty: ValueType::Bool },
+        ],
+    }))
+}
+
 /// The policy of a stream for one consumer, with every default made explicit.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Policy {
@@ -251,44 +284,56 @@ impl Default for Queue {
 impl Policy {
     /// The policy as KPL text, defaults included (`no approximation, any update, any order, queue 1024 block`).
     pub fn describe(&self) -> String {
+        self.parts().into_iter().map(|(text, _)| text).collect::<Vec<_>>().join(", ")
+    }
+
+    /// Only what differs from the default policy, as KPL text (`sample every 1s, strict order`);
+    /// empty for a stream with the default policy. The defaults that `sample every` implies
+    /// (`use most recent`, `monotone order`) count as defaults.
+    pub fn describe_changes(&self) -> String {
+        self.parts()
+            .into_iter()
+            .filter(|(_, default)| !default)
+            .map(|(text, _)| text)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The policy's parts as KPL text, each with whether it is what the stream gets by default.
+    fn parts(&self) -> Vec<(String, bool)> {
         use kpl_core::format_micros as d;
+        let sampled = matches!(self.change, Change::SampleEvery(_));
         let mut parts = vec![
             match self.approximation {
-                Approximation::None => "no approximation".to_string(),
-                Approximation::UseMostRecent => "use most recent".to_string(),
+                Approximation::None => ("no approximation".to_string(), !sampled),
+                Approximation::UseMostRecent => ("use most recent".to_string(), sampled),
             },
             match self.change {
-                Change::AnyUpdate => "any update".to_string(),
-                Change::AnyChange => "any change".to_string(),
-                Change::SampleEvery(t) => format!("sample every {}", d(t)),
+                Change::AnyUpdate => ("any update".to_string(), true),
+                Change::AnyChange => ("any change".to_string(), false),
+                Change::SampleEvery(t) => (format!("sample every {}", d(t)), false),
             },
         ];
         if let Some(t) = self.max_delay {
-            parts.push(format!("max delay {}", d(t)));
+            parts.push((format!("max delay {}", d(t)), false));
         }
         if let Some((from, to)) = self.window {
-            parts.push(format!("from {} to {}", d(from), to.map_or("inf".to_string(), d)));
+            parts.push((format!("from {} to {}", d(from), to.map_or("inf".to_string(), d)), false));
         }
-        parts.push(
-            match self.order {
-                Order::Any => "any order",
-                Order::Monotone => "monotone order",
-                Order::Strict => "strict order",
-            }
-            .to_string(),
-        );
-        parts.push(format!(
-            "queue {} {}",
-            self.queue.capacity,
-            match self.queue.overflow {
-                ast::Overflow::Block => "block",
-                ast::Overflow::DropOldest => "drop oldest",
-            }
-        ));
+        parts.push(match self.order {
+            Order::Any => ("any order".to_string(), !sampled),
+            Order::Monotone => ("monotone order".to_string(), sampled),
+            Order::Strict => ("strict order".to_string(), false),
+        });
+        let overflow = match self.queue.overflow {
+            ast::Overflow::Block => "block",
+            ast::Overflow::DropOldest => "drop oldest",
+        };
+        parts.push((format!("queue {} {overflow}", self.queue.capacity), self.queue == Queue::default()));
         if self.feedback {
-            parts.push("feedback".to_string());
+            parts.push(("feedback".to_string(), false));
         }
-        parts.join(", ")
+        parts
     }
 }
 

@@ -17,6 +17,7 @@
 //! assert_eq!(checked.diagnostics[0].hint.as_deref(), Some("did you mean `ticks`?"));
 //! ```
 
+mod attributes;
 mod check;
 pub mod diagnostics;
 mod formula;
@@ -24,6 +25,7 @@ pub mod hir;
 pub mod registry;
 pub mod render;
 mod suggest;
+pub mod svg;
 mod types;
 
 pub use check::{Checked, check, check_identification};

@@ -197,6 +197,35 @@ pub struct Entry {
     /// Predicates and functions this entry makes available to the conditions of the links that
     /// use it (`on_road` for a unit that knows the road network).
     pub provides: Vec<Function>,
+    /// Which attributes of the objects it produces this entry sets (link units); the checker
+    /// warns about an attribute that nothing sets (W0204).
+    pub computes: Computes,
+}
+
+/// Which attributes of its objects a unit sets.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Computes {
+    /// Not declared (sources replaying data, units that fill in whatever they are given): every
+    /// attribute counts as set.
+    #[default]
+    Unknown,
+    /// These attributes, and with `copies_shared` every attribute that the linked-from object
+    /// also has (same name).
+    Attributes { names: Vec<String>, copies_shared: bool },
+}
+
+impl Computes {
+    /// Whether an attribute is set for objects linked from objects with `from_attributes`.
+    pub fn sets(&self, attribute: &str, from_attributes: &[&str]) -> bool {
+        match self {
+            Computes::Unknown => true,
+            Computes::Attributes { names, copies_shared } => {
+                names.iter().any(|n| n == attribute)
+                    || (*copies_shared && from_attributes.contains(&attribute))
+            }
+        }
+    }
 }
 
 impl Entry {
@@ -210,7 +239,16 @@ impl Entry {
             output: TypeReq::Any,
             ports: Vec::new(),
             provides: Vec::new(),
+            computes: Computes::Unknown,
         }
+    }
+
+    /// Declares the attributes this entry sets: `names`, and with `copies_shared` those the
+    /// linked-from object also has. A unit that computes more (`speed`) lists it here.
+    pub fn computes(mut self, names: &[&str], copies_shared: bool) -> Entry {
+        self.computes =
+            Computes::Attributes { names: names.iter().map(|n| n.to_string()).collect(), copies_shared };
+        self
     }
     pub fn provides(mut self, function: Function) -> Entry {
         self.provides.push(function);

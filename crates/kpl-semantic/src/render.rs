@@ -1,5 +1,6 @@
-//! The process graph as Graphviz dot, Mermaid or JSON (`kpl graph`), with stream names and the
-//! policies each consumer applies.
+//! The process graph as SVG (laid out by [`crate::svg`]), Graphviz dot, Mermaid or JSON (`kpl
+//! graph`), with stream names and the policies each consumer applies: the pictures show only what
+//! differs from the default policy, the JSON every part of it.
 
 use serde_json::json;
 
@@ -8,6 +9,7 @@ use crate::hir::{self, Spec};
 /// Output formats of `kpl graph`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
+    Svg,
     Dot,
     Mermaid,
     Json,
@@ -15,6 +17,7 @@ pub enum Format {
 
 pub fn render(spec: &Spec, format: Format) -> String {
     match format {
+        Format::Svg => crate::svg::svg(spec),
         Format::Dot => dot(spec),
         Format::Mermaid => mermaid(spec),
         Format::Json => serde_json::to_string_pretty(&json_value(spec)).unwrap_or_default() + "\n",
@@ -79,12 +82,16 @@ fn dot(spec: &Spec) -> String {
     }
     for (from, to, edge) in edges(spec) {
         let style = if edge.policy.feedback { ", style=dashed" } else { "" };
+        let policy = edge.policy.describe_changes();
+        let label = if policy.is_empty() {
+            escape(&edge.stream)
+        } else {
+            format!("{}\\n{}", escape(&edge.stream), escape(&policy))
+        };
         out.push_str(&format!(
-            "  \"{}\" -> \"{}\" [label=\"{}\\n{}\"{style}];\n",
+            "  \"{}\" -> \"{}\" [label=\"{label}\"{style}];\n",
             escape(&spec.processes[from].name),
             escape(&spec.processes[to].name),
-            escape(&edge.stream),
-            escape(&edge.policy.describe())
         ));
     }
     out.push_str("}\n");
@@ -119,7 +126,10 @@ fn mermaid(spec: &Spec) -> String {
     }
     for (from, to, edge) in edges(spec) {
         let arrow = if edge.policy.feedback { "-.->" } else { "-->" };
-        let label = format!("{}: {}", edge.stream, edge.policy.describe()).replace('"', "'");
+        let policy = edge.policy.describe_changes();
+        let label =
+            if policy.is_empty() { edge.stream.clone() } else { format!("{}: {policy}", edge.stream) }
+                .replace('"', "'");
         out.push_str(&format!(
             "  {} {arrow}|\"{label}\"| {}\n",
             id(&spec.processes[from]),
@@ -153,6 +163,7 @@ fn json_value(spec: &Spec) -> serde_json::Value {
                 "input": edge.input,
                 "policy": edge.policy,
                 "policy_text": edge.policy.describe(),
+                "policy_changes": edge.policy.describe_changes(),
             })
         })
         .collect();

@@ -146,6 +146,10 @@ fn build(
             );
             continue;
         }
+        if let Some(meaning) = reserved_meaning(&field.name.name) {
+            diagnostics.push(diag::reserved_attribute(field.name.span, &field.name.name, meaning));
+            continue;
+        }
         own_spans.push((&field.name.name, field.name.span));
         match resolve_type_expr(&field.ty, &mut |n| {
             by_name.get(n).and_then(|d| build(d, by_name, names, built, failed, stack, diagnostics))
@@ -181,6 +185,18 @@ pub(crate) enum TypeError<'a> {
 }
 
 /// Resolves a type expression, looking record types up with `record`.
+/// What an attribute every object has means (`id` is the symbol; the others are
+/// `kpl_core::OBJECT_STATUS`), or `None` for a name a type may declare.
+pub(crate) fn reserved_meaning(name: &str) -> Option<&'static str> {
+    match name {
+        "measured" => Some("whether the object's state was measured at this state"),
+        "predicted_since" => Some("since when the object's state has not been measured"),
+        "likelihood" => Some("how likely a predicted branch is"),
+        "branch_of" => Some("the object a predicted branch object branches from"),
+        _ => None,
+    }
+}
+
 pub(crate) fn resolve_type_expr<'a>(
     ty: &'a ast::TypeExpr,
     record: &mut dyn FnMut(&str) -> Option<Arc<RecordType>>,

@@ -56,6 +56,38 @@ struct AnchorUnit {
     last_value: Option<Value>,
     /// Without a camera model the camera must stay still: the first pose seen.
     fixed_pose: Option<CameraPose>,
+    /// What the unit achieved, reported as the run's result.
+    tally: AnchorTally,
+}
+
+/// What `aapa.anchor` achieved: anchors created, and how many came back into view with their
+/// symbol after being hidden (occluded, out of view, attached or lost for a while).
+#[derive(Debug, Default)]
+struct AnchorTally {
+    stats: Option<Arc<kpl_runtime::stats::ProcessStats>>,
+    symbols: std::collections::BTreeSet<kpl_aapa::Symbol>,
+    hidden: std::collections::BTreeSet<kpl_aapa::Symbol>,
+    seen_again: u64,
+}
+
+impl AnchorTally {
+    fn count(&mut self, world: &WorldState) {
+        use kpl_aapa::AnchorStatus;
+        for anchor in &world.anchors {
+            self.symbols.insert(anchor.symbol.clone());
+            if anchor.status == AnchorStatus::Visible {
+                if self.hidden.remove(&anchor.symbol) {
+                    self.seen_again += 1;
+                }
+            } else {
+                self.hidden.insert(anchor.symbol.clone());
+            }
+        }
+        if let Some(stats) = &self.stats {
+            stats.result("anchors created", self.symbols.len() as u64);
+            stats.result("anchors seen again with their symbol after being hidden", self.seen_again);
+        }
+    }
 }
 
 fn sample<'a>(input: &'a Input<'_>, port: usize) -> Option<&'a Sample> {
@@ -71,6 +103,7 @@ impl AnchorUnit {
             last_world: WorldState::default(),
             last_value: None,
             fixed_pose: None,
+            tally: AnchorTally::default(),
         }
     }
 
@@ -163,6 +196,7 @@ impl Unit for AnchorUnit {
             .step_from(time, &percepts, &actions, camera.as_ref(), previous)
             .map_err(|e| at(e.to_string()))?;
         world.notes.extend(note);
+        self.tally.count(&world);
         let value = world_to_value(&world);
         out.emit(value.clone());
         self.last_world = world;
@@ -354,7 +388,9 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process::Asy
         check_percepts_type(&input.stream.ty).map_err(|e| ctx.error(e))?;
     }
     let aapa = Aapa::new(params(ctx)?).map_err(|e| ctx.error(e.to_string()))?;
-    Ok(Box::new(SyncUnit(AnchorUnit::new(aapa))))
+    let mut unit = AnchorUnit::new(aapa);
+    unit.tally.stats = Some(ctx.stats.clone());
+    Ok(Box::new(SyncUnit(unit)))
 }
 
 /// The ports of the replay sources (`sim.gearbox`, `cater.video`) after the default one, which

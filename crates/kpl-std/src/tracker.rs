@@ -64,6 +64,11 @@ impl Source for Tracker {
             Ok(())
         })
     }
+
+    /// A car that leaves the map is replaced by a new one: the traffic never ends.
+    fn ends_by_itself(&self) -> bool {
+        false
+    }
 }
 
 fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::BuildError> {

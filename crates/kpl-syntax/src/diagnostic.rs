@@ -1,5 +1,6 @@
 //! Diagnostics: a stable code, a message, the span it is about, labels and a hint; and their
-//! rendering as text (rustc-like, with the source line and the span marked) or as JSON objects.
+//! rendering as text (rustc-like, by codespan-reporting, with the source lines and every span
+//! marked, optionally in colour) or as JSON objects.
 //!
 //! Every diagnostic code is documented in `docs/diagnostics.md` with an example; a test checks
 //! that the list there and the codes used in the code base agree.
@@ -148,12 +149,62 @@ pub struct JsonDiagnostic {
     pub message: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hint: Option<String>,
+    /// Every marked place (the primary span first, then the others in source order).
+    pub labels: Vec<JsonLabel>,
+}
+
+/// One marked place of a diagnostic in `--format json`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct JsonLabel {
+    pub line: usize,
+    pub column: usize,
+    pub end_line: usize,
+    pub end_column: usize,
+    /// The span the diagnostic is about (one per diagnostic), or a place that explains it.
+    pub primary: bool,
+    /// The text printed under the span (empty when there is none).
+    pub message: String,
+}
+
+/// A span with its label, primary or secondary, in the order they are shown.
+struct Mark<'d> {
+    span: Span,
+    label: &'d str,
+    primary: bool,
 }
 
 impl Diagnostic {
+    /// The primary span, then the secondary ones in source order.
+    fn marks(&self) -> Vec<Mark<'_>> {
+        let mut secondary: Vec<Mark<'_>> = self
+            .secondary
+            .iter()
+            .map(|(span, label)| Mark { span: *span, label: label.as_str(), primary: false })
+            .collect();
+        secondary.sort_by_key(|m| (m.span.start, m.span.end));
+        let primary = Mark { span: self.span, label: self.label.as_deref().unwrap_or(""), primary: true };
+        std::iter::once(primary).chain(secondary).collect()
+    }
+
     pub fn to_json(&self, file: &str, source: &str, index: &LineIndex) -> JsonDiagnostic {
         let (line, column) = index.line_col(source, self.span.start);
         let (end_line, end_column) = index.line_col(source, self.span.end);
+        let labels = self
+            .marks()
+            .into_iter()
+            .map(|m| {
+                let (line, column) = index.line_col(source, m.span.start);
+                let (end_line, end_column) = index.line_col(source, m.span.end);
+                JsonLabel {
+                    line,
+                    column,
+                    end_line,
+                    end_column,
+                    primary: m.primary,
+                    message: m.label.to_string(),
+                }
+            })
+            .collect();
         JsonDiagnostic {
             file: file.to_string(),
             line,
@@ -164,99 +215,180 @@ impl Diagnostic {
             code: self.code.to_string(),
             message: self.message.clone(),
             hint: self.hint.clone(),
+            labels,
         }
     }
 
-    /// Renders the diagnostic as text: header, location, the source line with the span marked,
-    /// secondary labels and the hint. No colours, so the output is stable for snapshots.
+    /// Renders the diagnostic as plain text (no colours, so the output is stable for snapshots):
+    /// the header with severity and code, `--> file:line:column`, the source lines with every
+    /// label under its span in source order, and the hint. See [`Diagnostic::render_styled`].
     pub fn render(&self, file: &str, source: &str, index: &LineIndex) -> String {
-        use std::fmt::Write;
-        let mut out = String::new();
+        self.render_styled(file, source, index, false)
+    }
+
+    /// Renders the diagnostic as text, with ANSI colours when `colour` is set (for a terminal).
+    /// The layout is codespan-reporting's, in rustc's style and ASCII characters. A line longer
+    /// than [`LONG_LINE`] characters (a minified or generated file) is shown as a window of it
+    /// around the primary span; labels on other lines then become notes with their positions.
+    pub fn render_styled(&self, file: &str, source: &str, index: &LineIndex, colour: bool) -> String {
+        use codespan_reporting::diagnostic::{Diagnostic as Report, Label, Severity as Level};
+        let level = match self.severity {
+            Severity::Error => Level::Error,
+            Severity::Warning => Level::Warning,
+        };
         let (line, column) = index.line_col(source, self.span.start);
-        let _ = writeln!(out, "{}[{}]: {}", self.severity.as_str(), self.code, self.message);
-        let gutter = digits(line).max(
-            self.secondary.iter().map(|(s, _)| digits(index.line_col(source, s.start).0)).max().unwrap_or(0),
-        );
-        let pad = " ".repeat(gutter);
-        let _ = writeln!(out, "{pad}--> {file}:{line}:{column}");
-        let _ = writeln!(out, "{pad} |");
-        // The primary span's line first, with any secondary labels on that same line under it;
-        // then each other line once, with its labels.
-        let mut marks: Vec<(usize, Span, Option<&str>, char)> =
-            vec![(line, self.span, self.label.as_deref(), '^')];
-        for (span, label) in &self.secondary {
-            marks.push((index.line_col(source, span.start).0, *span, Some(label.as_str()), '-'));
-        }
-        let mut shown_lines: Vec<usize> = Vec::new();
-        for &(mark_line, ..) in &marks {
-            if shown_lines.contains(&mark_line) {
-                continue;
+        let excerpt = Excerpt::new(file, source, index, line, column);
+        let mut notes = Vec::new();
+        let mut labels = Vec::new();
+        for mark in self.marks() {
+            match excerpt.range(source, mark.span) {
+                Some(range) => {
+                    let label =
+                        if mark.primary { Label::primary((), range) } else { Label::secondary((), range) };
+                    labels.push(label.with_message(mark.label));
+                }
+                None => {
+                    let (l, c) = index.line_col(source, mark.span.start);
+                    notes.push(format!("at {file}:{l}:{c}: {}", mark.label));
+                }
             }
-            shown_lines.push(mark_line);
-            let on_line: Vec<_> =
-                marks.iter().filter(|m| m.0 == mark_line).map(|m| (m.1, m.2, m.3)).collect();
-            snippet(&mut out, source, index, &on_line, gutter);
         }
         if let Some(hint) = &self.hint {
-            let _ = writeln!(out, "{pad} = hint: {hint}");
+            notes.push(format!("hint: {hint}"));
         }
-        out
-    }
-}
-
-fn digits(n: usize) -> usize {
-    n.to_string().len()
-}
-
-fn snippet(
-    out: &mut String,
-    source: &str,
-    index: &LineIndex,
-    marks: &[(Span, Option<&str>, char)],
-    gutter: usize,
-) {
-    use std::fmt::Write;
-    let Some((first, ..)) = marks.first() else { return };
-    let (line, column) = index.line_col(source, first.start);
-    let text = index.line_text(source, line);
-    // Very long lines (a 50 MB single-line file) are cut around the first span.
-    let (shown, first_col) = window(text, column);
-    let shown_len = shown.chars().count();
-    let _ = writeln!(out, "{line:>gutter$} | {}", shown.replace('\t', " "));
-    for (span, label, mark) in marks {
-        let (_, column) = index.line_col(source, span.start);
-        let (end_line, end_column) = index.line_col(source, span.end);
-        if column < first_col || column - first_col > shown_len {
-            continue;
-        }
-        let width = if end_line == line {
-            end_column.saturating_sub(column)
-        } else {
-            text.chars().count() + 1 - column
+        let report = Report::new(level)
+            .with_code(self.code)
+            .with_message(&self.message)
+            .with_labels(labels)
+            .with_notes(notes);
+        let config = codespan_reporting::term::Config {
+            chars: codespan_reporting::term::Chars::ascii(),
+            ..Default::default()
         };
-        let width = width.clamp(1, (shown_len + 1 - (column - first_col)).max(1));
-        let marker: String = std::iter::repeat_n(*mark, width).collect();
-        let indent = " ".repeat(column - first_col);
-        match label {
-            Some(label) => {
-                let _ = writeln!(out, "{:gutter$} | {indent}{marker} {label}", "");
-            }
+        let rendered = if colour {
+            use codespan_reporting::term::termcolor::Ansi;
+            let styles = codespan_reporting::term::Styles::default();
+            let mut ansi = Ansi::new(Vec::new());
+            let mut writer = codespan_reporting::term::StylesWriter::new(&mut ansi, &styles);
+            codespan_reporting::term::emit_to_write_style(&mut writer, &config, &excerpt, &report)
+                .map(|()| String::from_utf8_lossy(&ansi.into_inner()).into_owned())
+        } else {
+            codespan_reporting::term::emit_into_string(&config, &excerpt, &report)
+        };
+        // Rendering only fails on spans outside the file, which `Excerpt::range` rules out; the
+        // header alone is still better than nothing.
+        rendered.unwrap_or_else(|_| {
+            format!(
+                "{}[{}]: {}\n --> {file}:{line}:{column}\n",
+                self.severity.as_str(),
+                self.code,
+                self.message
+            )
+        })
+    }
+}
+
+/// Lines longer than this many characters are shown as a window around the primary span.
+pub const LONG_LINE: usize = 240;
+/// The width of that window, in characters.
+const WINDOW: usize = 120;
+
+/// The text codespan-reporting renders from: the whole file, or, when the primary span's line
+/// is very long, a window of that one line (with its line number and columns kept).
+struct Excerpt<'s> {
+    name: &'s str,
+    text: std::borrow::Cow<'s, str>,
+    /// For a window: the 1-based line it comes from, the byte offset in the file where it
+    /// starts and its first column.
+    window: Option<(usize, usize, usize)>,
+    line_starts: Vec<usize>,
+}
+
+impl<'s> Excerpt<'s> {
+    fn new(name: &'s str, source: &'s str, index: &LineIndex, line: usize, column: usize) -> Excerpt<'s> {
+        let line_text = index.line_text(source, line);
+        if line_text.chars().count() <= LONG_LINE {
+            let line_starts = codespan_reporting::files::line_starts(source).collect();
+            return Excerpt { name, text: source.into(), window: None, line_starts };
+        }
+        let first_col = column.saturating_sub(WINDOW / 2).max(1);
+        let line_start = line_text.as_ptr() as usize - source.as_ptr() as usize;
+        let skip: usize = line_text.chars().take(first_col - 1).map(char::len_utf8).sum();
+        let shown: String = line_text[skip..].chars().take(WINDOW).collect();
+        Excerpt {
+            name,
+            text: shown.into(),
+            window: Some((line, line_start + skip, first_col)),
+            line_starts: vec![0],
+        }
+    }
+
+    /// Where a span of the file is in the excerpt (`None`: not shown in it).
+    fn range(&self, source: &str, span: Span) -> Option<std::ops::Range<usize>> {
+        let (start, end) = (span.start as usize, span.end as usize);
+        match self.window {
             None => {
-                let _ = writeln!(out, "{:gutter$} | {indent}{marker}", "");
+                let end = clamp_to_char_boundary(source, end.max(start));
+                Some(clamp_to_char_boundary(source, start)..end)
+            }
+            Some((_, offset, _)) => {
+                let len = self.text.len();
+                if start < offset || start > offset + len {
+                    return None;
+                }
+                let local_start = clamp_to_char_boundary(&self.text, start - offset);
+                let local_end = clamp_to_char_boundary(&self.text, end.saturating_sub(offset).min(len));
+                Some(local_start..local_end.max(local_start))
             }
         }
     }
 }
 
-/// Up to 120 characters of `text` around `column`; returns the shown text and its first column.
-fn window(text: &str, column: usize) -> (String, usize) {
-    const MAX: usize = 120;
-    let total = text.chars().count();
-    if total <= MAX {
-        return (text.to_string(), 1);
+impl<'a> codespan_reporting::files::Files<'a> for Excerpt<'_> {
+    type FileId = ();
+    type Name = &'a str;
+    type Source = &'a str;
+
+    fn name(&'a self, (): ()) -> Result<&'a str, codespan_reporting::files::Error> {
+        Ok(self.name)
     }
-    let first = column.saturating_sub(MAX / 2).max(1);
-    (text.chars().skip(first - 1).take(MAX).collect(), first)
+
+    fn source(&'a self, (): ()) -> Result<&'a str, codespan_reporting::files::Error> {
+        Ok(&self.text)
+    }
+
+    fn line_index(&'a self, (): (), byte_index: usize) -> Result<usize, codespan_reporting::files::Error> {
+        Ok(self.line_starts.partition_point(|&start| start <= byte_index).saturating_sub(1))
+    }
+
+    fn line_number(&'a self, (): (), line_index: usize) -> Result<usize, codespan_reporting::files::Error> {
+        Ok(self.window.map_or(line_index + 1, |(line, ..)| line))
+    }
+
+    fn column_number(
+        &'a self,
+        (): (),
+        line_index: usize,
+        byte_index: usize,
+    ) -> Result<usize, codespan_reporting::files::Error> {
+        let range = self.line_range((), line_index)?;
+        let column = codespan_reporting::files::column_index(&self.text, range, byte_index) + 1;
+        Ok(self.window.map_or(column, |(_, _, first_col)| column + first_col - 1))
+    }
+
+    fn line_range(
+        &'a self,
+        (): (),
+        line_index: usize,
+    ) -> Result<std::ops::Range<usize>, codespan_reporting::files::Error> {
+        let start =
+            *self.line_starts.get(line_index).ok_or(codespan_reporting::files::Error::LineTooLarge {
+                given: line_index,
+                max: self.line_starts.len() - 1,
+            })?;
+        let end = self.line_starts.get(line_index + 1).copied().unwrap_or(self.text.len());
+        Ok(start..end)
+    }
 }
 
 #[cfg(test)]
@@ -276,7 +408,7 @@ mod tests {
     }
 
     #[test]
-    fn renders_span_hint_and_secondary() {
+    fn renders_every_label_in_source_order_with_location_and_hint() {
         let src = "stream a = b\nstream a = c\n";
         let index = LineIndex::new(src);
         let diag = Diagnostic::error("E0102", Span::new(20, 21), "`a` is defined twice")
@@ -286,9 +418,43 @@ mod tests {
         let text = diag.render("x.kpl", src, &index);
         assert_eq!(
             text,
-            "error[E0102]: `a` is defined twice\n --> x.kpl:2:8\n  |\n2 | stream a = c\n  |        ^ second definition\n1 | stream a = b\n  |        - first defined here\n  = hint: rename one of them\n"
+            "error[E0102]: `a` is defined twice\n  --> x.kpl:2:8\n  |\n1 | stream a = b\n  |        - first defined here\n2 | stream a = c\n  |        ^ second definition\n  |\n  = hint: rename one of them\n\n"
         );
+        assert!(!text.contains('\x1b'), "plain text has no colour codes");
+        let coloured = diag.render_styled("x.kpl", src, &index, true);
+        assert!(coloured.contains("\x1b["), "{coloured:?}");
         let json = diag.to_json("x.kpl", src, &index);
         assert_eq!((json.line, json.column, json.end_line, json.end_column), (2, 8, 2, 9));
+        let labels: Vec<_> =
+            json.labels.iter().map(|l| (l.line, l.column, l.primary, l.message.as_str())).collect();
+        assert_eq!(labels, [(2, 8, true, "second definition"), (1, 8, false, "first defined here")]);
+    }
+
+    #[test]
+    fn secondary_labels_are_in_source_order() {
+        let src = "a b c d\n";
+        let index = LineIndex::new(src);
+        let diag = Diagnostic::error("E0001", Span::new(0, 1), "m")
+            .with_secondary(Span::new(6, 7), "third")
+            .with_secondary(Span::new(2, 3), "first");
+        let json = diag.to_json("x.kpl", src, &index);
+        let columns: Vec<_> = json.labels.iter().map(|l| l.column).collect();
+        assert_eq!(columns, [1, 3, 7]);
+    }
+
+    #[test]
+    fn a_very_long_line_is_shown_as_a_window_with_true_columns() {
+        let src = format!("{}bad{}\nnext line\n", "x".repeat(10_000), "y".repeat(10_000));
+        let index = LineIndex::new(&src);
+        let diag = Diagnostic::error("E0001", Span::new(10_000, 10_003), "unexpected")
+            .with_label("here")
+            .with_secondary(Span::new(20_004, 20_008), "elsewhere")
+            .with_hint("fix it");
+        let text = diag.render("big.kpl", &src, &index);
+        assert!(text.contains("--> big.kpl:1:10001"), "{text}");
+        assert!(text.contains("^^^ here"), "{text}");
+        assert!(text.contains("at big.kpl:2:1: elsewhere"), "{text}");
+        assert!(text.contains("hint: fix it"), "{text}");
+        assert!(text.len() < 1_000, "{} bytes", text.len());
     }
 }

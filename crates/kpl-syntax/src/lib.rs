@@ -18,7 +18,7 @@ pub mod format;
 pub mod lex;
 mod parser;
 
-pub use diagnostic::{Diagnostic, JsonDiagnostic, LineIndex, Severity};
+pub use diagnostic::{Diagnostic, JsonDiagnostic, JsonLabel, LineIndex, Severity};
 
 /// Reads a file's bytes as UTF-8 text; on failure the diagnostic points at the first bad byte.
 pub fn decode_source(bytes: &[u8]) -> Result<&str, Diagnostic> {

@@ -34,8 +34,9 @@
 //! parsing. On decoding, the value is checked against the stream's declared type as the JSON-lines
 //! files are ([`kpl_core::Value::from_json`]): ints widen to floats and durations, a list of two
 //! (four) numbers is a `vec2` (`box`) where one is declared, attributes a record type does not
-//! have are dropped, and a value that does not fit (NaN where a number is needed, a missing
-//! attribute, bytes cut short, nesting deeper than [`MAX_DEPTH`]) is an error, never a panic.
+//! have are dropped (except the object status attributes, `kpl_core::OBJECT_STATUS`), and a value
+//! that does not fit (NaN where a number is needed, a missing attribute, bytes cut short, nesting
+//! deeper than [`MAX_DEPTH`]) is an error, never a panic.
 
 use std::sync::Arc;
 
@@ -508,6 +509,16 @@ fn conform_record(value: &Record, ty: &RecordType) -> Result<Value, Mismatch> {
         };
         fields.push((field.name.clone(), conform(found, &field.ty).map_err(|e| within(e, segment))?));
     }
+    // How anchoring knows the object's state travels with it (`kpl_core::OBJECT_STATUS`).
+    for (name, status_ty) in &kpl_core::OBJECT_STATUS {
+        if ty.field(name).is_some() {
+            continue;
+        }
+        if let Some((_, found)) = value.fields.iter().find(|(n, _)| &**n == *name) {
+            let status = conform(found.clone(), status_ty).map_err(|e| within(e, format!(".{name}")))?;
+            fields.push((Arc::from(*name), status));
+        }
+    }
     Ok(Value::Record(Arc::new(Record { id: value.id.clone(), fields })))
 }
 
@@ -647,15 +658,20 @@ mod tests {
                 ("speed".into(), Value::Int(3)),
                 ("age".into(), Value::Int(5)),
                 ("pos".into(), Value::List(vec![Value::Int(1), Value::Float(2.5)].into())),
+                ("measured".into(), Value::Bool(false)),
+                ("predicted_since".into(), Value::Int(400)),
             ],
         }));
         let got = decode(&encode(&Sample::new(1, 1, sent)), &ty).unwrap();
+        // Attributes the type does not have are dropped, except how anchoring knows the state.
         let expected = Value::Record(Arc::new(Record {
             id: Some("co1".into()),
             fields: vec![
                 ("pos".into(), Value::vec2(1.0, 2.5)),
                 ("speed".into(), Value::Float(3.0)),
                 ("age".into(), Value::Duration(5)),
+                ("measured".into(), Value::Bool(false)),
+                ("predicted_since".into(), Value::Int(400)),
             ],
         }));
         assert_eq!(got, Message::Sample(Sample::new(1, 1, expected)));

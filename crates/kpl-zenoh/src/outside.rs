@@ -174,6 +174,10 @@ impl Source for Subscribe {
             Ok(())
         })
     }
+
+    fn ends_by_itself(&self) -> bool {
+        self.stop_at_end
+    }
 }
 
 struct Publish {

@@ -18,12 +18,14 @@ use kpl_cater::score::{Category, CategoryTable};
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Generate videos: scene JSON, `<video>_bb.json` ground truth, perfect and detector perception.
-    #[command(after_help = "Example:\n  kpl cater generate --videos 1371 --seed 7 --out data/cater")]
+    #[command(
+        after_help = "Example:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n\nLA-CATER's test set has 1371 videos (docs/cater.md)."
+    )]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
     #[command(
-        after_help = "Examples:\n  kpl cater eval --data data/cater --model aapa --perception perfect\n  \
-                            kpl cater eval --data data/cater --model heuristic --perception detector --json out/h.json"
+        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
+                            kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json"
     )]
     Eval(EvalArgs),
 }

@@ -9,7 +9,7 @@ use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl check specs/traffic/bridge.kpl\n  kpl check specs/ok specs/traffic\n  kpl check --format json spec.kpl | jq '.[].message'\n\nExit status: 0 when every spec is valid (warnings allowed), 1 when a spec has errors, 2 for usage or I/O errors."
+    after_help = "Examples:\n  kpl check specs/traffic/bridge.kpl\n  kpl check specs/ok specs/traffic\n  kpl check --format json specs/warn/unset_attribute.kpl > diagnostics.json\n\nEach diagnostic has a code; `kpl explain CODE` tells more about it.\nExit status: 0 when every spec is valid (warnings allowed), 1 when a spec has errors, 2 for usage or I/O errors."
 )]
 pub struct Args {
     /// Spec files, or directories to search for `.kpl` files (`-` reads standard input).

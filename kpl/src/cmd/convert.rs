@@ -12,8 +12,7 @@ use clap::Args as ClapArgs;
 use kpl_core::ValueType;
 use kpl_mcap::read::{RawEvent, Reader};
 use kpl_mcap::write::{Compression, Recorder, StreamId};
-use kpl_runtime::builtins::{SampleLine, StreamFilter, line_stream};
-use serde::Deserialize;
+use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
@@ -100,12 +99,6 @@ fn to_mcap(
     types: &BTreeMap<String, ValueType>,
     compression: Compression,
 ) -> Result<Converted, String> {
-    #[derive(Deserialize)]
-    struct Line {
-        valid: kpl_core::Time,
-        available: Option<kpl_core::Time>,
-        value: serde_json::Value,
-    }
     let file = File::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
     let mut streams: BTreeMap<String, StreamId> = BTreeMap::new();
@@ -116,30 +109,24 @@ fn to_mcap(
         if line.trim().is_empty() {
             continue;
         }
-        let parsed = line_stream(&line).and_then(|stream| {
-            let line: Line = serde_json::from_str(&line).map_err(|e| format!("not a sample line: {e}"))?;
-            Ok((stream.into_owned(), line))
-        });
-        let (stream, line) = match parsed {
-            Ok(parsed) => parsed,
+        let line = match read_line(&line) {
+            Ok(line) => line,
             Err(error) => {
                 skip(&location, &error);
                 converted.skipped += 1;
                 continue;
             }
         };
-        let id = match streams.get(&stream) {
+        let id = match streams.get(&line.stream) {
             Some(id) => *id,
             None => {
-                let ty = types.get(&stream).unwrap_or(&ValueType::Any);
-                let id = recorder.add_stream(&stream, ty).map_err(|e| e.to_string())?;
-                streams.insert(stream, id);
+                let ty = types.get(&line.stream).unwrap_or(&ValueType::Any);
+                let id = recorder.add_stream(&line.stream, ty).map_err(|e| e.to_string())?;
+                streams.insert(line.stream, id);
                 id
             }
         };
-        recorder
-            .write_json(id, line.valid, line.available.unwrap_or(line.valid), line.value)
-            .map_err(|e| e.to_string())?;
+        recorder.write_json(id, line.valid, line.available, line.value).map_err(|e| e.to_string())?;
         converted.samples += 1;
     }
     recorder.finish().map_err(|e| e.to_string())?;

@@ -8,7 +8,9 @@ use kpl_semantic::render;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum GraphFormat {
-    /// Graphviz dot (`| dot -Tsvg > graph.svg`).
+    /// An SVG picture, laid out by kpl itself (no Graphviz needed).
+    Svg,
+    /// Graphviz dot, for Graphviz's own layouts (`| dot -Tpng > graph.png`).
     Dot,
     /// A Mermaid flowchart (renders in Markdown on most forges).
     Mermaid,
@@ -18,13 +20,13 @@ pub enum GraphFormat {
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl graph specs/traffic/bridge.kpl | dot -Tsvg > bridge.svg\n  kpl graph --format mermaid specs/ok/overview.kpl\n  kpl graph --format json specs/ok/overview.kpl | jq '.streams[].policy_text'"
+    after_help = "Examples:\n  kpl graph specs/traffic/bridge.kpl > bridge.svg\n  kpl graph --format mermaid specs/ok/overview.kpl\n  kpl graph --format json specs/ok/overview.kpl > overview.json\n\nStreams are labelled with their name and the parts of their policy that differ from the\ndefault (`no approximation, any update, any order, queue 1024 block`); --format json has every\npart."
 )]
 pub struct Args {
     /// The spec file.
     pub file: PathBuf,
     /// Output format.
-    #[arg(long, value_enum, default_value = "dot")]
+    #[arg(long, value_enum, default_value = "svg")]
     pub format: GraphFormat,
 }
 
@@ -34,6 +36,7 @@ pub fn run(args: Args) -> ExitCode {
         Err(code) => return code,
     };
     let format = match args.format {
+        GraphFormat::Svg => render::Format::Svg,
         GraphFormat::Dot => render::Format::Dot,
         GraphFormat::Mermaid => render::Format::Mermaid,
         GraphFormat::Json => render::Format::Json,

@@ -7,20 +7,23 @@ use std::process::ExitCode;
 use clap::Args as ClapArgs;
 use kpl_semantic::registry::{EntryKind, Inputs, Registry};
 
+use crate::report::OutputFormat;
+
 #[derive(Debug, ClapArgs)]
-#[command(
-    after_help = "Examples:\n  kpl list\n  kpl list --json | jq '.entries[] | select(.kind == \"source\") | .name'"
-)]
+#[command(after_help = "Examples:\n  kpl list\n  kpl list --format json > registry.json")]
 pub struct Args {
-    /// Print the registry as JSON.
-    #[arg(long)]
+    /// Output format: text, or the registry as JSON ({entries, functions}).
+    #[arg(long, value_enum, default_value = "text")]
+    pub format: OutputFormat,
+    /// The same as `--format json` (kept for scripts written before `--format`).
+    #[arg(long, hide = true)]
     pub json: bool,
 }
 
 pub fn run(args: Args) -> ExitCode {
     let runtime_registry = crate::registry::registry();
     let registry = runtime_registry.signatures();
-    let text = if args.json {
+    let text = if args.json || args.format == OutputFormat::Json {
         let entries: Vec<_> = registry.entries().collect();
         let functions: Vec<_> = registry.functions().collect();
         serde_json::to_string_pretty(&serde_json::json!({ "entries": entries, "functions": functions }))
@@ -76,6 +79,17 @@ pub fn describe(registry: &Registry) -> String {
                 let default =
                     param.default.as_ref().map_or("required".to_string(), |d| format!("default {d}"));
                 let _ = writeln!(out, "      {:<24} {} ({default}) — {}", param.name, param.ty, param.doc);
+            }
+            if let kpl_semantic::registry::Computes::Attributes { names, copies_shared } = &entry.computes {
+                let mut sets = names.join(", ");
+                if *copies_shared {
+                    sets = if sets.is_empty() {
+                        "what the linked-from object also has".to_string()
+                    } else {
+                        format!("{sets}, and what the linked-from object also has")
+                    };
+                }
+                let _ = writeln!(out, "      {:<24} {sets}", "sets");
             }
             for function in &entry.provides {
                 let _ = writeln!(out, "      provides {:<15} — {}", function.signature(), function.summary);

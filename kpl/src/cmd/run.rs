@@ -2,11 +2,15 @@
 
 use std::fmt::Write as _;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant, SystemTime};
 
 use clap::Args as ClapArgs;
 use kpl_core::{Time, TimeUnit};
+use kpl_runtime::stats::RunStats;
 use kpl_runtime::{ClockKind, Ending, RunConfig, RunReport};
 
 use crate::report;
@@ -21,7 +25,7 @@ pub enum ClockArg {
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/timer.kpl --clock wall --for 5s --out /tmp/run\n  kpl run spec.kpl --host ground --clock wall     # one host of a deployed spec\n\nOutputs of file sinks go under --out (default out/SPEC). A summary per stream (produced,\ndelivered, dropped by reason, policy violations) is printed at the end and written to\nsummary.json there. Ctrl-C stops the run cleanly: sinks are flushed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors, 130 interrupted."
+    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/ticks.kpl --clock wall --for 5s --out /tmp/run\n  kpl run specs/zenoh/two_hosts.kpl --host b --clock wall --for 3s   # one host of a deployed spec\n\nOutputs of file sinks go under --out (default out/SPEC); the files written are listed at the end,\nwith what the processes achieved (objects anchored, symbols kept across gaps) and a summary per\nstream (produced, delivered, dropped by reason, policy violations), also written to summary.json\nthere (docs/runtime.md describes it field by field). While it runs, a progress line counts the\nsamples of every stream. Ctrl-C stops the run cleanly: sinks are flushed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors, 130 interrupted."
 )]
 pub struct Args {
     /// The spec to run.
@@ -48,6 +52,10 @@ pub struct Args {
     /// No progress line and no summary table.
     #[arg(long, short)]
     pub quiet: bool,
+    /// How to print the end-of-run summary: a table on stderr, or summary.json's content on
+    /// stdout.
+    #[arg(long, value_enum, default_value = "text")]
+    pub format: report::OutputFormat,
 }
 
 pub(crate) fn parse_duration(text: &str) -> Result<Time, String> {
@@ -67,6 +75,12 @@ pub fn run(args: Args) -> ExitCode {
         Err(code) => return code,
     };
 
+    if let Some(host) = &args.host
+        && let Err(message) = check_host(&spec, host)
+    {
+        eprintln!("error: --host {host}: {message}");
+        return ExitCode::from(2);
+    }
     let stem = args.spec.file_stem().map_or_else(|| "spec".to_string(), |s| s.to_string_lossy().into_owned());
     let out_dir = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(&stem));
     if let Err(err) = std::fs::create_dir_all(&out_dir) {
@@ -85,7 +99,7 @@ pub fn run(args: Args) -> ExitCode {
         spec_name: stem,
         strict: args.strict,
         host: args.host.clone(),
-        progress: !args.quiet,
+        stats: Some(Arc::new(RunStats::default())),
     };
     if args.host.is_some()
         && config.clock == ClockKind::Sim
@@ -98,7 +112,16 @@ pub fn run(args: Args) -> ExitCode {
     }
     let registry = crate::registry::registry();
     let transport = crate::transport::factory();
-    let report = match kpl_runtime::run(&spec, &registry, &config, transport.as_deref()) {
+    let started = SystemTime::now();
+    let progress = (!args.quiet).then(|| {
+        let stats = config.stats.clone().unwrap_or_default();
+        Progress::start(stats, config.clock, args.duration.is_some())
+    });
+    let result = kpl_runtime::run(&spec, &registry, &config, transport.as_deref());
+    if let Some(progress) = progress {
+        progress.finish();
+    }
+    let report = match result {
         Ok(report) => report,
         Err(err) => {
             eprintln!("error: {err}");
@@ -106,11 +129,17 @@ pub fn run(args: Args) -> ExitCode {
         }
     };
     let summary_path = out_dir.join("summary.json");
-    if let Ok(json) = serde_json::to_string_pretty(&report) {
-        let _ = std::fs::write(&summary_path, json + "\n");
+    let json = serde_json::to_string_pretty(&report).unwrap_or_default() + "\n";
+    if let Err(err) = std::fs::write(&summary_path, &json) {
+        eprintln!("error: cannot write {}: {err}", summary_path.display());
     }
-    if !args.quiet {
-        let _ = std::io::stderr().lock().write_all(describe(&report, config.clock).as_bytes());
+    if args.format == report::OutputFormat::Json {
+        let _ = std::io::stdout().lock().write_all(json.as_bytes());
+    } else if !args.quiet {
+        let mut text = describe(&report, config.clock);
+        text.push_str(&results(&report));
+        text.push_str(&outputs(&out_dir, started));
+        let _ = std::io::stderr().lock().write_all(text.as_bytes());
     }
     // Warnings are printed even with --quiet: each says why a run may not have done what the spec
     // meant (a replay filter matching nothing gives an empty source).
@@ -124,6 +153,131 @@ pub fn run(args: Args) -> ExitCode {
         Ending::Strict => ExitCode::from(1),
         _ if !report.failures.is_empty() => ExitCode::from(1),
         _ => ExitCode::SUCCESS,
+    }
+}
+
+/// Whether `--host` names a host of the spec's deploy section (else: what to say).
+fn check_host(spec: &kpl_semantic::hir::Spec, host: &str) -> Result<(), String> {
+    let Some(deploy) = &spec.deploy else {
+        return Err("the spec has no deploy section; run it without --host".into());
+    };
+    if deploy.hosts.iter().any(|h| h.name == host) {
+        return Ok(());
+    }
+    let names: Vec<String> = deploy.hosts.iter().map(|h| format!("`{}`", h.name)).collect();
+    Err(format!("the spec's deploy section has no such host; its hosts are {}", names.join(", ")))
+}
+
+/// What the processes achieved (`results` of each process in the summary), one line each.
+fn results(report: &RunReport) -> String {
+    let mut out = String::new();
+    for p in report.summary.processes.iter().filter(|p| !p.results.is_empty()) {
+        let parts: Vec<String> = p.results.iter().map(|o| format!("{} {}", o.count, o.what)).collect();
+        if out.is_empty() {
+            out.push_str("result:\n");
+        }
+        let _ = writeln!(out, "  {}: {}", p.process, parts.join(", "));
+    }
+    out
+}
+
+/// The files under `dir` written since `since`, with their sizes.
+fn outputs(dir: &Path, since: SystemTime) -> String {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else { continue };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let Ok(meta) = entry.metadata() else { continue };
+            if meta.is_dir() {
+                stack.push(path);
+            } else if meta.modified().is_ok_and(|m| m >= since) {
+                files.push((path, meta.len()));
+            }
+        }
+    }
+    files.sort();
+    let mut out = format!("outputs in {}:\n", dir.display());
+    for (path, len) in &files {
+        let name = path.strip_prefix(dir).unwrap_or(path);
+        let _ = writeln!(out, "  {:<30} {}", name.display(), size(*len));
+    }
+    out
+}
+
+fn size(bytes: u64) -> String {
+    match bytes {
+        0..1_000 => format!("{bytes} B"),
+        1_000..1_000_000 => format!("{:.1} kB", bytes as f64 / 1e3),
+        _ => format!("{:.1} MB", bytes as f64 / 1e6),
+    }
+}
+
+/// The progress line: clock and wall time and the samples of every stream, once a second on
+/// stderr (rewritten in place on a terminal), from its own thread so that a simulated run is not
+/// disturbed. First, if a source never ends and there is no `--for`, it says so.
+struct Progress {
+    done: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Progress {
+    fn start(stats: Arc<RunStats>, clock: ClockKind, bounded: bool) -> Progress {
+        let done = Arc::new(AtomicBool::new(false));
+        let flag = done.clone();
+        let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+        let thread = std::thread::spawn(move || {
+            let start = Instant::now();
+            let (mut last_count, mut last_tick) = (0u64, Instant::now());
+            let mut told_endless = bounded;
+            let mut shown = false;
+            while !flag.load(Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(50));
+                if !told_endless && let Some(endless) = stats.endless.lock().ok().and_then(|e| e.clone()) {
+                    told_endless = true;
+                    if !endless.is_empty() {
+                        let names: Vec<String> = endless.iter().map(|n| format!("`{n}`")).collect();
+                        eprintln!(
+                            "note: this run does not end by itself ({} never ends): stop it with Ctrl-C, or give --for",
+                            names.join(", ")
+                        );
+                    }
+                }
+                if last_tick.elapsed() < Duration::from_secs(1) {
+                    continue;
+                }
+                let count = stats.samples.load(Ordering::Relaxed);
+                let rate = (count - last_count) as f64 / last_tick.elapsed().as_secs_f64();
+                (last_count, last_tick) = (count, Instant::now());
+                let wall = start.elapsed().as_secs_f64();
+                let time = match clock {
+                    ClockKind::Sim => {
+                        let now = stats.now.load(Ordering::Relaxed) - stats.start.load(Ordering::Relaxed);
+                        format!("sim {:.1}s  wall {wall:.1}s", now.max(0) as f64 / 1e6)
+                    }
+                    ClockKind::Wall => format!("{wall:.1}s"),
+                };
+                let line = format!("{time}  {rate:.0} samples/s  ({count} samples, every stream)");
+                if terminal {
+                    eprint!("\r\x1b[2K{line}");
+                    shown = true;
+                } else {
+                    eprintln!("{line}");
+                }
+            }
+            if shown {
+                eprint!("\r\x1b[2K");
+            }
+        });
+        Progress { done, thread: Some(thread) }
+    }
+
+    fn finish(mut self) {
+        self.done.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
     }
 }
 
@@ -183,10 +337,9 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
                 p.instances_created, p.instances_removed
             ));
         }
-        if parts.is_empty() {
-            continue; // only warnings, printed after the summary
+        if !parts.is_empty() {
+            let _ = writeln!(out, "{}: {}", p.process, parts.join("; "));
         }
-        let _ = writeln!(out, "{}: {}", p.process, parts.join("; "));
         for m in &p.malformed_examples {
             let _ = writeln!(out, "  malformed at {}: {}", m.location, m.error);
         }

@@ -12,7 +12,6 @@
 //! With simulated time samples keep their recorded times; with wall-clock time they are shifted so
 //! the first one happens when the run starts.
 
-use std::borrow::Cow;
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::PathBuf;
@@ -48,35 +47,52 @@ pub fn encode_line(stream: &str, sample: &Sample) -> String {
     serde_json::to_string(&line).unwrap_or_default()
 }
 
-/// Decodes one line: the stream name and the sample, or what is wrong with it.
+/// Decodes one line: the stream name and the sample, or what is wrong with it (in words that
+/// point at the line's shape, not at the JSON parser's internals).
 pub fn decode_line(line: &str, ty: &ValueType) -> Result<(String, Sample), String> {
-    let stream = line_stream(line)?;
-    Ok((stream.into_owned(), decode_sample(line, ty)?))
+    let line = read_line(line)?;
+    let value = Value::from_json(&line.value, ty).map_err(|e| format!("value {e}"))?;
+    Ok((line.stream, Sample::new(line.valid, line.available, value)))
 }
 
-/// The stream a line belongs to (`""` when it names none), read without decoding its value: a
-/// replay keeps only the lines of one stream, and the other streams' values need not fit its type.
-pub fn line_stream(line: &str) -> Result<Cow<'_, str>, String> {
-    #[derive(Deserialize)]
-    struct Head<'a> {
-        #[serde(default, borrow)]
-        stream: Cow<'a, str>,
-    }
-    let head: Head<'_> = serde_json::from_str(line).map_err(|e| format!("not a sample line: {e}"))?;
-    Ok(head.stream)
+/// Reads one line's envelope (stream, times) and its value as plain JSON, not yet decoded with a
+/// type: a replay keeps only the lines of one stream, and the other streams' values need not fit
+/// its type. The stream is `""` when the line names none; `available` defaults to `valid`.
+pub fn read_line(line: &str) -> Result<SampleLine, String> {
+    use serde_json::Value as J;
+    let json: J = serde_json::from_str(line).map_err(|e| not_json(&e))?;
+    let J::Object(mut fields) = json else {
+        return Err(format!("the line is not a JSON object; {SAMPLE_LINE}"));
+    };
+    let time = |name: &str| match fields.get(name) {
+        None | Some(J::Null) => Ok(None),
+        Some(v) => v.as_i64().map(Some).ok_or_else(|| format!("`{name}` is {v}, not whole microseconds")),
+    };
+    let valid = time("valid")?.ok_or_else(|| format!("the line has no `valid` time; {SAMPLE_LINE}"))?;
+    let available = time("available")?.unwrap_or(valid);
+    let stream = match fields.remove("stream") {
+        None | Some(J::Null) => String::new(),
+        Some(J::String(name)) => name,
+        Some(other) => return Err(format!("`stream` is {other}, not a stream name")),
+    };
+    let value = fields.remove("value").ok_or_else(|| format!("the line has no `value`; {SAMPLE_LINE}"))?;
+    Ok(SampleLine { stream, valid, available, value })
 }
 
-/// The sample of a line, its value decoded with `ty`.
-fn decode_sample(line: &str, ty: &ValueType) -> Result<Sample, String> {
-    #[derive(Deserialize)]
-    struct Raw {
-        valid: Time,
-        available: Option<Time>,
-        value: serde_json::Value,
+/// The shape of a sample line, for messages about lines that do not have it.
+const SAMPLE_LINE: &str = "a sample line is {\"stream\": NAME, \"valid\": MICROSECONDS, \"available\": \
+                           MICROSECONDS, \"value\": VALUE} with `stream` and `available` optional";
+
+/// What is wrong with a line that is not JSON.
+fn not_json(error: &serde_json::Error) -> String {
+    use serde_json::error::Category;
+    let column = error.column();
+    match error.classify() {
+        Category::Eof => format!("the line ends inside a JSON value (column {column})"),
+        Category::Syntax | Category::Data | Category::Io => {
+            format!("the line is not JSON (unexpected text at column {column}); {SAMPLE_LINE}")
+        }
     }
-    let raw: Raw = serde_json::from_str(line).map_err(|e| format!("not a sample line: {e}"))?;
-    let value = Value::from_json(&raw.value, ty).map_err(|e| format!("value {e}"))?;
-    Ok(Sample::new(raw.valid, raw.available.unwrap_or(raw.valid), value))
 }
 
 struct Replay {
@@ -106,18 +122,18 @@ impl Source for Replay {
                     continue;
                 }
                 // The stream first: other streams' values need not fit this source's type.
-                match line_stream(&line) {
-                    Ok(stream) if self.filter.keep(&stream) => {}
+                let line = match read_line(&line) {
+                    Ok(line) if self.filter.keep(&line.stream) => line,
                     Ok(_) => continue,
                     Err(error) => {
                         ctx.malformed(&location, error)?;
                         continue;
                     }
-                }
-                let sample = match decode_sample(&line, &self.ty) {
-                    Ok(sample) => sample,
+                };
+                let sample = match Value::from_json(&line.value, &self.ty) {
+                    Ok(value) => Sample::new(line.valid, line.available, value),
                     Err(error) => {
-                        ctx.malformed(&location, error)?;
+                        ctx.malformed(&location, format!("value {error}"))?;
                         continue;
                     }
                 };
@@ -244,7 +260,24 @@ mod tests {
 
     #[test]
     fn bad_lines_say_what_is_wrong() {
-        assert!(decode_line("{", &ValueType::Any).unwrap_err().starts_with("not a sample line"));
+        let err = decode_line("{", &ValueType::Any).unwrap_err();
+        assert_eq!(err, "the line ends inside a JSON value (column 1)");
+        let err = decode_line("this is not json", &ValueType::Any).unwrap_err();
+        assert!(
+            err.starts_with("the line is not JSON (unexpected text at column 2); a sample line is"),
+            "{err}"
+        );
+        for (line, says) in [
+            ("[1, 2]", "the line is not a JSON object"),
+            (r#"{"value": 1}"#, "the line has no `valid` time"),
+            (r#"{"valid": 1.5, "value": 1}"#, "`valid` is 1.5, not whole microseconds"),
+            (r#"{"valid": 1}"#, "the line has no `value`"),
+            (r#"{"valid": 1, "stream": 3, "value": 1}"#, "`stream` is 3, not a stream name"),
+        ] {
+            let err = decode_line(line, &ValueType::Float).unwrap_err();
+            assert!(err.starts_with(says), "{line}: {err}");
+            assert!(!err.contains("expected ident") && !err.contains("invalid type"), "{err}");
+        }
         let err = decode_line(r#"{"valid": 1, "value": "NaN"}"#, &ValueType::Float).unwrap_err();
         assert!(err.contains("finite number"), "{err}");
         let (_, s) = decode_line(r#"{"valid": 7, "value": 1}"#, &ValueType::Float).unwrap();

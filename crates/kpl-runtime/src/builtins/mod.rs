@@ -19,5 +19,5 @@ pub(crate) fn register(registry: &mut Registry) {
     functions::register(registry);
 }
 
-pub use jsonl::{SampleLine, decode_line, encode_line, line_stream};
+pub use jsonl::{SampleLine, decode_line, encode_line, read_line};
 pub use replay::{ReplayTimes, StreamFilter};

@@ -28,6 +28,10 @@ impl Source for Timer {
             Ok(())
         })
     }
+
+    fn ends_by_itself(&self) -> bool {
+        self.count > 0
+    }
 }
 
 pub(super) fn register(registry: &mut Registry) {

@@ -1,0 +1,106 @@
+//! The status attributes of object records: besides its type's attributes, every object record
+//! the engine emits says how its state is known, so that a link's output stream, the world model
+//! and a condition (`from.measured`) all see it.
+//!
+//! - `measured` (bool): the state derives, through links, from a percept sample of this valid
+//!   time;
+//! - `predicted_since` (int, microseconds; only when `measured` is false): the valid time of the
+//!   first state since the object was last measured (predicted by a model, or held at its last
+//!   value);
+//! - `likelihood` (float) on the objects of a structure predicted along several branches, and
+//!   `branch_of` (string) on its branch objects ([`crate::branches`]).
+//!
+//! The names are [`kpl_core::OBJECT_STATUS`]: decoders (files, the wire) keep them on records of
+//! any object type.
+
+use std::sync::Arc;
+
+use kpl_core::{Record, Time, Value};
+
+pub const MEASURED: &str = "measured";
+pub const PREDICTED_SINCE: &str = "predicted_since";
+/// On the objects of a structure predicted along several branches: how likely its branch is.
+pub const LIKELIHOOD: &str = "likelihood";
+/// On a branch object: the symbol of the object whose prediction it branches from.
+pub const BRANCH_OF: &str = "branch_of";
+
+/// Whether `name` is one of the attributes the engine sets on object records.
+pub fn is_status(name: &str) -> bool {
+    matches!(name, MEASURED | PREDICTED_SINCE | LIKELIHOOD | BRANCH_OF)
+}
+
+/// `record` with the branch attributes set: its `likelihood`, and `branch_of` for a branch object.
+pub fn with_branch(mut record: Record, likelihood: f64, branch_of: Option<&Arc<str>>) -> Record {
+    record.fields.retain(|(name, _)| &**name != LIKELIHOOD && &**name != BRANCH_OF);
+    record.fields.push((Arc::from(LIKELIHOOD), Value::Float(likelihood)));
+    if let Some(owner) = branch_of {
+        record.fields.push((Arc::from(BRANCH_OF), Value::Str(owner.clone())));
+    }
+    record
+}
+
+/// `record` without the branch attributes (a prediction's start state, a hypothesis).
+pub fn without_branch(mut record: Record) -> Record {
+    record.fields.retain(|(name, _)| &**name != LIKELIHOOD && &**name != BRANCH_OF);
+    record
+}
+
+/// The status of one object's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectStatus {
+    pub measured: bool,
+    pub predicted_since: Option<Time>,
+}
+
+/// `record` with its status attributes set to `status` (replacing any it carried).
+pub fn with_status(mut record: Record, status: ObjectStatus) -> Record {
+    record.fields.retain(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE);
+    record.fields.push((Arc::from(MEASURED), Value::Bool(status.measured)));
+    if let Some(since) = status.predicted_since.filter(|_| !status.measured) {
+        record.fields.push((Arc::from(PREDICTED_SINCE), Value::Int(since)));
+    }
+    record
+}
+
+/// Whether an object value says it was measured (`measured: true`); a record without the
+/// attribute (a percept as its source gives it) counts as measured.
+pub fn is_measured(value: &Value) -> bool {
+    match value.as_record().and_then(|r| r.get(MEASURED)) {
+        Some(Value::Bool(b)) => *b,
+        _ => true,
+    }
+}
+
+/// `value` (an object record) marked as not measured at `time` (a sample held over from an
+/// earlier time): `measured: false`, and `predicted_since` from `time` unless it says earlier.
+pub fn held(value: &Value, time: Time) -> Value {
+    let Some(record) = value.as_record() else { return value.clone() };
+    let since = match record.get(PREDICTED_SINCE) {
+        Some(Value::Int(t)) if *t <= time => *t,
+        _ => time,
+    };
+    let status = ObjectStatus { measured: false, predicted_since: Some(since) };
+    Value::Record(Arc::new(with_status(record.clone(), status)))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_attributes_are_replaced_not_repeated() {
+        let record = Record { id: Some("wo1".into()), fields: vec![("pos".into(), Value::vec2(1.0, 2.0))] };
+        let predicted = with_status(record, ObjectStatus { measured: false, predicted_since: Some(7) });
+        assert_eq!(predicted.get(MEASURED), Some(&Value::Bool(false)));
+        assert_eq!(predicted.get(PREDICTED_SINCE), Some(&Value::Int(7)));
+        let measured = with_status(predicted, ObjectStatus { measured: true, predicted_since: None });
+        assert_eq!(measured.fields.len(), 2, "{measured:?}");
+        assert_eq!(measured.get(MEASURED), Some(&Value::Bool(true)));
+        assert_eq!(measured.get(PREDICTED_SINCE), None);
+        assert!(is_measured(&Value::Record(Arc::new(measured.clone()))));
+        let held = held(&Value::Record(Arc::new(measured)), 9);
+        assert!(!is_measured(&held));
+        assert_eq!(held.as_record().unwrap().get(PREDICTED_SINCE), Some(&Value::Int(9)));
+    }
+}
