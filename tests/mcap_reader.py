@@ -35,7 +35,7 @@ def main(mcap_path, jsonl_path):
     report = {"streams": {}}
     validators = {}
     with open(mcap_path, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, validate_crcs=True)
         header = reader.get_header()
         report["library"] = header.library
         summary = reader.get_summary()
