@@ -113,7 +113,8 @@ fn finish(mut child: Child, name: &str) -> Output {
     let stdout = child.stdout.take().map(read_to_end);
     let stderr = child.stderr.take().map(read_to_end);
     let status = wait_or_kill(&mut child);
-    let collect = |h: Option<std::thread::JoinHandle<Vec<u8>>>| h.map(|h| h.join().unwrap()).unwrap_or_default();
+    let collect =
+        |h: Option<std::thread::JoinHandle<Vec<u8>>>| h.map(|h| h.join().unwrap()).unwrap_or_default();
     let (stdout, stderr) = (collect(stdout), collect(stderr));
     let Some(status) = status else {
         panic!("{name} did not finish:\n{}", String::from_utf8_lossy(&stderr));
@@ -149,7 +150,12 @@ fn json_lines(bytes: &[u8]) -> Vec<Value> {
 }
 
 fn succeeded(out: &Output, name: &str) {
-    assert!(out.status.success(), "{name} failed ({}):\n{}", out.status, String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{name} failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
@@ -213,7 +219,9 @@ fn a_python_source_and_a_python_sink_in_a_deployment() {
     // The dashboard got the readings back and the verdicts, unchanged, then both ends.
     let got = json_lines(&dashboard.stdout);
     assert_eq!(got[0], serde_json::json!({"subscribed": "kpl-demo/out/*"}));
-    let on = |key: &str| -> Vec<&Value> { got.iter().filter(|l| l["key"] == key && l.get("end").is_none()).collect() };
+    let on = |key: &str| -> Vec<&Value> {
+        got.iter().filter(|l| l["key"] == key && l.get("end").is_none()).collect()
+    };
     let echo = on("kpl-demo/out/echo");
     assert_eq!(echo.len(), count);
     for (line, sample) in echo.iter().zip(&sent) {
