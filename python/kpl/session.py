@@ -237,11 +237,22 @@ class Subscription:
         self._host = host
         self._stop_at_end = stop_at_end
         self._sequences: dict[str, _Sequence] = {}
+        # Bounded on both sides: zenoh's channel and the queue the pump thread fills. When both
+        # are full zenoh's delivery waits (and, through BLOCK congestion control, the publisher),
+        # rather than dropping samples or growing without bound.
         self._queue: "queue.Queue[zenoh.Sample]" = queue.Queue(maxsize=queue_size)
-        self._lock = threading.Lock()
-        # A full queue blocks zenoh's delivery (and, through BLOCK congestion control, the
-        # publisher) rather than dropping samples or growing without bound.
-        self._subscriber = session.zenoh.declare_subscriber(key, self._queue.put)
+        self._subscriber = session.zenoh.declare_subscriber(key, zenoh.handlers.FifoChannel(queue_size))
+        self._pump = threading.Thread(target=self._forward, name=f"kpl {key}", daemon=True)
+        self._pump.start()
+
+    def _forward(self) -> None:
+        """Moves samples from zenoh's channel into the queue that :meth:`recv` reads with a
+        timeout, until the subscription is undeclared."""
+        try:
+            for sample in self._subscriber.handler:
+                self._queue.put(sample)
+        except zenoh.ZError:
+            pass
 
     def _count(self, what: str, reason: str) -> None:
         setattr(self, what, getattr(self, what) + 1)
