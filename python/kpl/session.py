@@ -5,11 +5,13 @@ hosts, its envelopes (:mod:`kpl.envelope`).
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import queue
 import threading
 import time
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Sequence
@@ -22,6 +24,16 @@ from . import wire
 
 #: How many reasons for malformed or refused messages a subscription keeps.
 KEEP_REASONS = 10
+
+#: Sessions still open: closed when the interpreter exits, so that no thread is left blocked in
+#: zenoh while Python shuts down.
+_OPEN: "weakref.WeakSet[Session]" = weakref.WeakSet()
+
+
+@atexit.register
+def _close_open_sessions() -> None:
+    for session in list(_OPEN):
+        session.close()
 
 
 def now() -> int:
@@ -93,10 +105,13 @@ class Session:
         zconfig = zenoh.Config()
         for path, value in settings.items():
             zconfig.insert_json5(path, json.dumps(value))
+        self._subscriptions: "weakref.WeakSet[Subscription]" = weakref.WeakSet()
+        self._closed = False
         deadline = time.monotonic() + wait
         while True:
             try:
                 self.zenoh = zenoh.open(zconfig)
+                _OPEN.add(self)
                 break
             except zenoh.ZError:
                 if time.monotonic() > deadline:
@@ -136,7 +151,14 @@ class Session:
         )
 
     def close(self) -> None:
+        """Ends the subscriptions and closes the zenoh session (again: nothing)."""
+        if self._closed:
+            return
+        self._closed = True
+        for subscription in list(self._subscriptions):
+            subscription.close()
         self.zenoh.close()
+        _OPEN.discard(self)
 
     def __enter__(self) -> "Session":
         return self
@@ -244,6 +266,8 @@ class Subscription:
         self._subscriber = session.zenoh.declare_subscriber(key, zenoh.handlers.FifoChannel(queue_size))
         self._pump = threading.Thread(target=self._forward, name=f"kpl {key}", daemon=True)
         self._pump.start()
+        self._closed = False
+        session._subscriptions.add(self)
 
     def _forward(self) -> None:
         """Moves samples from zenoh's channel into the queue that :meth:`recv` reads with a
@@ -334,7 +358,15 @@ class Subscription:
         return out
 
     def close(self) -> None:
-        self._subscriber.undeclare()
+        """Undeclares the subscription (again: nothing); samples already queued can still be read."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._subscriber.undeclare()
+        except zenoh.ZError:
+            pass  # the session is closed already
+        self._pump.join(timeout=5.0)
 
     def __enter__(self) -> "Subscription":
         return self
