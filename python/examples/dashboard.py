@@ -19,9 +19,11 @@ def main() -> int:
     parser.add_argument("--connect", default="tcp/127.0.0.1:7448", help="endpoint of the host that publishes")
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds to wait for the next sample")
     parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the host")
+    parser.add_argument("--keys", help="the deployment's keys folder (kpl keys), to link over mutual TLS")
+    parser.add_argument("--as", dest="host", help="with --keys: the host whose certificate to link with")
     args = parser.parse_args()
 
-    with kpl.Session([args.connect], wait=args.wait) as session:
+    with kpl.Session([args.connect], keys=args.keys, host=args.host, wait=args.wait) as session:
         subscription = session.subscribe(args.key)
         print(json.dumps({"subscribed": args.key}), flush=True)
         ended = 0

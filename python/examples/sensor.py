@@ -34,10 +34,12 @@ def main() -> int:
     parser.add_argument("--period", type=float, default=0.02, help="seconds between readings")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the host")
+    parser.add_argument("--keys", help="the deployment's keys folder (kpl keys), to link over mutual TLS")
+    parser.add_argument("--as", dest="host", help="with --keys: the host whose certificate to link with")
     args = parser.parse_args()
 
     rng = random.Random(args.seed)
-    with kpl.Session([args.connect], wait=args.wait) as session:
+    with kpl.Session([args.connect], keys=args.keys, host=args.host, wait=args.wait) as session:
         readings = session.publisher(args.key)
         if not readings.wait_for_subscriber(args.wait):
             print(f"no subscriber on {args.key} after {args.wait} s", file=sys.stderr)

@@ -248,6 +248,8 @@ class Subscription:
         queue_size: int = 4096,
     ):
         self.key = key
+        #: Every message that arrived, accepted or not.
+        self.messages = 0
         self.malformed = 0
         self.refused = 0
         self.lost = 0
@@ -298,6 +300,7 @@ class Subscription:
                 return message
 
     def _read(self, sample: "zenoh.Sample") -> "Received | Ended | None":
+        self.messages += 1
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
         try:
