@@ -23,7 +23,7 @@
 use kpl_core::{Record, Value};
 
 use crate::records::velocity;
-use crate::units::heading_of_velocity;
+use crate::units::{MIN_HEADING_SPEED_MPS, heading_of_velocity};
 
 /// κ of the von Mises weight of a branch's turn (see the module doc).
 pub const TURN_CONCENTRATION: f64 = 2.0;
@@ -31,7 +31,7 @@ pub const TURN_CONCENTRATION: f64 = 2.0;
 /// The likelihood of each hypothesis (summing to 1), from the state the prediction started from
 /// and the heading of the lane it was on then (when it was snapped to one).
 pub fn likelihoods(lane_heading: Option<f64>, start: &Record, hypotheses: &[Record]) -> Vec<f64> {
-    let object_heading = heading_of_velocity(velocity(start));
+    let object_heading = heading_of_velocity(velocity(start), MIN_HEADING_SPEED_MPS);
     let base = lane_heading.or(object_heading);
     let drift = match (object_heading, lane_heading) {
         (Some(o), Some(l)) => wrap(o - l),
@@ -40,7 +40,7 @@ pub fn likelihoods(lane_heading: Option<f64>, start: &Record, hypotheses: &[Reco
     let weights: Vec<f64> = hypotheses
         .iter()
         .map(|h| {
-            let turn = match (base, heading_of_velocity(velocity(h))) {
+            let turn = match (base, heading_of_velocity(velocity(h), MIN_HEADING_SPEED_MPS)) {
                 (Some(b), Some(t)) => wrap(t - b),
                 _ => 0.0,
             };

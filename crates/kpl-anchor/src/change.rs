@@ -68,6 +68,9 @@ pub enum Cause {
     /// The prediction split into more hypotheses (or fewer: routes that left the map merge); a
     /// branch object was created for a new hypothesis.
     Branch,
+    /// The prediction ended (every route reached a dead end or the network's border): the
+    /// structure keeps its last state, unanchored, until it is forgotten or reacquired.
+    Ended,
     /// A branch object whose structure was reacquired (or fed again), or whose hypothesis ended.
     Pruned,
     /// A percept no longer listed by its source.
@@ -91,6 +94,7 @@ impl Cause {
             Cause::ToRemoved => "to_removed",
             Cause::NoIncomingLink => "no_incoming_link",
             Cause::Branch => "branch",
+            Cause::Ended => "ended",
             Cause::Lost => "lost",
             Cause::Forgotten => "forgotten",
             Cause::Resolved => "resolved",

@@ -24,6 +24,7 @@
 //! ```
 
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::sync::Arc;
 
 use kpl_core::{Time, Value};
@@ -73,19 +74,39 @@ pub struct DriverStep<'a> {
     pub engine: &'a Anchoring,
 }
 
-/// The `sim.uav_tracker` parameters of a call (an empty `network_file` means none).
-pub fn tracker_params(params: &BTreeMap<String, Value>) -> Result<Params, String> {
-    let given = params
+/// The `sim.uav_tracker` parameters of a call (an empty file name means none), with file names
+/// relative to `dir`.
+pub fn tracker_params(params: &BTreeMap<String, Value>, dir: &Path) -> Result<Params, String> {
+    let resolved: Vec<(&str, Value)> = params
         .iter()
-        .filter(|(name, value)| !(name.as_str() == "network_file" && value.as_str() == Some("")));
-    Params::from_args(given.map(|(n, v)| (n.as_str(), v))).map_err(|e| e.to_string())
+        .map(|(name, value)| match value {
+            Value::Str(file) if name.ends_with("_file") && !file.is_empty() => {
+                (name.as_str(), Value::str(&dir.join(&**file).to_string_lossy()))
+            }
+            other => (name.as_str(), other.clone()),
+        })
+        .collect();
+    Params::from_args(resolved.iter().map(|(n, v)| (*n, v))).map_err(|e| e.to_string())
 }
 
 impl SimDriver {
     /// The trackers of the spec (every source must be `sim.uav_tracker`) and its engine. A
     /// tracker's road network is given to the engine for its scenario, so that link units and
     /// models naming the same scenario see the same network (a `grid_town` of the tracker's size).
-    pub fn from_spec(spec: &hir::Spec, mut config: AnchorConfig) -> Result<SimDriver, DriverError> {
+    /// Files are read relative to the working directory.
+    pub fn from_spec(spec: &hir::Spec, config: AnchorConfig) -> Result<SimDriver, DriverError> {
+        SimDriver::from_spec_in(spec, config, Path::new(""))
+    }
+
+    /// As [`SimDriver::from_spec`], reading the files the spec names (networks, recorded
+    /// traffic, vehicle types, occluders) relative to `dir`, as `kpl run` reads them relative to
+    /// the spec's directory.
+    pub fn from_spec_in(
+        spec: &hir::Spec,
+        mut config: AnchorConfig,
+        dir: &Path,
+    ) -> Result<SimDriver, DriverError> {
+        config.networks = config.networks.with_base_dir(dir);
         let mut sources = Vec::new();
         let mut skipped = Vec::new();
         for process in &spec.processes {
@@ -93,7 +114,7 @@ impl SimDriver {
                 hir::ProcessKind::Source(call) if call.entry == "sim.uav_tracker" => {
                     let source_error =
                         |message: String| DriverError::Source { name: process.name.clone(), message };
-                    let params = tracker_params(&call.params).map_err(source_error)?;
+                    let params = tracker_params(&call.params, dir).map_err(source_error)?;
                     let network = Arc::new(params.load_network().map_err(|e| source_error(e.to_string()))?);
                     if params.network_file.is_none() {
                         config.networks.insert(&params.scenario, network.clone());
@@ -125,15 +146,17 @@ impl SimDriver {
         Ok(SimDriver { engine, sources, skipped })
     }
 
-    /// The frames of the trackers that report next, if that is at or before `until`.
+    /// The frames of the trackers that report next, if that is at or before `until` (trackers of
+    /// recorded traffic that has ended report no more).
     pub fn next_frames(&mut self, until: Time) -> Option<Frames> {
-        let time = self.sources.iter().map(|s| s.sim.next_frame_time()).min()?;
+        let time =
+            self.sources.iter().filter(|s| !s.sim.finished()).map(|s| s.sim.next_frame_time()).min()?;
         if time > until {
             return None;
         }
         let mut frames = Vec::new();
         for (i, source) in self.sources.iter_mut().enumerate() {
-            if source.sim.next_frame_time() == time {
+            if !source.sim.finished() && source.sim.next_frame_time() == time {
                 frames.push((i, source.sim.next_frame()));
             }
         }

@@ -981,9 +981,34 @@ impl Anchoring {
                     start,
                     n_hypotheses: 0,
                     branches: Vec::new(),
+                    ended: false,
                 })
             }
         };
+        if run.ended || model.ended(&run.start, time) {
+            // Every route reached a dead end or the border: the structure stays where the
+            // prediction left it, unanchored and not predicted, until it is forgotten; branch
+            // objects following other routes are pruned.
+            if !run.ended {
+                run.ended = true;
+                out.changes.push(
+                    Change::new(time, ChangeKind::Predicted, root_symbol, root_type, Cause::Ended)
+                        .model(model.name()),
+                );
+                for &key in &path {
+                    if let Some(object) = self.store.get_mut(key) {
+                        object.predicted = false;
+                        object.hypotheses.clear();
+                    }
+                }
+                let branches = std::mem::take(&mut run.branches);
+                self.prune(branches, time, out);
+            }
+            if let Some(o) = self.store.get_mut(root) {
+                o.prediction = Some(run);
+            }
+            return;
+        }
         let mut raw = std::mem::take(&mut self.hypotheses);
         raw.clear();
         model.predict(&run.start, time, &mut raw);

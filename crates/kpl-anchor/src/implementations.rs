@@ -47,7 +47,9 @@ impl Default for Implementations {
         i.add_link_unit("anchor.copy", |_, _| Ok(Arc::new(Copy)));
         i.add_link_unit("anchor.world_from_percept", |_, _| Ok(Arc::new(WorldFromPercept)));
         i.add_link_unit("anchor.snap_to_lane", |params, networks| {
-            Ok(Arc::new(SnapToLane::new(networks.resolve(params)?)))
+            let unit =
+                SnapToLane::new(networks.resolve(params)?).with_min_heading_speed(min_heading_speed(params)?);
+            Ok(Arc::new(unit))
         });
         i.add_link_unit("anchor.kalman", |params, _| Ok(Arc::new(Kalman::new(kalman_params(params)?, None))));
         i.add_link_unit("anchor.fuse", |params, _| {
@@ -68,9 +70,22 @@ impl Default for Implementations {
                     return Err(format!("max_hypotheses must be an int from 1 to 1000, found {other}"));
                 }
             };
-            Ok(Arc::new(AlongRoads::new(networks.resolve(params)?, max)))
+            let model = AlongRoads::new(networks.resolve(params)?, max)
+                .with_min_heading_speed(min_heading_speed(params)?);
+            Ok(Arc::new(model))
         });
         i
+    }
+}
+
+/// The `min_heading_speed` parameter (m/s) of the road units and models.
+fn min_heading_speed(params: &Params) -> Result<f64, String> {
+    match params.get("min_heading_speed") {
+        None => Ok(crate::units::MIN_HEADING_SPEED_MPS),
+        Some(value) => match value.as_f64() {
+            Some(v) if (0.0..=100.0).contains(&v) => Ok(v),
+            _ => Err(format!("min_heading_speed must be a speed from 0 to 100 m/s, found {value}")),
+        },
     }
 }
 

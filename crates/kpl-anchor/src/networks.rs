@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kpl_core::Value;
-use kpl_sim::{Params, RoadNetwork};
+use kpl_roads::RoadNetwork;
+use kpl_roads::scenarios::{self, GridTownSize};
 
 /// Road networks by the parameters that name them.
 #[derive(Debug, Default, Clone)]
@@ -47,15 +48,18 @@ impl Networks {
         if let Some(network) = self.loaded.get(&key) {
             return Ok(network.clone());
         }
-        let file = (!key.1.is_empty()).then(|| match &self.base_dir {
-            Some(dir) => dir.join(&key.1).to_string_lossy().into_owned(),
-            None => key.1.clone(),
-        });
-        let sim_params = Params { scenario: key.0.clone(), network_file: file, ..Params::default() };
-        let network = sim_params.load_network().map_err(|e| match &sim_params.network_file {
-            Some(file) => format!("cannot load road network `{file}`: {e}"),
-            None => format!("cannot build road network `{}`: {e}", key.0),
-        })?;
+        let network = if key.1.is_empty() {
+            let file = scenarios::by_name(&key.0, GridTownSize::default())
+                .ok_or_else(|| format!("unknown road network scenario `{}`", key.0))?;
+            RoadNetwork::build(&file).map_err(|e| format!("cannot build road network `{}`: {e}", key.0))?
+        } else {
+            let path = match &self.base_dir {
+                Some(dir) => dir.join(&key.1),
+                None => PathBuf::from(&key.1),
+            };
+            RoadNetwork::load(&path)
+                .map_err(|e| format!("cannot load road network `{}`: {e}", path.display()))?
+        };
         let network = Arc::new(network);
         self.loaded.insert(key, network.clone());
         Ok(network)

@@ -12,10 +12,10 @@ use std::fmt;
 use std::sync::Arc;
 
 use kpl_core::{Record, Time, Value};
-use kpl_sim::{LanePosition, RoadNetwork, geom};
+use kpl_roads::{LanePosition, RoadNetwork, geom};
 
 use crate::records::{position, velocity, with_fields};
-use crate::units::heading_of_velocity;
+use crate::units::{MIN_HEADING_SPEED_MPS, heading_of_velocity};
 
 /// Where a prediction starts: the last known state, its time, and (for road models) the lane it
 /// was snapped to then.
@@ -38,6 +38,12 @@ pub trait PredictionModel: fmt::Debug + Send + Sync {
 
     /// The hypotheses at `time` (at or after the start), most likely first; at least one.
     fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>);
+
+    /// Whether the prediction has ended by `time`: the model cannot say where the object is any
+    /// more (it left the observed area). The structure then keeps its last state, unanchored.
+    fn ended(&self, _start: &PredictionStart, _time: Time) -> bool {
+        false
+    }
 }
 
 fn seconds(from: Time, to: Time) -> f64 {
@@ -83,17 +89,21 @@ impl PredictionModel for Stationary {
 }
 
 /// `along_roads`: the object keeps the speed it had and follows the lanes of the network from the
-/// lane it was snapped to (preferring the lane of its direction of travel), branching into every
-/// successor lane at the end of a lane: one hypothesis per route, at most `max_hypotheses`,
-/// ordered by how little the route turns (straight on first). `pos` is the point on the lane
-/// centre, `vel` the speed along the lane there, and a `road` attribute (int) the road's index
-/// (-1 inside a crossing). A route that leaves the map at a boundary continues beyond it in a
-/// straight line (road -1): the object has left the observed area. An object that cannot be
-/// snapped (no lane within the snap radius) is predicted with constant velocity.
+/// lane it was snapped to (preferring the lane of its direction of travel, when it moves at least
+/// `min_heading_speed`), through the network's allowed connections at the end of each lane: one
+/// hypothesis per route, at most `max_hypotheses`, ordered by how little the route turns
+/// (straight on first). `pos` is the point on the lane centre, `vel` the speed along the lane
+/// there, a `road` attribute (int) the road's index (-1 inside a junction) and a `lane` attribute
+/// (string) the lane's name. A route that reaches a lane nothing continues (a dead end, the
+/// network's border) is dropped; when every route has, the prediction has ended
+/// ([`PredictionModel::ended`]): the object stays where it was last predicted, unanchored, and
+/// the spec's `forget` removes it. An object that cannot be snapped (no lane within the snap
+/// radius) is predicted with constant velocity.
 #[derive(Debug, Clone)]
 pub struct AlongRoads {
     network: Arc<RoadNetwork>,
     max_hypotheses: usize,
+    min_heading_speed_mps: f64,
 }
 
 /// Default cap on the hypotheses of `along_roads` (two four-way crossings give nine).
@@ -101,7 +111,28 @@ pub const DEFAULT_MAX_HYPOTHESES: usize = 9;
 
 impl AlongRoads {
     pub fn new(network: Arc<RoadNetwork>, max_hypotheses: usize) -> AlongRoads {
-        AlongRoads { network, max_hypotheses: max_hypotheses.max(1) }
+        AlongRoads {
+            network,
+            max_hypotheses: max_hypotheses.max(1),
+            min_heading_speed_mps: MIN_HEADING_SPEED_MPS,
+        }
+    }
+
+    /// Below this speed (m/s) the velocity's direction is not used to pick the lane.
+    pub fn with_min_heading_speed(mut self, mps: f64) -> AlongRoads {
+        self.min_heading_speed_mps = mps;
+        self
+    }
+
+    fn routes(
+        &self,
+        start: &PredictionStart,
+        lane: &LanePosition,
+        time: Time,
+    ) -> (Vec<kpl_roads::Hypothesis>, f64, f64) {
+        let speed = velocity(&start.state).map_or(0.0, geom::norm);
+        let distance = speed * seconds(start.time, time);
+        (self.network.advance(lane, distance, self.max_hypotheses), speed, distance)
     }
 }
 
@@ -111,9 +142,17 @@ impl PredictionModel for AlongRoads {
     }
 
     fn start(&self, state: Arc<Record>, time: Time) -> PredictionStart {
-        let lane = position(&state)
-            .and_then(|p| self.network.snap_to_lane(p, heading_of_velocity(velocity(&state))));
+        let heading = heading_of_velocity(velocity(&state), self.min_heading_speed_mps);
+        let previous = previous_lane(&self.network, &state);
+        let lane =
+            position(&state).and_then(|p| self.network.snap(p, &kpl_roads::SnapHint { heading, previous }));
         PredictionStart { state, time, lane }
+    }
+
+    fn ended(&self, start: &PredictionStart, time: Time) -> bool {
+        let Some(lane) = &start.lane else { return false };
+        let (routes, _, _) = self.routes(start, lane, time);
+        !routes.is_empty() && routes.iter().all(|h| h.reached_end)
     }
 
     fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>) {
@@ -121,35 +160,55 @@ impl PredictionModel for AlongRoads {
             ConstantVelocity.predict(start, time, out);
             return;
         };
-        let speed = velocity(&start.state).map_or(0.0, geom::norm);
-        let distance = speed * seconds(start.time, time);
-        let mut hypotheses = self.network.advance(lane, distance, self.max_hypotheses);
+        let (mut hypotheses, speed, _) = self.routes(start, lane, time);
+        // A route that left the map is not where the object can be.
+        hypotheses.retain(|h| !h.reached_end);
         // Straightest first; `advance` gives a deterministic order, which breaks ties.
-        let turn = |h: &kpl_sim::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
+        let turn = |h: &kpl_roads::Hypothesis| geom::heading_difference(h.position.heading, lane.heading);
         hypotheses.sort_by(|a, b| turn(a).total_cmp(&turn(b)));
         for h in &hypotheses {
             let direction = geom::unit(h.position.heading);
-            // A route that left the map goes on beyond its boundary, in a straight line: the
-            // object is gone, and must not wait at the edge for whatever enters there next.
-            let (pos, road) = if h.reached_end {
-                (geom::add(h.position.point, geom::scale(direction, (distance - h.travelled_m).max(0.0))), -1)
-            } else {
-                (h.position.point, h.position.road().map_or(-1, |r| i64::from(r.0)))
-            };
+            let road = h.position.road().map_or(-1, |r| i64::from(r.0));
             let vel = geom::scale(direction, speed);
-            let mut record =
-                with_fields(&start.state, &[("pos", Value::Vec2(pos)), ("vel", Value::Vec2(vel))]);
-            for (name, value) in &mut record.fields {
-                if &**name == "road" && matches!(value, Value::Int(_)) {
-                    *value = Value::Int(road);
-                }
-            }
+            let mut record = with_fields(
+                &start.state,
+                &[("pos", Value::Vec2(h.position.point)), ("vel", Value::Vec2(vel))],
+            );
+            set_lane_fields(&mut record, &self.network, road, h.position.lane);
             out.push(record);
         }
         if out.is_empty() {
             out.push((*start.state).clone());
         }
     }
+}
+
+/// Sets a record's `road` (int: the road's index) and `lane` (string: the lane's name; int: its
+/// index) attributes, where it has them.
+pub fn set_lane_fields(record: &mut Record, network: &RoadNetwork, road: i64, lane: kpl_roads::LaneId) {
+    for (name, value) in &mut record.fields {
+        match (&**name, &*value) {
+            ("road", Value::Int(_)) => *value = Value::Int(road),
+            ("lane", Value::Str(_)) => *value = Value::str(&network.lane(lane).name),
+            ("lane", Value::Int(_)) => *value = Value::Int(i64::from(lane.0)),
+            _ => {}
+        }
+    }
+}
+
+/// The lane an object's last state was on: its `lane` attribute (a lane name, or index), else
+/// the lane whose centre its `pos` lies on (states made by `anchor.snap_to_lane` and
+/// `along_roads` are on a lane centre).
+pub fn previous_lane(network: &RoadNetwork, state: &Record) -> Option<kpl_roads::LaneId> {
+    match state.get("lane") {
+        Some(Value::Str(name)) if !name.is_empty() => return network.lane_by_name(name).map(|l| l.id),
+        Some(Value::Int(i)) if *i >= 0 && (*i as usize) < network.lanes().len() => {
+            return Some(kpl_roads::LaneId(*i as u32));
+        }
+        _ => {}
+    }
+    let snapped = network.snap_to_lane(position(state)?, None)?;
+    (snapped.lateral_m.abs() < 0.05).then_some(snapped.lane)
 }
 
 #[cfg(test)]
@@ -188,7 +247,7 @@ mod tests {
 
     #[test]
     fn along_roads_splits_at_a_crossing_straightest_first() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::crossing()).unwrap());
         let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
         // Eastbound on `west`, 30 m before the crossing at 10 m/s: after 1 s still one hypothesis.
         let out = predict(&model, state([-30.0, -1.75], [10.0, 0.0]), 1.0);
@@ -208,12 +267,10 @@ mod tests {
             let v = h.get("vel").unwrap().as_vec2().unwrap();
             assert!((geom::norm(v) - 10.0).abs() < 1e-9);
         }
-        // Leaving the map at the east end (x = 150): it goes on beyond the boundary.
-        let out = predict(&model, state([140.0, -1.75], [10.0, 0.0]), 3.0);
-        assert_eq!(out.len(), 1);
-        let p = out[0].get("pos").unwrap().as_vec2().unwrap();
-        assert!((p[0] - 170.0).abs() < 1e-6 && (p[1] + 1.75).abs() < 1e-6, "{p:?}");
-        assert_eq!(out[0].get("road"), Some(&Value::Int(-1)));
+        // Leaving the map at the east end (x = 150): the prediction ends there, not beyond.
+        let start = model.start(state([140.0, -1.75], [10.0, 0.0]), 1_000_000);
+        assert!(!model.ended(&start, 1_500_000), "still on the map after 0.5 s");
+        assert!(model.ended(&start, 4_000_000), "off the map after 3 s");
         // Off the network: constant velocity.
         let out = predict(&model, state([60.0, 60.0], [1.0, 0.0]), 2.0);
         assert_eq!(out[0].get("pos"), Some(&Value::vec2(62.0, 60.0)));

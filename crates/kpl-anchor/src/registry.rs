@@ -17,7 +17,7 @@ fn network_params(entry: Entry) -> Entry {
     entry
         .param(Param::optional(
             "scenario",
-            ParamType::Choice(kpl_sim::scenarios::NAMES.iter().map(|s| s.to_string()).collect()),
+            ParamType::Choice(kpl_roads::scenarios::NAMES.iter().map(|s| s.to_string()).collect()),
             Value::str("crossing"),
             "built-in road network (ignored when `network_file` is set)",
         ))
@@ -25,7 +25,13 @@ fn network_params(entry: Entry) -> Entry {
             "network_file",
             ParamType::Str,
             Value::str(""),
-            "road network JSON file (docs/simulator.md)",
+            "road network file: SUMO .net.xml or the project's JSON, either gzipped (docs/roads.md)",
+        ))
+        .param(Param::optional(
+            "min_heading_speed",
+            ParamType::Float,
+            Value::Float(crate::units::MIN_HEADING_SPEED_MPS),
+            "below this speed (m/s) the direction of `vel` is not used to pick the lane",
         ))
 }
 
@@ -83,7 +89,7 @@ pub fn entries() -> Vec<Entry> {
             "Snaps a world object to the centre of the nearest lane of the road network.",
         ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
-        .computes(&["pos", "vel", "road", "lane_offset"], true)
+        .computes(&["pos", "vel", "road", "lane", "lane_offset"], true)
         .provides(on_road_signature()),
         kalman_params(Entry::new(
             EntryKind::Link,

@@ -9,7 +9,7 @@
 //! (nothing here reads a clock).
 
 use kpl_core::Value;
-use kpl_sim::scenarios::GridTownSize;
+use kpl_roads::scenarios::GridTownSize;
 
 use crate::driver::{DriverError, SimDriver};
 use crate::engine::{AnchorConfig, Anchoring, StepOutput};

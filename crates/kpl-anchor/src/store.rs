@@ -55,6 +55,8 @@ pub struct PredictionRun {
     pub path: Vec<ObjectKey>,
     pub start: PredictionStart,
     pub n_hypotheses: usize,
+    /// The model said the prediction ended ([`crate::predict::PredictionModel::ended`]).
+    pub ended: bool,
     /// The branch objects following the hypotheses the owner does not (`crate::branches`).
     pub branches: Vec<ObjectKey>,
 }

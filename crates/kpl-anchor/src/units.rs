@@ -13,9 +13,10 @@ use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Value};
 use kpl_mtl::Function;
-use kpl_sim::RoadNetwork;
-use kpl_sim::geom;
+use kpl_roads::geom;
+use kpl_roads::{RoadNetwork, SnapHint};
 
+use crate::predict::{previous_lane, set_lane_fields};
 use crate::records::{fill, position, velocity};
 use crate::stateful::UnitCall;
 
@@ -89,29 +90,42 @@ impl LinkUnit for WorldFromPercept {
     }
 }
 
-/// Below this speed (m/s) a velocity says nothing about the direction of travel.
-pub const MIN_HEADING_SPEED_MPS: f64 = 0.5;
+/// Below this speed (m/s) a measured velocity says nothing about the direction of travel: the
+/// simulated tracker's velocity noise (0.5 m/s on each axis) alone gives a standing car a speed
+/// above 2 m/s in fewer than one frame in 2,900.
+pub const MIN_HEADING_SPEED_MPS: f64 = 2.0;
 
 /// `anchor.snap_to_lane`: the object on the road network. `pos` is the point on the centre of the
-/// nearest lane (preferring lanes in the direction of `vel`), `vel` the velocity along that lane,
-/// `road` the road's index (-1 inside a crossing or off the network), `lane_offset` the signed
-/// distance of the unsnapped position from the lane centre (positive to the left). Off the
-/// network (no lane within the network's snap radius) the position and velocity are copied,
-/// `road` is -1 and `lane_offset` 0. Provides `on_road(pos)`.
+/// lane chosen by [`kpl_roads::RoadNetwork::snap`]: the nearest, counting lanes against the
+/// direction of `vel` as further away when the object moves at least `min_heading_speed`, and
+/// lanes that do not continue the lane its last state was on as further away (lane continuity:
+/// a car standing in a queue, whose velocity is noise, stays on its lane). `vel` is the velocity
+/// along that lane, `road` the road's index (-1 inside a junction or off the network), `lane`
+/// (string) the lane's name, `lane_offset` the signed distance of the unsnapped position from the
+/// lane centre (positive to the left). Off the network (no lane within the network's snap radius)
+/// the position and velocity are copied, `road` is -1 and `lane_offset` 0. Provides
+/// `on_road(pos)`.
 #[derive(Debug, Clone)]
 pub struct SnapToLane {
     network: Arc<RoadNetwork>,
+    min_heading_speed_mps: f64,
 }
 
 impl SnapToLane {
     pub fn new(network: Arc<RoadNetwork>) -> SnapToLane {
-        SnapToLane { network }
+        SnapToLane { network, min_heading_speed_mps: MIN_HEADING_SPEED_MPS }
+    }
+
+    /// Below this speed (m/s) the velocity's direction is not used to pick the lane.
+    pub fn with_min_heading_speed(mut self, mps: f64) -> SnapToLane {
+        self.min_heading_speed_mps = mps;
+        self
     }
 }
 
-/// The heading of a velocity, when it is fast enough to have one.
-pub fn heading_of_velocity(vel: Option<[f64; 2]>) -> Option<f64> {
-    vel.filter(|v| geom::norm(*v) >= MIN_HEADING_SPEED_MPS).map(geom::heading_of)
+/// The heading of a velocity, when it is at least `min_speed` (m/s).
+pub fn heading_of_velocity(vel: Option<[f64; 2]>, min_speed: f64) -> Option<f64> {
+    vel.filter(|v| geom::norm(*v) >= min_speed).map(geom::heading_of)
 }
 
 impl LinkUnit for SnapToLane {
@@ -127,7 +141,28 @@ impl LinkUnit for SnapToLane {
             return Err("snapping to a lane needs a `pos` (vec2)".to_string());
         };
         let vel = velocity(from);
-        let (pos, vel, road, lane_offset) = match self.network.snap_to_lane(pos, heading_of_velocity(vel)) {
+        let previous_lane = previous.and_then(|p| previous_lane(&self.network, p));
+        let hint = SnapHint {
+            heading: heading_of_velocity(vel, self.min_heading_speed_mps),
+            previous: previous_lane,
+        };
+        // Standing still, the velocity says nothing and one noisy position little: the lane is
+        // chosen for the middle of this position and the last one (the previous state's point
+        // on its lane plus its `lane_offset`), which halves the noise's variance.
+        let query = match (hint.heading, previous, previous_lane) {
+            (None, Some(previous), Some(lane)) => last_position(&self.network, previous, lane)
+                .map_or(pos, |last| geom::scale(geom::add(pos, last), 0.5)),
+            _ => pos,
+        };
+        let snapped = self.network.snap(query, &hint).map(|s| {
+            // The lane chosen, the point and the offset of this measurement.
+            let projection = self.network.lane(s.lane).path.project(pos);
+            let mut at = self.network.lane_position(s.lane, projection.offset);
+            at.point = projection.point;
+            at.lateral_m = projection.lateral;
+            at
+        });
+        let (pos, vel, road, lane_offset) = match &snapped {
             Some(lane) => {
                 let along = geom::unit(lane.heading);
                 let vel = vel.map(|v| geom::scale(along, geom::dot(v, along)));
@@ -144,9 +179,20 @@ impl LinkUnit for SnapToLane {
                         *value = Value::Vec2(v);
                     }
                 }
-                "road" if matches!(value, Value::Int(_)) => *value = Value::Int(road),
                 "lane_offset" if matches!(value, Value::Float(_)) => *value = Value::Float(lane_offset),
+                "lane" if snapped.is_none() && matches!(value, Value::Str(_)) => *value = Value::str(""),
+                "lane" if snapped.is_none() && matches!(value, Value::Int(_)) => *value = Value::Int(-1),
                 _ => {}
+            }
+        }
+        match &snapped {
+            Some(lane) => set_lane_fields(&mut record, &self.network, road, lane.lane),
+            None => {
+                for (name, value) in &mut record.fields {
+                    if &**name == "road" && matches!(value, Value::Int(_)) {
+                        *value = Value::Int(-1);
+                    }
+                }
             }
         }
         Ok(record)
@@ -155,6 +201,20 @@ impl LinkUnit for SnapToLane {
     fn functions(&self) -> Vec<Function> {
         vec![on_road(self.network.clone())]
     }
+}
+
+/// The unsnapped position a previous state stood for: its point on `lane` moved sideways by its
+/// `lane_offset`.
+fn last_position(network: &RoadNetwork, previous: &Record, lane: kpl_roads::LaneId) -> Option<[f64; 2]> {
+    let point = position(previous)?;
+    let offset = previous.get("lane_offset").and_then(Value::as_f64)?;
+    let path = &network.lane(lane).path;
+    let along = path.project(point);
+    if along.lateral.abs() > 0.05 {
+        return None; // not a point on that lane
+    }
+    let left = geom::left_normal(geom::unit(path.heading_at(along.offset)));
+    Some(geom::add(along.point, geom::scale(left, offset)))
 }
 
 /// `on_road(p)`: whether a position (or an object's `pos`) is on the paved surface of the network.
@@ -200,7 +260,7 @@ mod tests {
 
     #[test]
     fn snap_to_lane_centres_the_object_on_its_lane() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
         let main = network.road_by_name("main").unwrap().id;
         let unit = SnapToLane::new(network);
         // Eastbound on `main` (lanes at y = +-1.75, driving on the right: eastbound at y = -1.75).
@@ -222,7 +282,7 @@ mod tests {
 
     #[test]
     fn on_road_reads_positions_and_objects() {
-        let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
         let f = on_road(network);
         assert_eq!((f.body)(&[Value::vec2(-100.0, -1.0)]).unwrap(), Value::Bool(true));
         assert_eq!((f.body)(&[Value::vec2(-100.0, -40.0)]).unwrap(), Value::Bool(false));

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use kpl_anchor::driver::{IdentityScore, SimDriver};
 use kpl_core::Time;
-use kpl_sim::{CarId, PerceptSource, Place};
+use kpl_sim::{CarId, PerceptSource};
 
 const TYPES: [&str; 3] = ["WorldObject", "OnRoadObject", "Car"];
 
@@ -69,10 +69,7 @@ fn check_seed(seed: u64) {
                 })
                 .collect();
             for car in &frame.cars {
-                let hidden = match car.place {
-                    Place::Road { road, .. } => network.occluder_over(road, car.pos).is_some(),
-                    Place::Crossing { .. } => false,
-                };
+                let hidden = network.occluders().hiding(car.pos, car.road()).is_some();
                 let list = passages.entry(car.id).or_default();
                 if hidden {
                     match list.last_mut() {

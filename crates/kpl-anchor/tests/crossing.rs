@@ -63,7 +63,7 @@ fn record_field(value: &Value, name: &str) -> Value {
 #[test]
 fn the_reacquired_branch_is_kept() {
     let mut engine = common::engine(SPEC);
-    let network = kpl_sim::RoadNetwork::build(&kpl_sim::scenarios::crossing()).unwrap();
+    let network = kpl_roads::RoadNetwork::build(&kpl_roads::scenarios::crossing()).unwrap();
     let north = i64::from(network.road_by_name("north").unwrap().id.0);
     let west = i64::from(network.road_by_name("west").unwrap().id.0);
 

@@ -17,7 +17,8 @@ use std::sync::Arc;
 
 use kpl_anchor::{AnchorConfig, Anchoring, Snapshot};
 use kpl_core::{Record, Time, Value};
-use kpl_sim::tracker::{Tracker, TrackerConfig};
+use kpl_sim::camera::Camera;
+use kpl_sim::tracker::{Tracker, TrackerConfig, View};
 use kpl_sim::traffic::Traffic;
 use kpl_sim::{CarId, Params, PerceptSource, RoadNetwork};
 use rand::SeedableRng;
@@ -87,7 +88,7 @@ struct Outcome {
 }
 
 fn run(seed: u64) -> Outcome {
-    let network = Arc::new(RoadNetwork::build(&kpl_sim::scenarios::bridge()).unwrap());
+    let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
     let params = Params {
         scenario: "bridge".into(),
         seed,
@@ -109,6 +110,9 @@ fn run(seed: u64) -> Outcome {
     // car -> (seen by a only at some point, then by b only) and the reverse.
     let mut regions: BTreeMap<CarId, Vec<&str>> = BTreeMap::new();
     let dt = 0.1;
+    // Each UAV's footprint is applied below (cars outside it lose their track); the camera sees
+    // the rest, the bridge hides what is under it.
+    let camera = Camera::Everything;
     for i in 0..1200 {
         let time: Time = i * 100_000;
         if i > 0 {
@@ -126,7 +130,8 @@ fn run(seed: u64) -> Outcome {
                 cars.iter().cloned().partition(|c| (*lo..=*hi).contains(&c.pos[0]));
             // A car out of view loses its track: it gets a new id when it comes back.
             trackers[k].forget(&outside.iter().map(|c| c.id).collect::<Vec<_>>());
-            let percepts = trackers[k].observe(&network, &inside, dt);
+            let view = View { camera: &camera, occluders: network.occluders(), elapsed: time };
+            let (percepts, _) = trackers[k].observe(&network, &view, &inside, dt);
             let mut items = Vec::new();
             for p in &percepts {
                 let id: Arc<str> = Arc::from(format!("{prefix}{}", p.id.0));

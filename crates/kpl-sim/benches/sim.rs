@@ -1,6 +1,5 @@
 //! Benchmarks of the simulator: the cost of one tracker frame for N cars (to compare with the
-//! 100 ms a frame lasts at 10 Hz), and geometry queries on a small and on a large network (to show
-//! that they do not grow with the network).
+//! 100 ms a frame lasts at 10 Hz). Geometry queries are benchmarked in kpl-roads.
 //!
 //! Run: `cargo bench -p kpl-sim --bench sim`
 
@@ -8,10 +7,8 @@ use std::hint::black_box;
 use std::sync::Arc;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use kpl_sim::scenarios::{self, GridTownSize};
-use kpl_sim::{Params, RoadNetwork, UavTrackerSim};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use kpl_roads::scenarios::GridTownSize;
+use kpl_sim::{Params, UavTrackerSim};
 
 /// A grid town sized by `GridTownSize::for_cars` (about 11 cars per block).
 fn town_params(n_cars: u32) -> Params {
@@ -45,45 +42,5 @@ fn frames(c: &mut Criterion) {
     group.finish();
 }
 
-fn random_points(net: &RoadNetwork, n: usize) -> Vec<[f64; 2]> {
-    let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let (lo, hi) = net.bounds();
-    (0..n).map(|_| [rng.random_range(lo[0]..hi[0]), rng.random_range(lo[1]..hi[1])]).collect()
-}
-
-fn queries(c: &mut Criterion) {
-    let town = |blocks| {
-        RoadNetwork::build(&scenarios::grid_town(GridTownSize {
-            blocks_x: blocks,
-            blocks_y: blocks,
-            block_m: 100.0,
-        }))
-        .expect("built-in scenario")
-    };
-    // The same street pattern at 1 and at 100 times the size: the cost per query should not change.
-    let (small, large) = (town(5), town(50));
-    let mut group = c.benchmark_group("query");
-    for (name, net) in [("town5x5", &small), ("town50x50", &large)] {
-        // Points near roads, where queries have work to do: random points snapped, then shifted.
-        let points: Vec<[f64; 2]> = random_points(net, 20_000)
-            .into_iter()
-            .filter_map(|p| net.snap_to_lane(p, None).map(|s| [s.point[0] + 1.0, s.point[1] - 1.0]))
-            .take(1000)
-            .collect();
-        group.throughput(Throughput::Elements(points.len() as u64));
-        group.bench_function(BenchmarkId::new("on_road", name), |b| {
-            b.iter(|| points.iter().filter(|&&p| net.on_road(black_box(p))).count())
-        });
-        group.bench_function(BenchmarkId::new("snap_to_lane", name), |b| {
-            b.iter(|| points.iter().filter_map(|&p| net.snap_to_lane(black_box(p), Some(0.3))).count())
-        });
-        let starts: Vec<_> = points.iter().filter_map(|&p| net.snap_to_lane(p, None)).collect();
-        group.bench_function(BenchmarkId::new("advance_150m", name), |b| {
-            b.iter(|| starts.iter().map(|s| net.advance(black_box(s), 150.0, 64).len()).sum::<usize>())
-        });
-    }
-    group.finish();
-}
-
-criterion_group!(benches, frames, queries);
+criterion_group!(benches, frames);
 criterion_main!(benches);

@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use kpl_sim::svg::{self, Layer};
+use kpl_roads::svg::{self, Layer};
 use kpl_sim::{Params, PerceptSource, UavTrackerSim};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -1,11 +1,12 @@
-//! A simulated UAV traffic-monitoring world for KPL: a road network (roads with lanes, crossings,
-//! bridges and tunnels) with fast geometry queries, cars driving through it, and a simulated
-//! object tracker that reports noisy vision percepts with tracker ids, the input of DyKnow-style
-//! hierarchical anchoring (percept -> world object -> on-road object -> car).
+//! A simulated UAV traffic-monitoring world for KPL: cars on a road network (`kpl-roads`), either
+//! simulated or played back from a recording (SUMO FCD, JSON lines, CSV), a camera footprint and
+//! occluders, and a simulated object tracker that reports noisy vision percepts with tracker ids,
+//! the input of DyKnow-style hierarchical anchoring (percept -> world object -> on-road object ->
+//! car), with the ground truth beside them.
 //!
-//! Pure library: no clock and no I/O except the explicit `load`/`save` functions and
-//! [`Params::load_network`] when a network file is named. For a given seed everything is
-//! deterministic (ChaCha random streams).
+//! Pure library: no clock; the only I/O is reading the files the parameters name (road network,
+//! recorded traffic, vehicle types, occluders). For a given seed everything is deterministic
+//! (ChaCha random streams).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -21,29 +22,21 @@
 //! }
 //! ```
 //!
-//! Modules: [`geom`] (plane geometry), `index` (spatial grids), [`format`] (the JSON file form),
-//! [`network`] (checked network and queries), [`predict`] (branching prediction along lanes),
-//! [`scenarios`] (built-in networks), [`traffic`] (cars and ground truth), [`tracker`] (percepts),
-//! [`params`] (source parameters), [`sim`] (the source object), [`svg`] (pictures).
+//! Modules: [`traffic`] (simulated cars and ground truth), [`recorded`] (recorded traffic played
+//! back), [`camera`] (the footprint), [`tracker`] (percepts), [`params`] (source parameters),
+//! [`sim`] (the source object), [`error`].
 
+pub mod camera;
 pub mod error;
-pub mod format;
-pub mod geom;
-mod index;
-pub mod network;
 pub mod params;
-pub mod predict;
-pub mod scenarios;
+pub mod recorded;
 pub mod sim;
-pub mod svg;
 pub mod tracker;
 pub mod traffic;
 
-pub use error::{NetworkError, NetworkProblem, ParamsError};
-pub use format::NetworkFile;
-pub use network::{LaneId, LanePosition, NodeId, OccluderId, Place, RoadId, RoadNetwork};
+pub use error::ParamsError;
+pub use kpl_roads::{LaneId, LanePosition, NetworkError, NodeId, OccluderId, Place, RoadId, RoadNetwork};
 pub use params::{ParamInfo, Params};
-pub use predict::Hypothesis;
 pub use sim::{Frame, UavTrackerSim};
-pub use tracker::{Percept, PerceptId, PerceptSource};
+pub use tracker::{Percept, PerceptId, PerceptSource, Visibility};
 pub use traffic::{CarId, CarState};

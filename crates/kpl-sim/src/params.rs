@@ -14,9 +14,10 @@ use std::path::Path;
 use kpl_core::Value;
 use serde::{Deserialize, Serialize};
 
+use crate::camera::{Camera, CameraError};
 use crate::error::ParamsError;
-use crate::network::RoadNetwork;
-use crate::scenarios::{self, GridTownSize};
+use kpl_roads::RoadNetwork;
+use kpl_roads::scenarios::{self, GridTownSize};
 
 /// One parameter as shown to users.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -51,8 +52,22 @@ macro_rules! declare_params {
 declare_params! {
     /// Built-in road network: `crossing`, `bridge` or `grid_town` (unused when `network_file` is set).
     scenario: String, "string" = "crossing".to_string();
-    /// Road network JSON file to use instead of a built-in scenario (see docs/simulator.md).
+    /// Road network file to use instead of a built-in scenario: SUMO `.net.xml` or the project's JSON, either gzipped (docs/roads.md).
     network_file: Option<String>, "string" = None;
+    /// Recorded traffic to observe instead of simulated cars: SUMO FCD output (`.xml`, `.xml.gz`) or rows (time, id, x, y[, heading, length, width]) as JSON lines or CSV; needs `network_file`.
+    traffic_file: Option<String>, "string" = None;
+    /// SUMO route or additional file with the `vType`s of the recorded vehicles (their lengths and widths); SUMO's defaults otherwise.
+    vtypes_file: Option<String>, "string" = None;
+    /// Corners [x, y] of the camera's footprint: world coordinates, or relative to the camera when `camera_path` is set. Empty: the camera sees everything.
+    footprint: Vec<[f64; 2]>, "list<list<float>>" = Vec::new();
+    /// Width and height [w, h] of a rectangular footprint centred on the camera (instead of `footprint`; needs `camera_path`).
+    footprint_size_m: Vec<f64>, "list<float>" = Vec::new();
+    /// Waypoints [seconds, x, y] of the camera's centre, followed in straight lines (one waypoint: a fixed camera).
+    camera_path: Vec<[f64; 3]>, "list<list<float>>" = Vec::new();
+    /// Occluders as polygons (lists of [x, y] corners), each hiding everything under it.
+    occluders: Vec<Vec<[f64; 2]>>, "list<list<list<float>>>" = Vec::new();
+    /// Occluder file: JSON (`{"occluders": [...]}`) or SUMO polygons (`.poly.xml`), see docs/roads.md.
+    occluders_file: Option<String>, "string" = None;
     /// Width of `grid_town` in blocks.
     grid_blocks_x: u32, "int" = 10;
     /// Height of `grid_town` in blocks.
@@ -100,20 +115,68 @@ impl Params {
             .collect()
     }
 
-    /// Reads parameters from a JSON object; unknown names are an error, missing ones default.
+    /// Reads parameters from a JSON object; unknown names are an error, missing ones default, and
+    /// a parameter set (to other than its default) where it would have no effect is an error too.
     pub fn from_json(json: serde_json::Value) -> Result<Params, ParamsError> {
         let params: Params = serde_json::from_value(json)?;
         params.validate()?;
+        params.check_effects()?;
         Ok(params)
     }
 
+    /// Refuses parameters that would be accepted and ignored.
+    fn check_effects(&self) -> Result<(), ParamsError> {
+        let defaults = Params::default();
+        let conflict = |name: &'static str, reason: &'static str| Err(ParamsError::NoEffect { name, reason });
+        if self.traffic_file.is_some() {
+            if self.n_cars != defaults.n_cars {
+                return conflict("n_cars", "the traffic comes from `traffic_file`");
+            }
+            if self.speed_sd != defaults.speed_sd {
+                return conflict("speed_sd", "the traffic comes from `traffic_file`");
+            }
+            if self.network_file.is_none() {
+                return Err(ParamsError::Needs {
+                    name: "traffic_file",
+                    needs: "network_file",
+                    reason: "the network the traffic was recorded on",
+                });
+            }
+        } else if self.vtypes_file.is_some() {
+            return conflict("vtypes_file", "there is no `traffic_file`");
+        }
+        if !self.footprint.is_empty() && !self.footprint_size_m.is_empty() {
+            return conflict("footprint_size_m", "`footprint` gives the footprint already");
+        }
+        if !self.footprint_size_m.is_empty() && self.camera_path.is_empty() {
+            return Err(ParamsError::Needs {
+                name: "footprint_size_m",
+                needs: "camera_path",
+                reason: "where the rectangle's centre is",
+            });
+        }
+        if !self.camera_path.is_empty() && self.footprint.is_empty() && self.footprint_size_m.is_empty() {
+            return conflict("camera_path", "there is no `footprint` or `footprint_size_m`");
+        }
+        Ok(())
+    }
+
     /// Reads parameters given as named KPL values (`seed: 7, noise_m: 1.5`). Durations are taken
-    /// in seconds, so `false_positive_duration_s: 500ms` means 0.5.
+    /// in seconds, so `false_positive_duration_s: 500ms` means 0.5; an empty string for a file
+    /// parameter, or an empty list, means "not set" (the checker fills in those defaults).
     pub fn from_args<'a>(
         args: impl IntoIterator<Item = (&'a str, &'a Value)>,
     ) -> Result<Params, ParamsError> {
         let mut object = serde_json::Map::new();
         for (name, value) in args {
+            let unset = match value {
+                Value::Str(s) => s.is_empty() && name.ends_with("_file"),
+                Value::List(items) => items.is_empty(),
+                _ => false,
+            };
+            if unset {
+                continue;
+            }
             let json = match value {
                 Value::Duration(us) => serde_json::json!(*us as f64 / 1e6),
                 other => other.to_json(),
@@ -167,7 +230,35 @@ impl Params {
             3600.0,
             "between 0.001 and 3600",
         )?;
+        let size_ok =
+            |size: &[f64]| size.len() == 2 && size.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= 1e6);
+        if !self.footprint_size_m.is_empty() && !size_ok(&self.footprint_size_m) {
+            return Err(ParamsError::OutOfRange {
+                name: "footprint_size_m",
+                expected: "[width, height] in metres, each above 0 and at most 1000000",
+                found: format!("{:?}", self.footprint_size_m),
+            });
+        }
+        self.camera()?;
         Ok(())
+    }
+
+    /// The camera these parameters describe.
+    pub fn camera(&self) -> Result<Camera, ParamsError> {
+        let camera_error = |e: CameraError| ParamsError::Camera(e);
+        let shape = if self.footprint_size_m.len() == 2 {
+            Camera::rectangle(self.footprint_size_m[0], self.footprint_size_m[1])
+        } else {
+            self.footprint.clone()
+        };
+        if shape.is_empty() {
+            return Ok(Camera::Everything);
+        }
+        if self.camera_path.is_empty() {
+            return Camera::fixed(shape).map_err(camera_error);
+        }
+        let path = self.camera_path.iter().map(|&[t, x, y]| (t, [x, y])).collect();
+        Camera::moving(shape, path).map_err(camera_error)
     }
 
     /// The frame period in microseconds (at least 1).
@@ -176,7 +267,7 @@ impl Params {
     }
 
     /// The road network these parameters name: the built-in scenario, or `network_file` read
-    /// from disk (the only I/O this crate does outside explicit load/save calls).
+    /// from disk (SUMO or JSON).
     pub fn load_network(&self) -> Result<RoadNetwork, ParamsError> {
         match &self.network_file {
             Some(path) => Ok(RoadNetwork::load(Path::new(path))?),

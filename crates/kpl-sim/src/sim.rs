@@ -1,6 +1,7 @@
-//! The `sim.uav_tracker` source as one deterministic object: traffic plus tracker, stepped one
-//! frame at a time. Time is an argument (the start time) and a counter (the frame index): nothing
-//! here reads a clock, so the runtime can run it in simulated or wall-clock time alike.
+//! The `sim.uav_tracker` source as one deterministic object: traffic (simulated, or played back
+//! from a recording) plus camera and tracker, stepped one frame at a time. Time is an argument
+//! (the start time) and a counter (the frame index): nothing here reads a clock, so the runtime
+//! can run it in simulated or wall-clock time alike.
 //!
 //! ```
 //! use std::sync::Arc;
@@ -13,16 +14,19 @@
 //! assert_eq!(frames[3].time, 300_000);
 //! ```
 
+use std::path::Path;
 use std::sync::Arc;
 
 use kpl_core::Time;
+use kpl_roads::{Occluder, OccluderId, Occluders, RoadNetwork};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::camera::Camera;
 use crate::error::ParamsError;
-use crate::network::RoadNetwork;
 use crate::params::Params;
-use crate::tracker::{Percept, Tracker, TrackerConfig};
+use crate::recorded::{Playback, Problem, VehicleTypes};
+use crate::tracker::{Percept, Tracker, TrackerConfig, View, Visibility};
 use crate::traffic::{CarState, Traffic};
 
 /// Random streams of one seed: traffic and tracker draw from separate streams, so changing a
@@ -40,14 +44,25 @@ pub struct Frame {
     pub percepts: Vec<Percept>,
     /// Ground truth: every car on the map, seen or not.
     pub cars: Vec<CarState>,
+    /// What the camera could see of each car (in the order of `cars`).
+    pub visibility: Vec<Visibility>,
+}
+
+/// Where the cars come from.
+#[derive(Debug)]
+enum Vehicles {
+    Simulated(Traffic),
+    Recorded(Box<Playback>),
 }
 
 /// A running simulation of cars on a road network watched by a UAV tracker.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct UavTrackerSim {
     network: Arc<RoadNetwork>,
-    traffic: Traffic,
+    vehicles: Vehicles,
     tracker: Tracker,
+    camera: Camera,
+    occluders: Occluders,
     start: Time,
     period_us: Time,
     next_index: u64,
@@ -61,17 +76,95 @@ fn rng_stream(seed: u64, stream: u64) -> ChaCha8Rng {
 
 impl UavTrackerSim {
     /// A simulation whose first frame is at `start`; later frames follow every `1 / rate_hz`.
+    /// Reads `traffic_file`, `vtypes_file` and `occluders_file` when set (paths as given).
     pub fn new(
         params: &Params,
         network: Arc<RoadNetwork>,
         start: Time,
     ) -> Result<UavTrackerSim, ParamsError> {
         params.validate()?;
-        let traffic =
-            Traffic::new(&network, params.n_cars, params.speed_sd, rng_stream(params.seed, TRAFFIC_STREAM))?;
+        let vehicles = match &params.traffic_file {
+            Some(file) => {
+                let types = match &params.vtypes_file {
+                    Some(types) => VehicleTypes::read(Path::new(types))?,
+                    None => VehicleTypes::builtin(),
+                };
+                Vehicles::Recorded(Box::new(Playback::open(Path::new(file), types, network.clone())?))
+            }
+            None => Vehicles::Simulated(Traffic::new(
+                &network,
+                params.n_cars,
+                params.speed_sd,
+                rng_stream(params.seed, TRAFFIC_STREAM),
+            )?),
+        };
+        let mut extra: Vec<Occluder> = params
+            .occluders
+            .iter()
+            .enumerate()
+            .map(|(i, polygon)| Occluder {
+                id: OccluderId(0),
+                name: format!("occluders[{i}]"),
+                kind: kpl_roads::format::OccluderKind::Other,
+                area: polygon.clone(),
+                roads: Vec::new(),
+            })
+            .collect();
+        if let Some(file) = &params.occluders_file {
+            extra.extend(kpl_roads::load::read_occluders(Path::new(file), &network)?);
+        }
+        if let Some(bad) =
+            extra.iter().find(|o| o.area.len() < 3 || o.area.iter().flatten().any(|c| !c.is_finite()))
+        {
+            return Err(ParamsError::OutOfRange {
+                name: "occluders",
+                expected: "polygons of at least 3 corners [x, y] with finite coordinates",
+                found: bad.name.clone(),
+            });
+        }
+        let occluders = network.occluders().with(extra);
         let tracker =
             Tracker::new(TrackerConfig::from_params(params), rng_stream(params.seed, TRACKER_STREAM));
-        Ok(UavTrackerSim { network, traffic, tracker, start, period_us: params.period_us(), next_index: 0 })
+        Ok(UavTrackerSim {
+            network,
+            vehicles,
+            tracker,
+            camera: params.camera()?,
+            occluders,
+            start,
+            period_us: params.period_us(),
+            next_index: 0,
+        })
+    }
+
+    /// The occluders the tracker uses: the network's and those of the parameters.
+    pub fn occluders(&self) -> &Occluders {
+        &self.occluders
+    }
+
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Whether the recorded traffic has ended (never, for simulated traffic): there will be no
+    /// more vehicles.
+    pub fn finished(&self) -> bool {
+        match &self.vehicles {
+            Vehicles::Simulated(_) => false,
+            Vehicles::Recorded(playback) => playback.finished(self.elapsed(self.next_index)),
+        }
+    }
+
+    /// Problems found in the recording since the last call (each skipped).
+    pub fn take_problems(&mut self) -> Vec<Problem> {
+        match &mut self.vehicles {
+            Vehicles::Simulated(_) => Vec::new(),
+            Vehicles::Recorded(playback) => playback.take_problems(),
+        }
+    }
+
+    fn elapsed(&self, index: u64) -> Time {
+        i64::try_from(index).unwrap_or(i64::MAX).saturating_mul(self.period_us)
     }
 
     pub fn network(&self) -> &Arc<RoadNetwork> {
@@ -85,30 +178,41 @@ impl UavTrackerSim {
 
     /// The valid time of the frame [`UavTrackerSim::next_frame`] will return.
     pub fn next_frame_time(&self) -> Time {
-        let offset = i64::try_from(self.next_index).unwrap_or(i64::MAX).saturating_mul(self.period_us);
-        self.start.saturating_add(offset)
+        self.start.saturating_add(self.elapsed(self.next_index))
     }
 
-    /// Produces the next frame: moves the cars by one period (except before the first frame) and
-    /// lets the tracker look at them.
+    /// Produces the next frame: moves the cars by one period (except before the first frame), or
+    /// takes the recorded ones at the frame's time, and lets the tracker look at them.
     pub fn next_frame(&mut self) -> Frame {
         let dt_s = self.period_us as f64 / 1e6;
-        if self.next_index > 0 {
-            let left_map = self.traffic.step(&self.network, dt_s);
-            self.tracker.forget(&left_map);
-        }
+        let elapsed = self.elapsed(self.next_index);
+        let cars = match &mut self.vehicles {
+            Vehicles::Simulated(traffic) => {
+                if self.next_index > 0 {
+                    let left_map = traffic.step(&self.network, dt_s);
+                    self.tracker.forget(&left_map);
+                }
+                traffic.states(&self.network)
+            }
+            Vehicles::Recorded(playback) => {
+                let (cars, gone) = playback.states_at(elapsed);
+                self.tracker.forget(&gone);
+                cars
+            }
+        };
         let time = self.next_frame_time();
-        let cars = self.traffic.states(&self.network);
-        let percepts = self.tracker.observe(&self.network, &cars, dt_s);
-        let frame = Frame { index: self.next_index, time, percepts, cars };
+        let view = View { camera: &self.camera, occluders: &self.occluders, elapsed };
+        let (percepts, visibility) = self.tracker.observe(&self.network, &view, &cars, dt_s);
+        let frame = Frame { index: self.next_index, time, percepts, cars, visibility };
         self.next_index += 1;
         frame
     }
 
-    /// All frames with valid time at or before `until` that were not produced yet.
+    /// All frames with valid time at or before `until` that were not produced yet (up to the end
+    /// of recorded traffic).
     pub fn frames_until(&mut self, until: Time) -> Vec<Frame> {
         let mut frames = Vec::new();
-        while self.next_frame_time() <= until && self.next_frame_time() < Time::MAX {
+        while self.next_frame_time() <= until && self.next_frame_time() < Time::MAX && !self.finished() {
             frames.push(self.next_frame());
         }
         frames

@@ -1,23 +1,26 @@
 //! The simulated UAV object tracker: turns the true car states of one frame into vision percepts
 //! as an image-based tracker would report them. Positions, velocities and sizes are noisy; a car
-//! is missed with the dropout probability; a car hidden under a bridge or in a tunnel is not seen
-//! and gets a new percept id when it reappears, as does a car whose track was missing for more
-//! than `max_gap_frames` frames; short-lived false positives appear on and off the roads. Percept
+//! is missed with the dropout probability; a car outside the camera's footprint or hidden by an
+//! occluder (under a bridge, in a tunnel, behind trees) is not seen and gets a new percept id
+//! when it reappears, as does a car whose track was missing for more than `max_gap_frames`
+//! frames; short-lived false positives appear on and off the roads inside the footprint. Percept
 //! ids (`vp1`, `vp2`, ...) are never reused, and each percept carries what it really was.
 
 use std::collections::HashMap;
 use std::fmt;
 use std::sync::Arc;
 
-use kpl_core::{Record, Value};
+use kpl_core::{Record, Time, Value};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Geometric, Poisson, StandardNormal};
 
-use crate::geom::Point;
-use crate::network::{Place, RoadNetwork};
 use crate::params::Params;
 use crate::traffic::{CarId, CarState};
+use kpl_roads::geom::Point;
+use kpl_roads::{Occluders, RoadNetwork};
+
+use crate::camera::Camera;
 
 /// A percept's identity; shown as `vp1`, `vp2`, ... and never reused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -109,8 +112,37 @@ struct Track {
     percept: Option<PerceptId>,
     /// Frames in a row the car was visible but not detected.
     missed: u32,
-    /// The car was hidden by an occluder since it was last detected.
+    /// The car was hidden (by an occluder, or outside the footprint) since it was last detected.
     hidden: bool,
+}
+
+/// What the camera could see of a car in one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Visibility {
+    /// Detected: a percept shows it.
+    Detected,
+    /// In view but missed (a dropout).
+    Missed,
+    /// In the footprint but under an occluder.
+    Occluded,
+    /// Outside the camera's footprint.
+    OutOfView,
+}
+
+impl Visibility {
+    /// Whether the tracker could have seen it (detected or missed).
+    pub fn in_view(self) -> bool {
+        matches!(self, Visibility::Detected | Visibility::Missed)
+    }
+}
+
+/// Where the camera looks in one frame and what hides things from it.
+#[derive(Debug, Clone, Copy)]
+pub struct View<'a> {
+    pub camera: &'a Camera,
+    pub occluders: &'a Occluders,
+    /// Microseconds since the start (for a moving camera).
+    pub elapsed: Time,
 }
 
 #[derive(Debug, Clone)]
@@ -131,7 +163,7 @@ pub struct Tracker {
     false_positives: Vec<FalsePositive>,
 }
 
-/// Bounded tries to find an off-road point for a false positive.
+/// Bounded tries to find a point for a false positive (off the road, or in the footprint).
 const OFF_ROAD_TRIES: usize = 20;
 
 impl Tracker {
@@ -165,19 +197,31 @@ impl Tracker {
     }
 
     /// The percepts of one frame, `dt_s` seconds after the previous one: cars first (in the order
-    /// given), then false positives.
-    pub fn observe(&mut self, net: &RoadNetwork, cars: &[CarState], dt_s: f64) -> Vec<Percept> {
+    /// given), then false positives; and what the camera could see of each car.
+    pub fn observe(
+        &mut self,
+        net: &RoadNetwork,
+        view: &View<'_>,
+        cars: &[CarState],
+        dt_s: f64,
+    ) -> (Vec<Percept>, Vec<Visibility>) {
         let mut percepts = Vec::with_capacity(cars.len() + self.false_positives.len());
+        let mut visibility = Vec::with_capacity(cars.len());
         for car in cars {
-            let hidden = match car.place {
-                Place::Road { road, .. } => net.occluder_over(road, car.pos).is_some(),
-                Place::Crossing { .. } => false,
+            let seen = if !view.camera.sees(car.pos, view.elapsed) {
+                Visibility::OutOfView
+            } else if view.occluders.hiding(car.pos, car.road()).is_some() {
+                Visibility::Occluded
+            } else {
+                Visibility::Detected
             };
             let mut track = self.tracks.remove(&car.id).unwrap_or_default();
-            if hidden {
+            let seen = if seen != Visibility::Detected {
                 track.hidden = true;
+                seen
             } else if self.config.dropout > 0.0 && self.rng.random::<f64>() < self.config.dropout {
                 track.missed = track.missed.saturating_add(1);
+                Visibility::Missed
             } else {
                 let percept = match track.percept {
                     Some(id) if !track.hidden && track.missed <= self.config.max_gap_frames => id,
@@ -188,14 +232,22 @@ impl Tracker {
                 let vel = self.noisy(car.vel, self.config.vel_noise_mps);
                 let size_m = (car.length_m + self.gaussian(self.config.size_noise_m)).max(0.1);
                 percepts.push(Percept { id: percept, pos, vel, size_m, source: PerceptSource::Car(car.id) });
-            }
+                Visibility::Detected
+            };
+            visibility.push(seen);
             self.tracks.insert(car.id, track);
         }
-        self.false_positives_frame(net, dt_s, &mut percepts);
-        percepts
+        self.false_positives_frame(net, view, dt_s, &mut percepts);
+        (percepts, visibility)
     }
 
-    fn false_positives_frame(&mut self, net: &RoadNetwork, dt_s: f64, percepts: &mut Vec<Percept>) {
+    fn false_positives_frame(
+        &mut self,
+        net: &RoadNetwork,
+        view: &View<'_>,
+        dt_s: f64,
+        percepts: &mut Vec<Percept>,
+    ) {
         self.false_positives.retain_mut(|fp| {
             fp.frames_left -= 1;
             fp.frames_left > 0
@@ -211,12 +263,7 @@ impl Tracker {
         let mean_frames = (self.config.false_positive_duration_s / dt_s).max(1.0);
         for _ in 0..n_new {
             let on_road = self.rng.random::<f64>() < self.config.false_positive_on_road;
-            let pos = if on_road {
-                let u: f64 = self.rng.random();
-                net.road_lane_position_at_fraction(u).map(|p| p.point)
-            } else {
-                self.off_road_point(net)
-            };
+            let pos = if on_road { self.on_road_point(net, view) } else { self.off_road_point(net, view) };
             let Some(pos) = pos else { continue };
             // Frames alive: 1 + a geometric number, so the mean is `mean_frames`.
             let extra = Geometric::new(1.0 / mean_frames).map_or(0, |g| self.rng.sample(g));
@@ -233,11 +280,32 @@ impl Tracker {
         }
     }
 
-    fn off_road_point(&mut self, net: &RoadNetwork) -> Option<Point> {
-        let (lo, hi) = net.bounds();
+    /// A random point of a road lane that the camera sees.
+    fn on_road_point(&mut self, net: &RoadNetwork, view: &View<'_>) -> Option<Point> {
+        let tries = if matches!(view.camera, Camera::Everything) { 1 } else { OFF_ROAD_TRIES };
+        for _ in 0..tries {
+            let u: f64 = self.rng.random();
+            let p = net.road_lane_position_at_fraction(u)?.point;
+            if view.camera.sees(p, view.elapsed) {
+                return Some(p);
+            }
+        }
+        None
+    }
+
+    /// A random point off the roads that the camera sees.
+    fn off_road_point(&mut self, net: &RoadNetwork, view: &View<'_>) -> Option<Point> {
+        let (mut lo, mut hi) = net.bounds();
+        if let Some((flo, fhi)) = view.camera.bounds_at(view.elapsed) {
+            lo = [lo[0].max(flo[0]), lo[1].max(flo[1])];
+            hi = [hi[0].min(fhi[0]), hi[1].min(fhi[1])];
+            if lo[0] > hi[0] || lo[1] > hi[1] {
+                return None;
+            }
+        }
         for _ in 0..OFF_ROAD_TRIES {
             let p = [self.rng.random_range(lo[0]..=hi[0]), self.rng.random_range(lo[1]..=hi[1])];
-            if !net.on_road(p) {
+            if !net.on_road(p) && view.camera.sees(p, view.elapsed) {
                 return Some(p);
             }
         }

@@ -6,7 +6,7 @@
 //! Cars do not yield to each other inside crossings; the model is meant to give a tracker
 //! plausible motion, not to study traffic.
 
-use std::fmt;
+use std::sync::Arc;
 
 use kpl_core::{Record, Value};
 use rand::Rng;
@@ -14,46 +14,56 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::error::ParamsError;
-use crate::geom::{self, Point};
-use crate::network::{LaneId, LaneKind, Place, RoadNetwork};
+use kpl_roads::geom::{self, Point};
+use kpl_roads::{LaneId, LaneKind, Place, RoadNetwork};
 
-/// A car's identity; shown as `car1`, `car2`, ... and never reused.
+/// A vehicle's identity within one run (numbered from 1 in order of appearance, never reused);
+/// [`CarState::name`] is what it is called.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct CarId(pub u32);
 
-impl fmt::Display for CarId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "car{}", self.0)
-    }
-}
-
-/// The true state of one car at one instant.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The true state of one vehicle at one instant.
+#[derive(Debug, Clone, PartialEq)]
 pub struct CarState {
     pub id: CarId,
+    /// `car1`, `car2`, ... for simulated traffic; the recorded id for recorded traffic.
+    pub name: Arc<str>,
+    /// The vehicle's centre.
     pub pos: Point,
     pub vel: Point,
     /// Direction of travel in radians, counter-clockwise from east.
     pub heading: f64,
     pub speed_mps: f64,
-    pub lane: LaneId,
-    pub place: Place,
+    /// The lane it is on (`None`: a recorded vehicle off the network).
+    pub lane: Option<LaneId>,
+    pub place: Option<Place>,
     /// Arc length along `lane`.
     pub offset_m: f64,
     pub length_m: f64,
+    pub width_m: f64,
 }
 
 impl CarState {
-    /// The ground truth as a record: `id` `carN`, fields `pos`, `vel`, `heading`, `speed`, and
-    /// `road` and `lane` (the road index and lane number; -1 inside a crossing), `node` (the
-    /// crossing's index, -1 on a road).
-    pub fn to_value(&self) -> Value {
+    /// The road it is on (`None` inside a junction or off the network).
+    pub fn road(&self) -> Option<kpl_roads::RoadId> {
+        match self.place {
+            Some(Place::Road { road, .. }) => Some(road),
+            _ => None,
+        }
+    }
+
+    /// The ground truth as a record: `id` (the vehicle's name), fields `pos` (its centre), `vel`,
+    /// `heading`, `speed`, `road` and `lane` (the road index and lane number, left to right; -1
+    /// inside a junction or off the network), `node` (the junction's index, -1 elsewhere),
+    /// `length`, `width`.
+    pub fn to_record(&self) -> Record {
         let (road, lane, node) = match self.place {
-            Place::Road { road, lane } => (i64::from(road.0), i64::from(lane), -1),
-            Place::Crossing { node } => (-1, -1, i64::from(node.0)),
+            Some(Place::Road { road, lane }) => (i64::from(road.0), i64::from(lane), -1),
+            Some(Place::Crossing { node }) => (-1, -1, i64::from(node.0)),
+            None => (-1, -1, -1),
         };
-        Value::Record(std::sync::Arc::new(Record {
-            id: Some(self.id.to_string().into()),
+        Record {
+            id: Some(self.name.clone()),
             fields: vec![
                 ("pos".into(), Value::Vec2(self.pos)),
                 ("vel".into(), Value::Vec2(self.vel)),
@@ -62,10 +72,19 @@ impl CarState {
                 ("road".into(), Value::Int(road)),
                 ("lane".into(), Value::Int(lane)),
                 ("node".into(), Value::Int(node)),
+                ("length".into(), Value::Float(self.length_m)),
+                ("width".into(), Value::Float(self.width_m)),
             ],
-        }))
+        }
+    }
+
+    pub fn to_value(&self) -> Value {
+        Value::Record(Arc::new(self.to_record()))
     }
 }
+
+/// Width of simulated cars, metres.
+pub const CAR_WIDTH_M: f64 = 1.8;
 
 // Intelligent Driver Model constants (Treiber et al.), typical urban values.
 const MAX_ACCEL: f64 = 1.5;
@@ -88,6 +107,7 @@ const WANDER_MAX_M: f64 = 0.5;
 #[derive(Debug, Clone)]
 struct Car {
     id: CarId,
+    name: Arc<str>,
     lane: LaneId,
     offset: f64,
     speed: f64,
@@ -123,9 +143,26 @@ pub struct Traffic {
 fn key_of(net: &RoadNetwork, lane: LaneId, offset: f64) -> (LaneId, f64) {
     let l = net.lane(lane);
     match l.kind {
-        LaneKind::Connector { to, .. } => (to, offset - l.path.length()),
+        LaneKind::Connector { to, .. } => (to, offset - connector_length(net, lane)),
         LaneKind::Road { .. } => (lane, offset),
     }
+}
+
+/// From the start of a connector lane to the road lane it leads into: its length and that of the
+/// connectors after it (a SUMO turn may pass two internal lanes).
+fn connector_length(net: &RoadNetwork, lane: LaneId) -> f64 {
+    let mut length = net.lane(lane).path.length();
+    let mut current = lane;
+    for _ in 0..8 {
+        match net.onward(current).next() {
+            Some(next) if matches!(net.lane(next).kind, LaneKind::Connector { .. }) => {
+                length += net.lane(next).path.length();
+                current = next;
+            }
+            _ => break,
+        }
+    }
+    length
 }
 
 /// The speed a car placed at `offset` on `lane` starts with: its share of the speed limit,
@@ -203,6 +240,7 @@ impl Traffic {
         let speed = desired_speed(net, lane, offset, next_lane, speed_factor);
         self.cars.push(Car {
             id: CarId(self.next_id),
+            name: format!("car{}", self.next_id).into(),
             lane,
             offset,
             speed,
@@ -216,12 +254,12 @@ impl Traffic {
     }
 
     fn choose_branch(&mut self, net: &RoadNetwork, lane: LaneId) -> Option<LaneId> {
-        let successors = &net.lane(lane).successors;
-        if successors.is_empty() {
-            None
-        } else {
-            Some(successors[self.rng.random_range(0..successors.len())])
+        let n = net.onward(lane).count();
+        if n == 0 {
+            return None;
         }
+        let pick = self.rng.random_range(0..n);
+        net.onward(lane).nth(pick)
     }
 
     pub fn len(&self) -> usize {
@@ -412,14 +450,16 @@ impl Traffic {
                 let pos = geom::add(centre, geom::scale(geom::left_normal(direction), car.lateral));
                 CarState {
                     id: car.id,
+                    name: car.name.clone(),
                     pos,
                     vel: geom::scale(direction, car.speed),
                     heading,
                     speed_mps: car.speed,
-                    lane: car.lane,
-                    place: net.place_of(car.lane),
+                    lane: Some(car.lane),
+                    place: Some(net.place_of(car.lane)),
                     offset_m: car.offset,
                     length_m: car.length,
+                    width_m: CAR_WIDTH_M,
                 }
             })
             .collect()

@@ -1,23 +1,26 @@
 //! `source NAME : TYPE = sim.uav_tracker(...)`: one snapshot per tracker frame of the percepts it
 //! currently sees, as records `{id: "vp3", pos, vel, size}`; the `truth` output carries the
-//! ground truth of the same frame (every car, and which percept sees it).
+//! ground truth of the same frame (every vehicle, whether the camera could see it, and which
+//! percept sees it; docs/simulator.md, "Ground truth records").
 //!
 //! The simulation's seed is mixed with the run's `--seed`, so a run with a fixed seed is
-//! reproducible and different seeds give different traffic.
+//! reproducible and different seeds give different traffic. With recorded traffic
+//! (`traffic_file`) the source ends with the recording; a malformed vehicle or row is counted as
+//! a malformed input of the source and skipped.
 
 use std::sync::Arc;
 
-use kpl_core::{Record, Time, Value, ValueType};
+use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{BoxFuture, ProcessError, Source};
 use kpl_runtime::registry::BuildContext;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
-use kpl_sim::{Params, PerceptSource, UavTrackerSim};
+use kpl_sim::{Frame, Params, PerceptSource, UavTrackerSim};
 
 struct Tracker {
     sim: Option<UavTrackerSim>,
     params: Params,
-    network: Arc<kpl_sim::RoadNetwork>,
+    network: Arc<kpl_roads::RoadNetwork>,
 }
 
 impl Source for Tracker {
@@ -30,33 +33,20 @@ impl Source for Tracker {
             };
             let mut sim = sim;
             loop {
+                if sim.finished() {
+                    break;
+                }
                 let t: Time = sim.next_frame_time();
                 if !ctx.wait_until(t).await {
                     break;
                 }
                 let frame = sim.next_frame();
+                for problem in sim.take_problems() {
+                    ctx.malformed(problem.location, problem.error)?;
+                }
                 let percepts: Vec<Value> = frame.percepts.iter().map(kpl_sim::Percept::to_value).collect();
                 ctx.emit(frame.time, Value::List(percepts.into())).await;
-                let mut seen_as = std::collections::BTreeMap::new();
-                for p in &frame.percepts {
-                    if let PerceptSource::Car(car) = p.source {
-                        seen_as.insert(car, p.id.to_string());
-                    }
-                }
-                let truth: Vec<Value> = frame
-                    .cars
-                    .iter()
-                    .map(|car| {
-                        let mut record = match car.to_value() {
-                            Value::Record(r) => (*r).clone(),
-                            _ => Record::default(),
-                        };
-                        let seen = seen_as.get(&car.id).cloned().unwrap_or_default();
-                        record.fields.push(("seen_as".into(), Value::str(&seen)));
-                        Value::Record(Arc::new(record))
-                    })
-                    .collect();
-                ctx.emit_port(1, frame.time, Value::List(truth.into())).await;
+                ctx.emit_port(1, frame.time, truth(&frame)).await;
                 if ctx.unconsumed() {
                     break;
                 }
@@ -65,10 +55,43 @@ impl Source for Tracker {
         })
     }
 
-    /// A car that leaves the map is replaced by a new one: the traffic never ends.
+    /// Recorded traffic ends with its recording; in simulated traffic a car that leaves the map
+    /// is replaced by a new one, so it never ends.
     fn ends_by_itself(&self) -> bool {
-        false
+        self.params.traffic_file.is_some()
     }
+}
+
+/// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
+/// (the camera could see it: in the footprint and not occluded) and `seen_as` (the percept that
+/// shows it, "" when none).
+fn truth(frame: &Frame) -> Value {
+    let mut seen_as = std::collections::BTreeMap::new();
+    for p in &frame.percepts {
+        if let PerceptSource::Car(car) = p.source {
+            seen_as.insert(car, p.id.to_string());
+        }
+    }
+    let records: Vec<Value> = frame
+        .cars
+        .iter()
+        .zip(&frame.visibility)
+        .map(|(car, visibility)| {
+            let mut record = car.to_record();
+            record.fields.push(("visible".into(), Value::Bool(visibility.in_view())));
+            let seen = seen_as.get(&car.id).cloned().unwrap_or_default();
+            record.fields.push(("seen_as".into(), Value::str(&seen)));
+            Value::Record(Arc::new(record))
+        })
+        .collect();
+    Value::List(records.into())
+}
+
+/// The parameters that name files, read relative to the spec's directory.
+macro_rules! FILE_PARAMS {
+    () => {
+        "network_file" | "traffic_file" | "vtypes_file" | "occluders_file"
+    };
 }
 
 fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::BuildError> {
@@ -77,9 +100,7 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::Build
     let mut args: Vec<(String, Value)> = Vec::new();
     for (name, value) in &call.params {
         match (name.as_str(), value) {
-            // An empty file name means the built-in scenario.
-            ("network_file", Value::Str(s)) if s.is_empty() => {}
-            ("network_file", Value::Str(s)) => {
+            (FILE_PARAMS!(), Value::Str(s)) if !s.is_empty() => {
                 args.push((name.clone(), Value::str(&spec_dir.join(&**s).to_string_lossy())))
             }
             _ => args.push((name.clone(), value.clone())),
@@ -90,6 +111,19 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::Build
     // Mix the run's seed in (a fixed --seed gives the same traffic every run).
     params.seed ^= ctx.seed();
     Ok(params)
+}
+
+/// The parameter type a type name of `Params::describe` stands for (`list<list<float>>`).
+fn param_type(name: &str) -> ParamType {
+    match name {
+        "int" => ParamType::Int,
+        "float" => ParamType::Float,
+        "bool" => ParamType::Bool,
+        _ => match name.strip_prefix("list<").and_then(|rest| rest.strip_suffix('>')) {
+            Some(item) => ParamType::List(Box::new(param_type(item))),
+            None => ParamType::Str,
+        },
+    }
 }
 
 pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
@@ -106,15 +140,10 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
     .port(
         "truth",
         TypeReq::Any,
-        "ground truth per frame: every car, with `seen_as` the percept that sees it",
+        "ground truth per frame: every vehicle (id, pos, vel, heading, speed, road, lane, node, length, width), `visible`, and `seen_as` the percept that sees it",
     );
     for info in Params::describe() {
-        let ty = match info.ty {
-            "int" => ParamType::Int,
-            "float" => ParamType::Float,
-            "bool" => ParamType::Bool,
-            _ => ParamType::Str,
-        };
+        let ty = param_type(info.ty);
         let ty = if info.name == "scenario" {
             ParamType::Choice(vec!["crossing".into(), "bridge".into(), "grid_town".into()])
         } else {
@@ -129,6 +158,9 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
     registry.add_source(entry, |ctx| {
         let params = params(ctx)?;
         let network = Arc::new(params.load_network().map_err(|e| ctx.error(e.to_string()))?);
+        // Opened now so that a missing or unreadable recording, vehicle-type or occluder file
+        // stops the run before it starts; the run opens it again at its start time.
+        UavTrackerSim::new(&params, network.clone(), 0).map_err(|e| ctx.error(e.to_string()))?;
         Ok(Box::new(Tracker { sim: None, params, network }))
     });
 }

@@ -1,10 +1,12 @@
 //! Prediction along the road network: where can something on a lane be after travelling a given
-//! distance? One hypothesis per branch taken at every crossing on the way, each with its route,
-//! which is what the on-road prediction model of anchoring needs while a car is not seen (the
-//! paper's "travel along the road network, splitting into multiple objects at crossings").
+//! distance? One hypothesis per allowed branch taken at every junction on the way (the network's
+//! connections, U-turns excepted), each with its route, which is what the on-road prediction model
+//! of anchoring needs while a car is not seen (the paper's "travel along the road network,
+//! splitting into multiple objects at crossings"). A route that reaches a lane nothing continues
+//! (a dead end, the network's border) stops there.
 //!
 //! ```
-//! use kpl_sim::{RoadNetwork, scenarios};
+//! use kpl_roads::{RoadNetwork, scenarios};
 //! let net = RoadNetwork::build(&scenarios::crossing()).unwrap();
 //! let start = net.snap_to_lane([-20.0, -1.75], Some(0.0)).unwrap(); // eastbound, before the crossing
 //! let hypotheses = net.advance(&start, 60.0, 16);
@@ -22,13 +24,14 @@ pub struct Hypothesis {
     pub route: Vec<LaneId>,
     /// Distance travelled, equal to the requested distance unless the route reached a dead end.
     pub travelled_m: f64,
-    /// The route left the map at a boundary node (it stops at the end of its last lane).
+    /// The route reached a lane nothing continues (a dead end or the map's border): it stops at
+    /// the end of that lane, having travelled less than asked.
     pub reached_end: bool,
 }
 
 impl RoadNetwork {
     /// Advances `from` along its lane by `distance_m` (negative or NaN counts as 0), branching
-    /// into every successor lane at the end of a lane. Returns at most `max_hypotheses`
+    /// into every onward lane ([`RoadNetwork::onward`]) at the end of a lane. Returns at most `max_hypotheses`
     /// hypotheses; when there are more, the ones found first in a depth-first walk that takes
     /// successors in lane order are kept. The order of the result is deterministic. A position
     /// whose lane is not in this network gives no hypotheses.
@@ -56,7 +59,8 @@ impl RoadNetwork {
                 });
                 continue;
             }
-            if lane.successors.is_empty() {
+            let onward: Vec<LaneId> = self.onward(lane_id).collect();
+            if onward.is_empty() {
                 result.push(Hypothesis {
                     position: self.lane_position(lane_id, lane.path.length()),
                     route,
@@ -66,7 +70,7 @@ impl RoadNetwork {
                 continue;
             }
             // Push in reverse so that the first successor is explored first.
-            for &next in lane.successors.iter().rev() {
+            for &next in onward.iter().rev() {
                 let mut next_route = route.clone();
                 next_route.push(next);
                 stack.push((next, 0.0, remaining - left_on_lane, next_route));

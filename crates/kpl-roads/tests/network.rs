@@ -1,10 +1,10 @@
 //! Road-network geometry: on_road, snapping, branching prediction, occluders, the file format.
 #![allow(clippy::unwrap_used, reason = "tests")]
 
-use kpl_sim::format::{LaneDirection, LaneSpec, OccluderKind, OccluderSpec};
-use kpl_sim::network::{LaneKind, NodeKind};
-use kpl_sim::scenarios::{self, GridTownSize};
-use kpl_sim::{NetworkError, NetworkFile, NetworkProblem, Place, RoadNetwork};
+use kpl_roads::format::{LaneDirection, LaneSpec, OccluderKind, OccluderSpec};
+use kpl_roads::network::{LaneKind, NodeKind};
+use kpl_roads::scenarios::{self, GridTownSize};
+use kpl_roads::{NetworkError, NetworkFile, NetworkProblem, Place, RoadNetwork};
 use proptest::prelude::*;
 use std::sync::LazyLock;
 
@@ -103,7 +103,7 @@ fn snapping_inside_a_crossing_uses_the_heading_to_pick_the_connector() {
     let centre = net.node_by_name("c").unwrap().id;
     let snapped = net.snap_to_lane([0.5, 0.5], Some(NORTH)).unwrap();
     assert_eq!(snapped.place, Place::Crossing { node: centre });
-    assert!(kpl_sim::geom::heading_difference(snapped.heading, NORTH) < 0.6, "{snapped:?}");
+    assert!(kpl_roads::geom::heading_difference(snapped.heading, NORTH) < 0.6, "{snapped:?}");
 }
 
 #[test]
@@ -138,7 +138,7 @@ fn advancing_branches_once_per_outgoing_road_at_a_crossing() {
             - start.offset_m
             + h.position.offset_m;
         assert!((along - 60.0).abs() < 1e-9);
-        assert!(kpl_sim::geom::dist([0.0, 0.0], h.position.point) > 30.0);
+        assert!(kpl_roads::geom::dist([0.0, 0.0], h.position.point) > 30.0);
     }
 
     // Far enough to leave the map: every branch ends at its boundary.
@@ -168,7 +168,7 @@ fn bridge_occludes_only_the_road_below() {
     let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
     let main = net.road_by_name("main").unwrap().id;
     let overpass = net.road_by_name("overpass").unwrap().id;
-    let bridge = net.occluders()[0].id;
+    let bridge = net.occluders().list()[0].id;
     let half = scenarios::BRIDGE_LENGTH_M / 2.0;
     for (p, expected) in [
         ([0.0, -1.75], true),
@@ -178,10 +178,11 @@ fn bridge_occludes_only_the_road_below() {
         ([-half - 0.1, 1.75], false),
         ([0.0, 20.0], false),
     ] {
-        assert_eq!(net.occluder_at(p) == Some(bridge), expected, "occluder_at({p:?})");
-        assert_eq!(net.occluder_over(main, p) == Some(bridge), expected, "occluder_over(main, {p:?})");
+        assert_eq!(net.occluders().at(p) == Some(bridge), expected, "at({p:?})");
+        assert_eq!(net.occluders().hiding(p, Some(main)) == Some(bridge), expected, "hiding({p:?}, main)");
+        assert_eq!(net.occluders().hiding(p, None), None, "only what is on main is hidden");
     }
-    assert_eq!(net.occluder_over(overpass, [0.0, 0.0]), None, "a car on the bridge is seen");
+    assert_eq!(net.occluders().hiding([0.0, 0.0], Some(overpass)), None, "a car on the bridge is seen");
     // Both roads cover the point where they cross, without a crossing node.
     assert!(net.on_road([0.0, 0.0]));
     assert!(net.nodes().iter().all(|n| n.kind == NodeKind::Boundary));
@@ -196,11 +197,11 @@ fn built_in_scenarios_round_trip_through_json() {
         let file =
             scenarios::by_name(name, GridTownSize { blocks_x: 3, blocks_y: 2, block_m: 80.0 }).unwrap();
         let net = RoadNetwork::build(&file).unwrap();
-        let again = RoadNetwork::from_json_str(&net.to_json_string()).unwrap();
-        assert_eq!(again.file(), &file, "{name}");
+        let again = RoadNetwork::from_json_str(&net.to_json_string().unwrap()).unwrap();
+        assert_eq!(again.file(), Some(&file), "{name}");
         assert_eq!(again.lanes().len(), net.lanes().len());
     }
-    let dir = std::env::temp_dir().join(format!("kpl-sim-test-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("kpl-roads-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("bridge.json");
     let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
@@ -250,32 +251,14 @@ fn every_problem_of_a_bad_file_is_reported_at_once() {
     // Geometry problems: a road too short for its crossings, an occluder outside its road.
     let mut file = scenarios::crossing();
     file.nodes[1].pos = [-5.5, 0.0];
-    file.occluders.push(OccluderSpec {
-        id: "tunnel".into(),
-        kind: OccluderKind::Tunnel,
-        road: "east".into(),
-        from_m: 100.0,
-        to_m: 200.0,
-    });
+    file.occluders.push(OccluderSpec::stretch("tunnel", OccluderKind::Tunnel, "east", 100.0, 200.0));
     let err = RoadNetwork::build(&file).unwrap_err();
     let message = err.to_string();
     assert!(message.contains("road \"west\" is 5.5 m long, too short"), "{message}");
 
     let mut file = scenarios::crossing();
-    file.occluders.push(OccluderSpec {
-        id: "tunnel".into(),
-        kind: OccluderKind::Tunnel,
-        road: "east".into(),
-        from_m: 100.0,
-        to_m: 200.0,
-    });
-    file.occluders.push(OccluderSpec {
-        id: "t2".into(),
-        kind: OccluderKind::Tunnel,
-        road: "ring".into(),
-        from_m: 0.0,
-        to_m: 1.0,
-    });
+    file.occluders.push(OccluderSpec::stretch("tunnel", OccluderKind::Tunnel, "east", 100.0, 200.0));
+    file.occluders.push(OccluderSpec::stretch("t2", OccluderKind::Tunnel, "ring", 0.0, 1.0));
     let NetworkError::Invalid(problems) = RoadNetwork::build(&file).unwrap_err() else { panic!() };
     assert_eq!(problems.len(), 2);
     assert!(matches!(problems[0], NetworkProblem::OccluderOutsideRoad { .. }));
@@ -349,17 +332,17 @@ fn check_snapping(net: &RoadNetwork, p: [f64; 2], heading: Option<f64>) -> Resul
         return Ok(());
     };
     prop_assert!(net.on_road(snapped.point), "snapped point {:?} is off the road", snapped.point);
-    prop_assert!(kpl_sim::geom::dist(p, snapped.point) <= net.snap_radius_m() + 1e-9);
-    prop_assert!((kpl_sim::geom::dist(p, snapped.point) - snapped.lateral_m.abs()).abs() < 1e-6);
+    prop_assert!(kpl_roads::geom::dist(p, snapped.point) <= net.snap_radius_m() + 1e-9);
+    prop_assert!((kpl_roads::geom::dist(p, snapped.point) - snapped.lateral_m.abs()).abs() < 1e-6);
     let lane = net.lane(snapped.lane);
-    prop_assert!(kpl_sim::geom::dist(lane.path.point_at(snapped.offset_m), snapped.point) < 1e-6);
+    prop_assert!(kpl_roads::geom::dist(lane.path.point_at(snapped.offset_m), snapped.point) < 1e-6);
     // Idempotent: snapping the snapped point (with or without the lane's heading) stays there.
     let again = net.snap_to_lane(snapped.point, Some(snapped.heading)).unwrap();
-    prop_assert!(kpl_sim::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
-    prop_assert!(kpl_sim::geom::heading_difference(again.heading, snapped.heading) < 1e-6);
+    prop_assert!(kpl_roads::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
+    prop_assert!(kpl_roads::geom::heading_difference(again.heading, snapped.heading) < 1e-6);
     prop_assert!(again.lateral_m.abs() < 1e-6);
     let again = net.snap_to_lane(snapped.point, None).unwrap();
-    prop_assert!(kpl_sim::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
+    prop_assert!(kpl_roads::geom::dist(again.point, snapped.point) < 1e-6, "{snapped:?} -> {again:?}");
     Ok(())
 }
 
@@ -388,7 +371,7 @@ proptest! {
         let brute = net.roads().iter().any(|r| {
             let proj = r.centerline.project(p);
             proj.lateral.abs() <= r.width_m / 2.0
-        }) || net.nodes().iter().any(|n| kpl_sim::geom::point_in_polygon(p, &n.area))
+        }) || net.nodes().iter().any(|n| kpl_roads::geom::point_in_polygon(p, &n.area))
             || net.lanes().iter().any(|l| l.path.project(p).lateral.abs() <= l.width_m / 2.0);
         prop_assert_eq!(net.on_road(p), brute);
     }
@@ -450,7 +433,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(500))]
 
     /// Any file either builds or is rejected with problems; a built network answers every query
-    /// and runs traffic without panicking.
+    /// without panicking (kpl-sim's tests run traffic on such networks).
     #[test]
     fn random_networks_build_or_are_rejected_and_never_panic(
         file in arb_network_file(),
@@ -466,7 +449,7 @@ proptest! {
         };
         for (x, y, heading) in points {
             let _ = net.on_road([x, y]);
-            let _ = net.occluder_at([x, y]);
+            let _ = net.occluders().at([x, y]);
             check_snapping(&net, [x, y], Some(heading))?;
             if let Some(snapped) = net.snap_to_lane([x, y], Some(heading)) {
                 for h in net.advance(&snapped, 150.0, 32) {
@@ -474,11 +457,6 @@ proptest! {
                     prop_assert_eq!(h.route[0], snapped.lane);
                 }
             }
-        }
-        let params = kpl_sim::Params { n_cars: 3, false_positive_rate: 5.0, ..kpl_sim::Params::default() };
-        if let Ok(mut sim) = kpl_sim::UavTrackerSim::new(&params, std::sync::Arc::new(net), 0) {
-            let frames = sim.frames_until(3_000_000);
-            prop_assert_eq!(frames.len(), 31);
         }
     }
 }

@@ -1,6 +1,7 @@
-//! The road-network file format: plain serde structures mirroring the JSON documented in
-//! `docs/simulator.md`. Nothing here is validated; [`crate::RoadNetwork::build`] checks a
-//! [`NetworkFile`] and derives the geometry.
+//! The project's road-network file format: plain serde structures mirroring the JSON documented in
+//! `docs/roads.md`. Nothing here is validated; [`crate::RoadNetwork::build`] checks a
+//! [`NetworkFile`] and derives the geometry. Occluder files (`docs/roads.md`, "Occluders") use
+//! [`OccluderSpec`] too.
 
 use serde::{Deserialize, Serialize};
 
@@ -104,23 +105,92 @@ pub enum LaneDirection {
     Backward,
 }
 
-/// A stretch of road that cannot be seen from above: cars on `road` between `from_m` and `to_m`
-/// (arc length along the road's centre line from its `from` node) are hidden from the tracker.
+/// Something that hides what is under it from the UAV: either a stretch of one road (`road`,
+/// `from_m`, `to_m`: arc length along the road's centre line from its `from` node; it hides only
+/// what is on that road, not the road on a bridge above it) or a `polygon`, which hides
+/// everything under it, or only what is on the roads listed in `roads`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OccluderSpec {
     pub id: String,
     pub kind: OccluderKind,
-    pub road: String,
-    pub from_m: f64,
-    pub to_m: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub road: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub to_m: Option<f64>,
+    /// Corners of the hidden area, in order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub polygon: Option<Vec<Point>>,
+    /// With `polygon`: hide only what is on these roads (by name); empty hides everything.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub roads: Vec<String>,
 }
 
+impl OccluderSpec {
+    /// A stretch of `road` from `from_m` to `to_m`.
+    pub fn stretch(id: &str, kind: OccluderKind, road: &str, from_m: f64, to_m: f64) -> OccluderSpec {
+        OccluderSpec {
+            id: id.to_string(),
+            kind,
+            road: Some(road.to_string()),
+            from_m: Some(from_m),
+            to_m: Some(to_m),
+            polygon: None,
+            roads: Vec::new(),
+        }
+    }
+
+    /// A polygon hiding everything under it.
+    pub fn area(id: &str, kind: OccluderKind, polygon: Vec<Point>) -> OccluderSpec {
+        OccluderSpec {
+            id: id.to_string(),
+            kind,
+            road: None,
+            from_m: None,
+            to_m: None,
+            polygon: Some(polygon),
+            roads: Vec::new(),
+        }
+    }
+}
+
+/// What an occluder is; only drawing tells them apart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum OccluderKind {
     Bridge,
     Tunnel,
+    /// Trees (a row along a road, a wood).
+    Trees,
+    Building,
+    Other,
+}
+
+impl OccluderKind {
+    /// The kind a SUMO polygon's `type` names (`bridge`, `tunnel`, `forest`, `building.yes`, ...).
+    pub fn from_sumo_type(text: &str) -> OccluderKind {
+        let text = text.to_ascii_lowercase();
+        if text.contains("bridge") {
+            OccluderKind::Bridge
+        } else if text.contains("tunnel") {
+            OccluderKind::Tunnel
+        } else if ["tree", "forest", "wood"].iter().any(|w| text.contains(w)) {
+            OccluderKind::Trees
+        } else if text.contains("building") {
+            OccluderKind::Building
+        } else {
+            OccluderKind::Other
+        }
+    }
+}
+
+/// An occluder file: `{"occluders": [...]}` with the items of [`NetworkFile::occluders`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OccluderFile {
+    pub occluders: Vec<OccluderSpec>,
 }
 
 impl NetworkFile {

@@ -21,6 +21,13 @@ pub struct GridTownSize {
     pub block_m: f64,
 }
 
+impl Default for GridTownSize {
+    /// 10 x 10 blocks of 100 m.
+    fn default() -> GridTownSize {
+        GridTownSize { blocks_x: 10, blocks_y: 10, block_m: 100.0 }
+    }
+}
+
 impl GridTownSize {
     /// A square town of 100 m blocks with room for `n_cars` at about 11 cars per block (one car
     /// per 36 m of lane, a busy town; at least 2 x 2 blocks). Used by the scale benchmarks.
@@ -70,13 +77,13 @@ pub fn bridge() -> NetworkFile {
     if let Some(overpass) = file.roads.last_mut() {
         overpass.level = 1;
     }
-    file.occluders.push(OccluderSpec {
-        id: "bridge".to_string(),
-        kind: OccluderKind::Bridge,
-        road: "main".to_string(),
-        from_m: 200.0 - BRIDGE_LENGTH_M / 2.0,
-        to_m: 200.0 + BRIDGE_LENGTH_M / 2.0,
-    });
+    file.occluders.push(OccluderSpec::stretch(
+        "bridge",
+        OccluderKind::Bridge,
+        "main",
+        200.0 - BRIDGE_LENGTH_M / 2.0,
+        200.0 + BRIDGE_LENGTH_M / 2.0,
+    ));
     file
 }
 

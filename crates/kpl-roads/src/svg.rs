@@ -1,8 +1,9 @@
-//! SVG pictures of a road network with tracks drawn over it (ground truth, percepts, anchored
+//! SVG pictures of a road network (roads with their lane markings, junction areas, occluders)
+//! with tracks drawn over it (ground truth, percepts, anchored
 //! objects: any list of point lists), so that a user can look at what was anchored.
 //!
 //! ```
-//! use kpl_sim::{RoadNetwork, scenarios, svg};
+//! use kpl_roads::{RoadNetwork, scenarios, svg};
 //! let net = RoadNetwork::build(&scenarios::bridge()).unwrap();
 //! let truth = svg::Layer::line("car1", "#1f77b4", vec![vec![[-100.0, -1.75], [100.0, -1.75]]]);
 //! let picture = svg::render(&net, &[truth], &svg::SvgOptions::default());
@@ -107,21 +108,30 @@ pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> Stri
             let d = view.path(road.centerline.points());
             let w = road.width_m * view.scale;
             let _ = writeln!(svg, r##"<path d="{d}" fill="none" stroke="#8a8a8a" stroke-width="{w:.1}"/>"##);
-            let _ = writeln!(
-                svg,
-                r##"<path d="{d}" fill="none" stroke="#ffffff" stroke-width="{:.1}" stroke-dasharray="{:.1}"/>"##,
-                (0.15 * view.scale).max(0.5),
-                3.0 * view.scale
-            );
+            // A dashed line between neighbouring lanes.
+            for pair in road.lanes.windows(2) {
+                let boundary = pair[0].lateral_m - pair[0].width_m / 2.0;
+                let Some(line) = road.centerline.offset(boundary) else { continue };
+                let _ = writeln!(
+                    svg,
+                    r##"<path d="{}" fill="none" stroke="#ffffff" stroke-width="{:.1}" stroke-dasharray="{:.1}"/>"##,
+                    view.path(line.points()),
+                    (0.15 * view.scale).max(0.5),
+                    3.0 * view.scale
+                );
+            }
         }
         if level == ground {
             for node in net.nodes().iter().filter(|n| n.area.len() >= 3) {
                 let _ = writeln!(svg, r##"<path d="{} Z" fill="#8a8a8a"/>"##, view.path(&node.area));
             }
-            for occluder in net.occluders() {
+            for occluder in net.occluders().list() {
                 let (fill, opacity) = match occluder.kind {
                     OccluderKind::Bridge => ("#6b5a45", 0.8),
                     OccluderKind::Tunnel => ("#3a3a3a", 0.9),
+                    OccluderKind::Trees => ("#3f7a3a", 0.8),
+                    OccluderKind::Building => ("#9a8f86", 0.9),
+                    OccluderKind::Other => ("#555555", 0.7),
                 };
                 let _ = writeln!(
                     svg,

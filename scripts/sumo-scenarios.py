@@ -1,0 +1,177 @@
+#!/usr/bin/env python3
+"""Makes the SUMO traffic scenarios that ship in specs/traffic/sumo/ (and the network of the load
+benchmark), with SUMO from the `eclipse-sumo` Python package (requirements-test.txt installs it
+into .venv; no other SUMO is needed).
+
+Each scenario is a folder with the network (net.xml.gz), the recorded traffic as SUMO's floating
+car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type, speed and lane,
+every 0.5 s) and, where the traffic uses vehicle types of its own, their definitions (vtypes.xml).
+Everything is seeded, so the same SUMO release makes the same traffic (only the files' "generated
+on" comments differ).
+
+    .venv/bin/python scripts/sumo-scenarios.py                 # every scenario into specs/traffic/sumo
+    .venv/bin/python scripts/sumo-scenarios.py --only grid --out /tmp/s --duration 30
+
+Scenarios:
+  grid      a 4 x 4 grid of 120 m blocks with traffic lights at every crossing and 80 m roads out of
+            town at the edge; random trips from edge to edge (queues at red lights).
+  random    a random network of about 50 junctions (netgenerate --rand), priority junctions;
+            random trips.
+  highway   a straight 2 km road, two lanes each way at 120 km/h, with fast cars (up to 36 m/s)
+            and slow trucks (up to 22 m/s): the cars overtake the trucks.
+  town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
+            of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
+"""
+
+import argparse
+import gzip
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+FCD_PERIOD_S = 0.5
+STEP_LENGTH_S = 0.1
+
+
+def sumo_home():
+    try:
+        import sumo  # the eclipse-sumo package
+    except ImportError:
+        sys.exit("the eclipse-sumo Python package is missing: run scripts/test once, or "
+                 "pip install -r requirements-test.txt")
+    return sumo.SUMO_HOME
+
+
+def run(cmd, cwd):
+    env = dict(os.environ, SUMO_HOME=sumo_home())
+    result = subprocess.run(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if result.returncode != 0:
+        sys.exit("failed: %s\n%s" % (" ".join(cmd), result.stdout))
+
+
+class Sumo:
+    def __init__(self, home, work):
+        self.home = home
+        self.work = work
+
+    def tool(self, name):
+        return os.path.join(self.home, "bin", name)
+
+    def netgenerate(self, out, *options):
+        run([self.tool("netgenerate"), "--seed", "42", "-o", out] + list(options), self.work)
+
+    def netconvert(self, out, *options):
+        run([self.tool("netconvert"), "-o", out] + list(options), self.work)
+
+    def random_trips(self, net, routes, duration, period, *options):
+        env_tools = os.path.join(self.home, "tools")
+        run([sys.executable, os.path.join(env_tools, "randomTrips.py"), "-n", net, "-r", routes,
+             "-b", "0", "-e", str(duration), "-p", str(period), "--seed", "42",
+             ] + list(options), self.work)
+
+    def simulate(self, net, routes, fcd, duration, additional=None):
+        cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
+               "--step-length", str(STEP_LENGTH_S), "--seed", "42", "--no-step-log", "--no-warnings",
+               "--fcd-output", fcd, "--device.fcd.period", str(FCD_PERIOD_S),
+               "--fcd-output.attributes", "x,y,angle,type,speed,lane"]
+        if additional:
+            cmd += ["--additional-files", additional]
+        run(cmd, self.work)
+
+
+def gzip_to(src, dst):
+    with open(src, "rb") as f_in, gzip.GzipFile(dst, "wb", mtime=0) as f_out:
+        shutil.copyfileobj(f_in, f_out)
+
+
+def grid(s, duration):
+    s.netgenerate("net.net.xml", "--grid", "--grid.number", "4", "--grid.length", "120",
+                  "--grid.attach-length", "80", "--default-junction-type", "traffic_light",
+                  "--tls.default-type", "static")
+    s.random_trips("net.net.xml", "routes.rou.xml", duration, "1.5", "--fringe-factor", "50",
+                   "--min-distance", "300")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration)
+    return ["net.net.xml", "fcd.xml"], None
+
+
+def random_net(s, duration):
+    s.netgenerate("net.net.xml", "--rand", "--rand.iterations", "60", "--rand.min-distance", "80",
+                  "--rand.max-distance", "200", "--rand.grid", "--default-junction-type", "priority")
+    s.random_trips("net.net.xml", "routes.rou.xml", duration, "3", "--fringe-factor", "20",
+                   "--min-distance", "300")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration)
+    return ["net.net.xml", "fcd.xml"], None
+
+
+VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="36" speedFactor="1.1" speedDev="0.1" lcSpeedGain="2"/>
+    <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="22" speedFactor="1.0" speedDev="0.05"/>
+</additional>
+"""
+
+
+def highway(s, duration):
+    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
+        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="2000" y="0"/>\n</nodes>\n')
+    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
+        f.write('<edges>\n'
+                '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="33.33"/>\n'
+                '    <edge id="westbound" from="east" to="west" numLanes="2" speed="33.33"/>\n'
+                '</edges>\n')
+    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
+        f.write(VTYPES)
+    s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+    flows = []
+    for direction in ["eastbound", "westbound"]:
+        flows.append('    <flow id="%s_cars" type="car" route="%s" begin="0" end="%d" vehsPerHour="700" '
+                     'departLane="random" departSpeed="max"/>' % (direction, direction, duration))
+        flows.append('    <flow id="%s_trucks" type="truck" route="%s" begin="0" end="%d" vehsPerHour="150" '
+                     'departLane="0" departSpeed="max"/>' % (direction, direction, duration))
+    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
+        f.write('<routes>\n    <route id="eastbound" edges="eastbound"/>\n'
+                '    <route id="westbound" edges="westbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+def town400(s, duration):
+    s.netgenerate("net.net.xml", "--grid", "--grid.number", "20", "--grid.length", "100",
+                  "--default-junction-type", "traffic_light", "--tls.default-type", "static")
+    return ["net.net.xml"], None
+
+
+SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "town400": town400}
+DURATION_S = {"grid": 300, "random": 300, "highway": 240, "town400": 0}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    parser.add_argument("--out", default=os.path.join(root, "specs", "traffic", "sumo"),
+                        help="folder to write the scenario folders into (default specs/traffic/sumo)")
+    parser.add_argument("--only", choices=sorted(SCENARIOS), action="append",
+                        help="make only this scenario (may be given more than once)")
+    parser.add_argument("--duration", type=int, help="seconds of traffic (default per scenario)")
+    args = parser.parse_args()
+    home = sumo_home()
+    for name in args.only or list(SCENARIOS):
+        with tempfile.TemporaryDirectory() as work:
+            s = Sumo(home, work)
+            duration = args.duration or DURATION_S[name]
+            files, vtypes = SCENARIOS[name](s, duration)
+            target = os.path.join(args.out, name)
+            os.makedirs(target, exist_ok=True)
+            for produced in files:
+                stem = produced.split(".")[0]
+                gzip_to(os.path.join(work, produced), os.path.join(target, stem + ".xml.gz"))
+            if vtypes:
+                shutil.copy(os.path.join(work, vtypes), os.path.join(target, "vtypes.xml"))
+            sizes = ", ".join("%s %d KiB" % (f, os.path.getsize(os.path.join(target, f)) // 1024)
+                              for f in sorted(os.listdir(target)))
+            print("%s: %s" % (target, sizes))
+
+
+if __name__ == "__main__":
+    main()
