@@ -83,10 +83,16 @@ fn free_ports(n: u16) -> u16 {
 
 /// `kpl run SPEC --host HOST --clock wall --out OUT`, zenoh's ports from `port_base`.
 fn host(spec: &Path, host: &str, out: &Path, port_base: u16) -> Child {
+    host_with(spec, host, out, port_base, &[])
+}
+
+/// [`host`] with more arguments.
+fn host_with(spec: &Path, host: &str, out: &Path, port_base: u16, more: &[&str]) -> Child {
     common::kpl_command(&["run"])
         .arg(spec)
         .args(["--host", host, "--clock", "wall", "--out"])
         .arg(out)
+        .args(more)
         .env("KPL_ZENOH_PORT_BASE", port_base.to_string())
         .env("KPL_ZENOH_WAIT", "120")
         .stdin(Stdio::null())
@@ -193,9 +199,16 @@ fn a_python_source_and_a_python_sink_in_a_deployment() {
     }
     succeeded(&dashboard, "dashboard.py");
 
+    check_exchange(&dir, &json_lines(&sensor.stdout), &json_lines(&dashboard.stdout));
+}
+
+/// What `sensor.py` sent (`sent`, as it printed it) reached host `control` (its `log.jsonl` in
+/// `dir/control`) and the dashboard (`got`, as it printed it) unchanged, with the monitor's
+/// verdicts.
+fn check_exchange(dir: &Path, sent: &[Value], got: &[Value]) {
+    let count = sent.len();
+    assert!(count > 0);
     // What the sensor sent, as it printed it.
-    let sent = json_lines(&sensor.stdout);
-    assert_eq!(sent.len(), count);
     let hot = sent.iter().filter(|s| s["value"]["temp"].as_f64().unwrap() >= 30.0).count();
     assert!(hot > 0 && hot < count, "the readings warm past 30 degrees: {hot} of {count}");
 
@@ -203,7 +216,7 @@ fn a_python_source_and_a_python_sink_in_a_deployment() {
     let log = lines(&dir.join("control/log.jsonl"));
     let readings: Vec<&Value> = log.iter().filter(|l| l["stream"] == "readings").collect();
     assert_eq!(readings.len(), count);
-    for (line, sample) in readings.iter().zip(&sent) {
+    for (line, sample) in readings.iter().zip(sent) {
         assert_eq!(
             (&line["valid"], &line["available"], &line["value"]),
             (&sample["valid"], &sample["available"], &sample["value"])
@@ -217,14 +230,13 @@ fn a_python_source_and_a_python_sink_in_a_deployment() {
     );
 
     // The dashboard got the readings back and the verdicts, unchanged, then both ends.
-    let got = json_lines(&dashboard.stdout);
     assert_eq!(got[0], serde_json::json!({"subscribed": "kpl-demo/out/*"}));
     let on = |key: &str| -> Vec<&Value> {
         got.iter().filter(|l| l["key"] == key && l.get("end").is_none()).collect()
     };
     let echo = on("kpl-demo/out/echo");
     assert_eq!(echo.len(), count);
-    for (line, sample) in echo.iter().zip(&sent) {
+    for (line, sample) in echo.iter().zip(sent) {
         assert_eq!(
             (&line["valid"], &line["available"], &line["value"]),
             (&sample["valid"], &sample["available"], &sample["value"])
