@@ -114,6 +114,19 @@ fn example(python: &str, name: &str, args: &[String]) -> Child {
         .unwrap()
 }
 
+/// The first line a program prints (its own "subscribed" or "watching" line: it is ready), read
+/// byte by byte so that the rest stays for [`finish`].
+fn first_line(child: &mut Child) -> String {
+    let mut stdout = child.stdout.take().unwrap();
+    let mut line = Vec::new();
+    let mut byte = [0u8; 1];
+    while stdout.read(&mut byte).unwrap() == 1 && byte[0] != b'\n' {
+        line.push(byte[0]);
+    }
+    child.stdout = Some(stdout);
+    String::from_utf8(line).unwrap()
+}
+
 /// Waits for a process (killing it if it hangs): its status and both outputs.
 fn finish(mut child: Child, name: &str) -> Output {
     let stdout = child.stdout.take().map(read_to_end);
@@ -253,4 +266,90 @@ fn check_exchange(dir: &Path, sent: &[Value], got: &[Value]) {
     let ends: Vec<&Value> = got.iter().filter(|l| l.get("end").is_some()).collect();
     assert_eq!(ends.len(), 2, "{got:?}");
     assert!(ends.contains(&&serde_json::json!({"key": "kpl-demo/out/echo", "end": count})));
+}
+
+#[test]
+fn python_in_an_authenticated_deployment() {
+    let Some(python) = python_with_package() else { return };
+    let dir = common::fresh_dir("python", "keys");
+    let spec = root().join("specs/zenoh/python.kpl");
+    let keys = dir.join("keys");
+    let made = common::kpl(&["keys", spec.to_str().unwrap(), "--out", keys.to_str().unwrap()]);
+    assert!(made.status.success(), "kpl keys:\n{}", String::from_utf8_lossy(&made.stderr));
+    // The same keys but another secret: what a stranger with a certificate would have.
+    let stranger = dir.join("stranger");
+    std::fs::create_dir_all(&stranger).unwrap();
+    for entry in std::fs::read_dir(&keys).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, stranger.join(path.file_name().unwrap())).unwrap();
+    }
+    std::fs::write(stranger.join("secret"), "ab".repeat(32) + "\n").unwrap();
+
+    let base = free_ports(2);
+    let tls = |port: u16, keys: &Path, host: &str| {
+        let mut args = vec!["--connect".to_string(), format!("tls/127.0.0.1:{port}")];
+        args.extend(["--keys".into(), keys.display().to_string(), "--as".into(), host.into()]);
+        args
+    };
+    let keys_arg = keys.display().to_string();
+    let station = host_with(&spec, "station", &dir.join("station"), base, &["--keys", &keys_arg]);
+    let control = host_with(&spec, "control", &dir.join("control"), base, &["--keys", &keys_arg]);
+    let dashboard = example(&python, "dashboard.py", &tls(base + 1, &keys, "control"));
+    let watch = |keys: &Path, extra: &[&str]| {
+        let mut args = tls(base, keys, "station");
+        args.extend(["--spec", "python", "--from-host", "station"].map(String::from));
+        args.extend(extra.iter().map(|s| s.to_string()));
+        args.extend(["readings", "too_hot"].map(String::from));
+        example(&python, "watch.py", &args)
+    };
+    let mut watcher = watch(&keys, &[]);
+    let mut stranger_watcher = watch(&stranger, &["--idle", "10"]);
+    // The sensor starts once both watchers have subscribed, so that they see every message.
+    for w in [&mut watcher, &mut stranger_watcher] {
+        let line = first_line(w);
+        assert!(line.starts_with("{\"watching\""), "{line}");
+    }
+    let count = 30;
+    let mut args = tls(base, &keys, "station");
+    args.extend(["--count".into(), count.to_string(), "--period".into(), "0.01".into()]);
+    let sensor = finish(example(&python, "sensor.py", &args), "sensor.py");
+    succeeded(&sensor, "sensor.py");
+    let dashboard = finish(dashboard, "dashboard.py");
+    let watcher = finish(watcher, "watch.py");
+    let stranger_watcher = finish(stranger_watcher, "watch.py (another secret)");
+    for (child, name) in [(station, "station"), (control, "control")] {
+        succeeded(&finish(child, name), name);
+    }
+    succeeded(&dashboard, "dashboard.py");
+    succeeded(&watcher, "watch.py");
+    let sent = json_lines(&sensor.stdout);
+    check_exchange(&dir, &sent, &json_lines(&dashboard.stdout));
+
+    // The watcher read the streams station sends control, each message from host `station`,
+    // tagged with the deployment's secret, in sequence, nothing refused or lost.
+    let watched = json_lines(&watcher.stdout);
+    assert!(!watched.is_empty(), "{}", String::from_utf8_lossy(&watcher.stderr));
+    let readings: Vec<&Value> =
+        watched.iter().filter(|l| l["stream"] == "readings" && l.get("value").is_some()).collect();
+    assert_eq!(readings.len(), count);
+    for (i, (line, sample)) in readings.iter().zip(&sent).enumerate() {
+        assert_eq!(
+            (&line["host"], &line["sequence"], &line["authenticated"]),
+            (&"station".into(), &i.into(), &true.into())
+        );
+        assert_eq!((&line["valid"], &line["value"]), (&sample["valid"], &sample["value"]));
+    }
+    for stream in ["readings", "too_hot"] {
+        let report = watched.iter().find(|l| l["stream"] == stream && l.get("refused").is_some()).unwrap();
+        assert_eq!((&report["refused"], &report["lost"]), (&0.into(), &0.into()), "{report}");
+    }
+    assert!(watched.contains(&serde_json::json!({"stream": "readings", "end": count})));
+
+    // With another secret every message is refused, none is shown, and no end comes.
+    assert_eq!(stranger_watcher.status.code(), Some(1));
+    let refused = json_lines(&stranger_watcher.stdout);
+    assert!(refused.iter().all(|l| l.get("value").is_none()), "{refused:?}");
+    let report = refused.iter().find(|l| l["stream"] == "readings" && l.get("refused").is_some()).unwrap();
+    assert_eq!(report["refused"], count + 1, "the samples and the end: {report}");
+    assert!(report["reasons"][0].as_str().unwrap().contains("tag does not verify"), "{report}");
 }

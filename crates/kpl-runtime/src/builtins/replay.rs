@@ -4,7 +4,7 @@
 //!   the source's type), and a filter that kept nothing says so, naming the streams it saw.
 //! - [`ReplayTimes`]: recorded samples must not go back in available time (such a sample is
 //!   malformed); with the wall clock, recorded times are shifted so that the first sample happens
-//!   when the run starts.
+//!   when the run starts (a time the shift would move past the range of i64 is malformed).
 
 use std::collections::BTreeMap;
 
@@ -99,13 +99,23 @@ impl ReplayTimes {
             ctx.malformed(location, error)?;
             return Ok(None);
         }
-        self.last_available = Some(sample.available);
         let shift = *self.shift.get_or_insert_with(|| match self.clock {
             ClockKind::Sim => 0,
-            ClockKind::Wall => ctx.clock.start() - sample.available,
+            ClockKind::Wall => ctx.clock.start().saturating_sub(sample.available),
         });
-        sample.valid = sample.valid.saturating_add(shift);
-        sample.available = sample.available.saturating_add(shift);
+        let (Some(valid), Some(available)) =
+            (sample.valid.checked_add(shift), sample.available.checked_add(shift))
+        else {
+            let error = format!(
+                "valid {} / available {} cannot be moved to the wall clock (by {shift} us): past the range \
+                 of 64-bit microseconds",
+                sample.valid, sample.available
+            );
+            ctx.malformed(location, error)?;
+            return Ok(None);
+        };
+        self.last_available = Some(sample.available);
+        (sample.valid, sample.available) = (valid, available);
         Ok(Some(sample))
     }
 }
