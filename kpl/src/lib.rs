@@ -51,6 +51,8 @@ enum Command {
     List(cmd::list::Args),
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
+    /// Convert a recording between JSON lines and MCAP, losing nothing.
+    Convert(cmd::convert::Args),
     /// Launch every host of a deployed spec on this machine, with one summary.
     Launch(cmd::launch::Args),
     /// Make the keys of a deployment: mutual TLS between its hosts, authenticated messages.
@@ -117,6 +119,7 @@ pub fn main() -> ExitCode {
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Convert(args) => cmd::convert::run(args),
         Command::Launch(args) => cmd::launch::run(args),
         Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),

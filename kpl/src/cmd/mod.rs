@@ -6,6 +6,7 @@ pub mod bench_anchor;
 pub mod bench_runtime;
 pub mod cater;
 pub mod check;
+pub mod convert;
 pub mod explain;
 pub mod fmt;
 pub mod graph;
