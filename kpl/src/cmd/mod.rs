@@ -11,5 +11,6 @@ pub mod fmt;
 pub mod graph;
 pub mod list;
 pub mod mtl;
+pub mod plot;
 pub mod run;
 pub mod score;
