@@ -3,19 +3,32 @@
 //! - `specs/traffic/fig5.kpl` (the DyKnow paper's Fig. 5): four percept tracks, one symbol per
 //!   level through all of them, predicted states in the gaps, branch objects in the crossing; and
 //!   its picture shows that.
+//! - `specs/traffic/two_uavs.kpl`: two UAVs with overlapping footprints over the same cars, two
+//!   link specifications into the same world objects; each car keeps one car symbol across the
+//!   hand-over from one UAV to the other.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests
 
 mod common;
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use common::{kpl, lines};
 use serde_json::Value;
 
 fn run(spec: &str, name: &str) -> PathBuf {
+    run_with(spec, name, &[])
+}
+
+fn run_for(spec: &str, name: &str, time: &str) -> PathBuf {
+    run_with(spec, name, &["--for", time])
+}
+
+fn run_with(spec: &str, name: &str, extra: &[&str]) -> PathBuf {
     let out = common::fresh_dir("traffic", name);
-    let result = kpl(&["run", "--quiet", spec, "--out", out.to_str().unwrap()]);
+    let mut args = vec!["run", "--quiet", spec, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let result = kpl(&args);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     out
 }
@@ -117,4 +130,79 @@ fn plot_refuses_what_it_cannot_draw_and_says_why() {
     let empty = kpl(&["plot", dir, "--from", "100s", "-o", out.join("empty.svg").to_str().unwrap()]);
     assert!(empty.status.success());
     assert!(String::from_utf8_lossy(&empty.stderr).contains("nothing to draw"));
+}
+
+/// The measured object of a snapshot within `gate` metres of `pos` that stands for a true car:
+/// the one it had (`last`) while that one is still within the gate, else the nearest.
+fn matched<'a>(objects: &'a [Value], pos: [f64; 2], gate: f64, last: Option<&str>) -> Option<&'a str> {
+    let near: Vec<(f64, &str)> = objects
+        .iter()
+        .filter(|o| o["measured"] == true)
+        .map(|o| {
+            let p = &o["pos"];
+            let d = (p[0].as_f64().unwrap() - pos[0]).hypot(p[1].as_f64().unwrap() - pos[1]);
+            (d, o["id"].as_str().unwrap())
+        })
+        .filter(|(d, _)| *d <= gate)
+        .collect();
+    if let Some(&(_, kept)) = near.iter().find(|(_, id)| Some(*id) == last) {
+        return Some(kept);
+    }
+    near.iter().min_by(|a, b| a.0.total_cmp(&b.0)).map(|(_, id)| *id)
+}
+
+#[test]
+fn two_uavs_hand_each_car_over_with_its_car_symbol() {
+    let out = run_for("specs/traffic/two_uavs.kpl", "two_uavs", "120s");
+    let records = lines(&out.join("two_uavs/tracks.jsonl"));
+    // Both UAVs saw the cars, each with its own percept ids.
+    let (a, b) = (ids(&records, "uav_a"), ids(&records, "uav_b"));
+    assert!(a.iter().all(|id| id.starts_with('a')) && a.len() >= 10, "{a:?}");
+    assert!(b.iter().all(|id| id.starts_with('b')) && b.len() >= 10, "{b:?}");
+    // No level above the percepts ever switches a car's symbol (measured states).
+    let scores = score(&out, &["--measured-only"]);
+    for level in ["a_world", "b_world", "world_onroad", "onroad_car"] {
+        assert_eq!(stream(&scores, level)["clear"]["switches"], 0, "{level}");
+    }
+    // Cars on the main road that drive from UAV a's part (x < 20 m, only a sees it) to UAV b's
+    // (x > 60 m, only b sees it), or the other way: the measured car symbol that stands for the car
+    // (within 2 m; kept while it stays within 2 m, as scoring keeps it) is one and the same on
+    // both sides.
+    let cars: BTreeMap<i64, &Value> = records
+        .iter()
+        .filter(|r| r["stream"] == "onroad_car")
+        .map(|r| (r["valid"].as_i64().unwrap(), &r["value"]))
+        .collect();
+    let mut sides: BTreeMap<String, Vec<(&str, String)>> = BTreeMap::new();
+    for r in records.iter().filter(|r| r["stream"] == "uav_a.truth") {
+        let Some(symbols) = cars.get(&r["valid"].as_i64().unwrap()) else { continue };
+        for car in r["value"].as_array().unwrap() {
+            let pos = [car["pos"][0].as_f64().unwrap(), car["pos"][1].as_f64().unwrap()];
+            let side = if pos[0] < 20.0 {
+                "a"
+            } else if pos[0] > 60.0 {
+                "b"
+            } else {
+                continue;
+            };
+            if pos[1].abs() > 5.0 {
+                continue; // on the overpass
+            }
+            let list = sides.entry(car["id"].as_str().unwrap().to_string()).or_default();
+            let last = list.last().map(|(_, symbol)| symbol.as_str());
+            let Some(symbol) = matched(symbols.as_array().unwrap(), pos, 2.0, last) else { continue };
+            if list.last().is_none_or(|(s, sym)| *s != side || sym != symbol) {
+                list.push((side, symbol.to_string()));
+            }
+        }
+    }
+    let handed_over: Vec<(&String, &Vec<(&str, String)>)> = sides
+        .iter()
+        .filter(|(_, list)| list.iter().any(|(s, _)| *s == "a") && list.iter().any(|(s, _)| *s == "b"))
+        .collect();
+    assert!(handed_over.len() >= 3, "only {} cars handed over: {sides:?}", handed_over.len());
+    for (car, list) in handed_over {
+        let symbols: BTreeSet<&String> = list.iter().map(|(_, symbol)| symbol).collect();
+        assert_eq!(symbols.len(), 1, "{car} changed its car symbol: {list:?}");
+    }
 }
