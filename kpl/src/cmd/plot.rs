@@ -14,9 +14,11 @@ use kpl_score::Recording;
 
 const AFTER_HELP: &str = "\
 Examples:
-  kpl run specs/traffic/fig5.kpl && kpl plot out/fig5 --network specs/traffic/fig5/crossing.json
+  kpl run specs/traffic/fig5.kpl
+  kpl plot out/fig5 --network specs/traffic/fig5/crossing.json
   kpl plot out/fig5 --scenario crossing --stream tracker --stream world_onroad -o fig5.svg
-  kpl run specs/traffic/sumo_grid.kpl --for 70s && kpl plot out/sumo_grid --network specs/traffic/sumo/grid/net.xml.gz --from 60s --to 70s
+  kpl run specs/traffic/sumo_grid.kpl --for 70s
+  kpl plot out/sumo_grid --network specs/traffic/sumo/grid/net.xml.gz --from 60s --to 70s
 
 Every object stream of the recording is drawn (or those given with --stream): streams whose
 records say nothing about being measured (the tracker's percepts) as dots, the others (link
