@@ -41,7 +41,7 @@ pub mod scores;
 pub mod sequence;
 mod time;
 
-pub use align::{AlignOptions, Aligned, Alignment, MeasuredFilter, Missing, align};
+pub use align::{AlignOptions, Aligned, Alignment, BranchFilter, MeasuredFilter, Missing, align};
 pub use clear::ClearMot;
 pub use error::{AlignError, ConfigError, ReadError, SelectError, SequenceError};
 pub use hota::Hota;

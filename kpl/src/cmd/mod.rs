@@ -9,6 +9,8 @@ pub mod check;
 pub mod explain;
 pub mod fmt;
 pub mod graph;
+pub mod keys;
+pub mod launch;
 pub mod list;
 pub mod mtl;
 pub mod plot;
