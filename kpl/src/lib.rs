@@ -59,6 +59,8 @@ enum Command {
     Keys(cmd::keys::Args),
     /// Score recorded object streams against ground truth: MOTA, IDF1, HOTA, ... per stream.
     Score(cmd::score::Args),
+    /// Draw a recorded run as SVG: roads, percepts, anchored objects, ground truth, situations.
+    Plot(cmd::plot::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -123,6 +125,7 @@ pub fn main() -> ExitCode {
         Command::Launch(args) => cmd::launch::run(args),
         Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),
+        Command::Plot(args) => cmd::plot::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

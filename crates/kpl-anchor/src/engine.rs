@@ -937,6 +937,14 @@ impl Anchoring {
                 if object.prediction.is_some()
                     && let Some(run) = self.store.get_mut(root).and_then(|o| o.prediction.take())
                 {
+                    // Fed again: an ended prediction no longer dooms the structure.
+                    if run.ended {
+                        for key in self.prediction_path(root).0 {
+                            if let Some(o) = self.store.get_mut(key) {
+                                o.forget_now = false;
+                            }
+                        }
+                    }
                     self.prune(run.branches, time, out);
                 }
                 continue;
@@ -952,6 +960,9 @@ impl Anchoring {
 
     fn predict_structure(&mut self, root: ObjectKey, time: Time, out: &mut StepOutput) {
         let (mut path, owner_index) = self.prediction_path(root);
+        // The whole structure (the objects above the model's owner too, a car over its on-road
+        // object), for a model that forgets it when the prediction ends.
+        let structure = path.clone();
         let Some(owner_index) = owner_index else {
             // No model: the last state is kept, no longer measured.
             if let Some(o) = self.store.get_mut(root) {
@@ -1000,6 +1011,13 @@ impl Anchoring {
                     if let Some(object) = self.store.get_mut(key) {
                         object.predicted = false;
                         object.hypotheses.clear();
+                    }
+                }
+                if model.forget_when_ended() {
+                    for &key in &structure {
+                        if let Some(object) = self.store.get_mut(key) {
+                            object.forget_now = true;
+                        }
                     }
                 }
                 let branches = std::mem::take(&mut run.branches);
@@ -1235,15 +1253,15 @@ impl Anchoring {
     }
 
     /// Removes the objects of `ty` not anchored for its forget time.
+    /// Also removes those whose prediction ended with a model that forgets them at once.
     fn forget(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
-        let Some(after) = self.types[ty as usize].forget else { return };
+        let after = self.types[ty as usize].forget;
         let mut doomed = Vec::new();
         for key in self.store.objects_of(ty) {
             let Some(object) = self.store.get(key) else { continue };
-            if object.origin == Origin::Derived
-                && !object.anchored
-                && time.saturating_sub(object.last_anchored) >= after
-            {
+            let due =
+                object.forget_now || after.is_some_and(|a| time.saturating_sub(object.last_anchored) >= a);
+            if object.origin == Origin::Derived && !object.anchored && due {
                 doomed.push(key);
             }
         }

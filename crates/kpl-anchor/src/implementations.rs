@@ -70,8 +70,14 @@ impl Default for Implementations {
                     return Err(format!("max_hypotheses must be an int from 1 to 1000, found {other}"));
                 }
             };
+            let forget_at_end = match params.get("forget_at_end") {
+                None => false,
+                Some(Value::Bool(b)) => *b,
+                Some(other) => return Err(format!("forget_at_end must be true or false, found {other}")),
+            };
             let model = AlongRoads::new(networks.resolve(params)?, max)
-                .with_min_heading_speed(min_heading_speed(params)?);
+                .with_min_heading_speed(min_heading_speed(params)?)
+                .with_forget_at_end(forget_at_end);
             Ok(Arc::new(model))
         });
         i

@@ -44,6 +44,13 @@ pub trait PredictionModel: fmt::Debug + Send + Sync {
     fn ended(&self, _start: &PredictionStart, _time: Time) -> bool {
         false
     }
+
+    /// Whether a structure whose prediction ended is forgotten at once (its objects removed at
+    /// that step, cause `forgotten`) rather than after the spec's `forget` time: what left the
+    /// map is not waiting at its edge to be seen again.
+    fn forget_when_ended(&self) -> bool {
+        false
+    }
 }
 
 fn seconds(from: Time, to: Time) -> f64 {
@@ -97,13 +104,14 @@ impl PredictionModel for Stationary {
 /// (string) the lane's name. A route that reaches a lane nothing continues (a dead end, the
 /// network's border) is dropped; when every route has, the prediction has ended
 /// ([`PredictionModel::ended`]): the object stays where it was last predicted, unanchored, and
-/// the spec's `forget` removes it. An object that cannot be snapped (no lane within the snap
+/// the spec's `forget` removes it (or at once, with `forget_at_end`). An object that cannot be snapped (no lane within the snap
 /// radius) is predicted with constant velocity.
 #[derive(Debug, Clone)]
 pub struct AlongRoads {
     network: Arc<RoadNetwork>,
     max_hypotheses: usize,
     min_heading_speed_mps: f64,
+    forget_at_end: bool,
 }
 
 /// Default cap on the hypotheses of `along_roads` (two four-way crossings give nine).
@@ -115,7 +123,15 @@ impl AlongRoads {
             network,
             max_hypotheses: max_hypotheses.max(1),
             min_heading_speed_mps: MIN_HEADING_SPEED_MPS,
+            forget_at_end: false,
         }
+    }
+
+    /// Forget a structure as soon as every route reached the end of the network (the spec's
+    /// `forget_at_end: true`): [`PredictionModel::forget_when_ended`].
+    pub fn with_forget_at_end(mut self, forget: bool) -> AlongRoads {
+        self.forget_at_end = forget;
+        self
     }
 
     /// Below this speed (m/s) the velocity's direction is not used to pick the lane.
@@ -153,6 +169,10 @@ impl PredictionModel for AlongRoads {
         let Some(lane) = &start.lane else { return false };
         let (routes, _, _) = self.routes(start, lane, time);
         !routes.is_empty() && routes.iter().all(|h| h.reached_end)
+    }
+
+    fn forget_when_ended(&self) -> bool {
+        self.forget_at_end
     }
 
     fn predict(&self, start: &PredictionStart, time: Time, out: &mut Vec<Record>) {

@@ -135,6 +135,12 @@ pub fn entries() -> Vec<Entry> {
             Value::Int(crate::predict::DEFAULT_MAX_HYPOTHESES as i64),
             "most hypotheses kept (straightest routes first)",
         ))
+        .param(Param::optional(
+            "forget_at_end",
+            ParamType::Bool,
+            Value::Bool(false),
+            "forget a structure as soon as every route reached the end of the network (it left the map) instead of after `forget`",
+        ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2)])),
     ]
 }

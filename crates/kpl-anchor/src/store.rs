@@ -97,6 +97,9 @@ pub struct Object {
     pub anchored: bool,
     /// When it was last anchored (its creation time if never).
     pub last_anchored: Time,
+    /// Its structure's prediction ended and the model forgets such structures at once
+    /// ([`crate::predict::PredictionModel::forget_when_ended`]): removed at the next forget sweep.
+    pub forget_now: bool,
     /// Names given by identifications.
     pub names: Vec<Arc<str>>,
     pub(crate) prediction: Option<Box<PredictionRun>>,
@@ -343,6 +346,7 @@ impl Store {
             outgoing: Vec::new(),
             anchored: false,
             last_anchored: time,
+            forget_now: false,
             names: Vec::new(),
             prediction: None,
             seen_step: 0,

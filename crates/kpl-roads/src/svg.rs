@@ -59,22 +59,40 @@ impl Default for SvgOptions {
     }
 }
 
-fn escape(text: &str) -> String {
-    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
-}
-
-struct View {
-    lo: Point,
-    hi: Point,
-    scale: f64,
+/// The mapping from world metres to picture pixels: `lo` is the bottom-left corner of the part of
+/// the world drawn, `hi` the top-right; y grows upwards in the world and downwards in SVG.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    pub lo: Point,
+    pub hi: Point,
+    /// Pixels per metre.
+    pub scale: f64,
 }
 
 impl View {
-    fn px(&self, p: Point) -> (f64, f64) {
+    /// A view of the world's rectangle `(lo, hi)` that is `width_px` wide (clamped to 50-20,000
+    /// pixels; 1,000 when not finite).
+    pub fn new(lo: Point, hi: Point, width_px: f64) -> View {
+        let hi = [hi[0].max(lo[0] + 1.0), hi[1].max(lo[1] + 1.0)];
+        let width_px = if width_px.is_finite() { width_px.clamp(50.0, 20_000.0) } else { 1000.0 };
+        View { lo, hi, scale: width_px / (hi[0] - lo[0]) }
+    }
+
+    pub fn width_px(&self) -> f64 {
+        (self.hi[0] - self.lo[0]) * self.scale
+    }
+
+    pub fn height_px(&self) -> f64 {
+        (self.hi[1] - self.lo[1]) * self.scale
+    }
+
+    /// A world point in pixels.
+    pub fn px(&self, p: Point) -> (f64, f64) {
         ((p[0] - self.lo[0]) * self.scale, (self.hi[1] - p[1]) * self.scale)
     }
 
-    fn path(&self, points: &[Point]) -> String {
+    /// An SVG path through world points.
+    pub fn path(&self, points: &[Point]) -> String {
         let mut d = String::new();
         for (i, &p) in points.iter().enumerate() {
             let (x, y) = self.px(p);
@@ -84,21 +102,14 @@ impl View {
     }
 }
 
-/// Draws the network (roads by level, crossings, bridges and tunnels) and the layers over it.
-pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> String {
-    let (lo, hi) = options.view.unwrap_or_else(|| net.bounds());
-    let world_width = (hi[0] - lo[0]).max(1.0);
-    let world_height = (hi[1] - lo[1]).max(1.0);
-    let width_px = if options.width_px.is_finite() { options.width_px.clamp(50.0, 20_000.0) } else { 1000.0 };
-    let view = View { lo, hi, scale: width_px / world_width };
-    let height_px = world_height * view.scale;
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{width_px:.0}" height="{height_px:.0}" viewBox="0 0 {width_px:.1} {height_px:.1}">"##
-    );
-    let _ = writeln!(svg, r##"<rect width="100%" height="100%" fill="#eef3e8"/>"##);
+/// Escapes text for SVG content and attribute values.
+pub fn escape(text: &str) -> String {
+    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
 
+/// Draws the network (roads by level with their lane markings, junction areas, occluders) into
+/// `svg`, as SVG elements (no `<svg>` element around them).
+pub fn draw_network(svg: &mut String, net: &RoadNetwork, view: &View) {
     let mut levels: Vec<i32> = net.roads().iter().map(|r| r.level).collect();
     levels.sort_unstable();
     levels.dedup();
@@ -126,22 +137,41 @@ pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> Stri
                 let _ = writeln!(svg, r##"<path d="{} Z" fill="#8a8a8a"/>"##, view.path(&node.area));
             }
             for occluder in net.occluders().list() {
-                let (fill, opacity) = match occluder.kind {
-                    OccluderKind::Bridge => ("#6b5a45", 0.8),
-                    OccluderKind::Tunnel => ("#3a3a3a", 0.9),
-                    OccluderKind::Trees => ("#3f7a3a", 0.8),
-                    OccluderKind::Building => ("#9a8f86", 0.9),
-                    OccluderKind::Other => ("#555555", 0.7),
-                };
-                let _ = writeln!(
-                    svg,
-                    r##"<path d="{} Z" fill="{fill}" fill-opacity="{opacity}"><title>{}</title></path>"##,
-                    view.path(&occluder.area),
-                    escape(&occluder.name)
-                );
+                draw_occluder(svg, view, occluder.kind, &occluder.area, &occluder.name);
             }
         }
     }
+}
+
+/// Draws one occluder's area, filled by its kind, with its name as a tooltip.
+pub fn draw_occluder(svg: &mut String, view: &View, kind: OccluderKind, area: &[Point], name: &str) {
+    let (fill, opacity) = match kind {
+        OccluderKind::Bridge => ("#6b5a45", 0.8),
+        OccluderKind::Tunnel => ("#3a3a3a", 0.9),
+        OccluderKind::Trees => ("#3f7a3a", 0.8),
+        OccluderKind::Building => ("#9a8f86", 0.9),
+        OccluderKind::Other => ("#555555", 0.7),
+    };
+    let _ = writeln!(
+        svg,
+        r##"<path d="{} Z" fill="{fill}" fill-opacity="{opacity}"><title>{}</title></path>"##,
+        view.path(area),
+        escape(name)
+    );
+}
+
+/// Draws the network (roads by level, crossings, bridges and tunnels) and the layers over it.
+pub fn render(net: &RoadNetwork, layers: &[Layer], options: &SvgOptions) -> String {
+    let (lo, hi) = options.view.unwrap_or_else(|| net.bounds());
+    let view = View::new(lo, hi, options.width_px);
+    let (width_px, height_px) = (view.width_px(), view.height_px());
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{width_px:.0}" height="{height_px:.0}" viewBox="0 0 {width_px:.1} {height_px:.1}">"##
+    );
+    let _ = writeln!(svg, r##"<rect width="100%" height="100%" fill="#eef3e8"/>"##);
+    draw_network(&mut svg, net, &view);
 
     let dot_radius = (0.8 * view.scale).clamp(1.0, 4.0);
     for layer in layers {

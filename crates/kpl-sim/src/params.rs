@@ -76,6 +76,10 @@ declare_params! {
     block_m: f64, "float" = 100.0;
     /// Seed of all randomness; the same seed and parameters give the same frames.
     seed: u64, "int" = 0;
+    /// Simulated traffic that every tracker of a run with the same `seed`, network and traffic parameters shares (several UAVs over the same cars); the tracker's own noise still differs per source. Without it each source's traffic differs.
+    shared_traffic: bool, "bool" = false;
+    /// Percept ids are this followed by a number (`vp1`, `vp2`, ...); two trackers of one run need different prefixes.
+    percept_prefix: String, "string" = "vp".to_string();
     /// Tracker frames per second.
     rate_hz: f64, "float" = 10.0;
     /// Number of cars on the network; a car that leaves the map is replaced by a new one.

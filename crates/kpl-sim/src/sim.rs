@@ -82,6 +82,18 @@ impl UavTrackerSim {
         network: Arc<RoadNetwork>,
         start: Time,
     ) -> Result<UavTrackerSim, ParamsError> {
+        UavTrackerSim::with_traffic_seed(params, network, start, params.seed)
+    }
+
+    /// [`UavTrackerSim::new`] with simulated traffic drawn from `traffic_seed` instead of
+    /// `params.seed` (the tracker still draws from `params.seed`): trackers given the same
+    /// traffic seed watch the same cars with noise of their own.
+    pub fn with_traffic_seed(
+        params: &Params,
+        network: Arc<RoadNetwork>,
+        start: Time,
+        traffic_seed: u64,
+    ) -> Result<UavTrackerSim, ParamsError> {
         params.validate()?;
         let vehicles = match &params.traffic_file {
             Some(file) => {
@@ -95,7 +107,7 @@ impl UavTrackerSim {
                 &network,
                 params.n_cars,
                 params.speed_sd,
-                rng_stream(params.seed, TRAFFIC_STREAM),
+                rng_stream(traffic_seed, TRAFFIC_STREAM),
             )?),
         };
         let mut extra: Vec<Occluder> = params

@@ -64,8 +64,13 @@ impl Percept {
     /// The percept as the record a `VisionPercept { pos: vec2, vel: vec2, size: float }` sample
     /// carries: `id` `vpN`, fields `pos`, `vel`, `size`. The ground truth is left out.
     pub fn to_record(&self) -> Record {
+        self.to_record_prefixed("vp")
+    }
+
+    /// The record with the id `{prefix}N` instead of `vpN` (a tracker's `percept_prefix`).
+    pub fn to_record_prefixed(&self, prefix: &str) -> Record {
         Record {
-            id: Some(self.id.to_string().into()),
+            id: Some(format!("{prefix}{}", self.id.0).into()),
             fields: vec![
                 ("pos".into(), Value::Vec2(self.pos)),
                 ("vel".into(), Value::Vec2(self.vel)),

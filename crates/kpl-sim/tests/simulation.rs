@@ -350,7 +350,7 @@ fn parameters_have_defaults_docs_and_clear_errors() {
         assert!(serialized.get(info.name).is_some(), "{} is documented but not a field", info.name);
         assert!(!info.doc.is_empty() && !info.doc.contains('\n'), "{}", info.name);
         assert!(
-            ["int", "float", "string", "list<float>", "list<list<float>>", "list<list<list<float>>>"]
+            ["int", "float", "bool", "string", "list<float>", "list<list<float>>", "list<list<list<float>>>"]
                 .contains(&info.ty)
         );
     }

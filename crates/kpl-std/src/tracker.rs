@@ -20,6 +20,9 @@ use kpl_sim::{Frame, Params, PerceptSource, UavTrackerSim};
 struct Tracker {
     sim: Option<UavTrackerSim>,
     params: Params,
+    /// The seed of the simulated traffic: the tracker's own, or with `shared_traffic` one that
+    /// every source with the same `seed` shares.
+    traffic_seed: u64,
     network: Arc<kpl_roads::RoadNetwork>,
 }
 
@@ -28,8 +31,13 @@ impl Source for Tracker {
         Box::pin(async move {
             let sim = match self.sim.take() {
                 Some(sim) => sim,
-                None => UavTrackerSim::new(&self.params, self.network.clone(), ctx.now())
-                    .map_err(|e| ProcessError::failed(e.to_string()))?,
+                None => UavTrackerSim::with_traffic_seed(
+                    &self.params,
+                    self.network.clone(),
+                    ctx.now(),
+                    self.traffic_seed,
+                )
+                .map_err(|e| ProcessError::failed(e.to_string()))?,
             };
             let mut sim = sim;
             loop {
@@ -44,9 +52,14 @@ impl Source for Tracker {
                 for problem in sim.take_problems() {
                     ctx.malformed(problem.location, problem.error)?;
                 }
-                let percepts: Vec<Value> = frame.percepts.iter().map(kpl_sim::Percept::to_value).collect();
+                let prefix = self.params.percept_prefix.as_str();
+                let percepts: Vec<Value> = frame
+                    .percepts
+                    .iter()
+                    .map(|p| Value::Record(Arc::new(p.to_record_prefixed(prefix))))
+                    .collect();
                 ctx.emit(frame.time, Value::List(percepts.into())).await;
-                ctx.emit_port(1, frame.time, truth(&frame)).await;
+                ctx.emit_port(1, frame.time, truth(&frame, prefix)).await;
                 if ctx.unconsumed() {
                     break;
                 }
@@ -65,11 +78,11 @@ impl Source for Tracker {
 /// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
 /// (the camera could see it: in the footprint and not occluded) and `seen_as` (the percept that
 /// shows it, "" when none).
-fn truth(frame: &Frame) -> Value {
+fn truth(frame: &Frame, prefix: &str) -> Value {
     let mut seen_as = std::collections::BTreeMap::new();
     for p in &frame.percepts {
         if let PerceptSource::Car(car) = p.source {
-            seen_as.insert(car, p.id.to_string());
+            seen_as.insert(car, format!("{prefix}{}", p.id.0));
         }
     }
     let records: Vec<Value> = frame
@@ -94,7 +107,8 @@ macro_rules! FILE_PARAMS {
     };
 }
 
-fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::BuildError> {
+/// The parameters, with the run's seed mixed in, and the seed of the simulated traffic.
+fn params(ctx: &BuildContext<'_>) -> Result<(Params, u64), kpl_runtime::registry::BuildError> {
     let call = ctx.call().ok_or_else(|| ctx.error("no parameters"))?;
     let spec_dir = ctx.spec_dir.to_path_buf();
     let mut args: Vec<(String, Value)> = Vec::new();
@@ -108,9 +122,16 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, kpl_runtime::registry::Build
     }
     let mut params =
         Params::from_args(args.iter().map(|(n, v)| (n.as_str(), v))).map_err(|e| ctx.error(e.to_string()))?;
+    // Shared traffic: the spec's seed and the run's, not the process name, so every tracker of
+    // the run with the same seed draws the same cars.
+    let traffic_seed = if params.shared_traffic {
+        params.seed ^ ctx.run_seed.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    } else {
+        params.seed ^ ctx.seed()
+    };
     // Mix the run's seed in (a fixed --seed gives the same traffic every run).
     params.seed ^= ctx.seed();
-    Ok(params)
+    Ok((params, traffic_seed))
 }
 
 /// The parameter type a type name of `Params::describe` stands for (`list<list<float>>`).
@@ -156,11 +177,12 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
         entry = entry.param(Param::optional(info.name, ty, default, info.doc));
     }
     registry.add_source(entry, |ctx| {
-        let params = params(ctx)?;
+        let (params, traffic_seed) = params(ctx)?;
         let network = Arc::new(params.load_network().map_err(|e| ctx.error(e.to_string()))?);
         // Opened now so that a missing or unreadable recording, vehicle-type or occluder file
         // stops the run before it starts; the run opens it again at its start time.
-        UavTrackerSim::new(&params, network.clone(), 0).map_err(|e| ctx.error(e.to_string()))?;
-        Ok(Box::new(Tracker { sim: None, params, network }))
+        UavTrackerSim::with_traffic_seed(&params, network.clone(), 0, traffic_seed)
+            .map_err(|e| ctx.error(e.to_string()))?;
+        Ok(Box::new(Tracker { sim: None, params, traffic_seed, network }))
     });
 }

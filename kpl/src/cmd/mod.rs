@@ -14,5 +14,6 @@ pub mod keys;
 pub mod launch;
 pub mod list;
 pub mod mtl;
+pub mod plot;
 pub mod run;
 pub mod score;
