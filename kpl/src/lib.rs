@@ -53,6 +53,8 @@ enum Command {
     Run(cmd::run::Args),
     /// Score recorded object streams against ground truth: MOTA, IDF1, HOTA, ... per stream.
     Score(cmd::score::Args),
+    /// Score recognised traffic situations against the true ones of the recorded traffic: precision and recall per kind.
+    Situations(cmd::situations::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -108,6 +110,7 @@ pub fn main() -> ExitCode {
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::Score(args) => cmd::score::run(args),
+        Command::Situations(args) => cmd::situations::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

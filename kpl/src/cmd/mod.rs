@@ -13,3 +13,4 @@ pub mod list;
 pub mod mtl;
 pub mod run;
 pub mod score;
+pub mod situations;
