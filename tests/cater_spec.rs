@@ -55,12 +55,8 @@ fn the_spec_predicts_what_kpl_cater_eval_predicts() {
                 &dir,
                 &["cater", "generate", "--videos", "1", "--seed", seed, "--out", data.to_str().unwrap()],
             );
-            // With the detector, `kpl cater eval` restores partial boxes; the spec is told the same.
             let text = if perception == "detector" {
-                spec.replace("perception: \"perfect\"", "perception: \"detector\"").replace(
-                    "spatial_relations: false",
-                    "spatial_relations: false, restore_partial_boxes: true",
-                )
+                spec.replace("perception: \"perfect\"", "perception: \"detector\"")
             } else {
                 spec.clone()
             };

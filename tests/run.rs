@@ -352,3 +352,30 @@ fn a_spec_that_never_ends_says_so_at_the_start() {
     let _ = child.wait();
     assert!(first.starts_with("note: this run does not end by itself (`ticks` never ends)"), "{first}");
 }
+
+#[test]
+fn recorded_traffic_ends_the_run_with_its_recording() {
+    let out = out_dir("recorded-ends");
+    let sumo = common::root().join("specs/traffic/sumo/highway");
+    let spec = out.join("recorded.kpl");
+    std::fs::write(
+        &spec,
+        format!(
+            "type VisionPercept symbol vp {{ pos: vec2, vel: vec2, size: float }}\n\
+             source tracker : list<VisionPercept> = sim.uav_tracker(network_file: {:?}, traffic_file: {:?})\n\
+             sink seen = file.jsonl(tracker, path: \"seen.jsonl\")\n",
+            sumo.join("net.xml.gz").to_str().unwrap(),
+            sumo.join("fcd.xml.gz").to_str().unwrap(),
+        ),
+    )
+    .unwrap();
+    let output = kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(!stderr.contains("does not end by itself"), "{stderr}");
+    assert!(stderr.contains("every source ended"), "{stderr}");
+    // The highway recording is 240 s long, at the tracker's 10 Hz.
+    let seen = lines(&out.join("seen.jsonl"));
+    let last = seen.last().unwrap()["valid"].as_i64().unwrap();
+    assert!((239_000_000..=240_000_000).contains(&last), "{last}");
+}

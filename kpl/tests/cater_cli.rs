@@ -1,5 +1,6 @@
 //! `kpl cater generate` + `kpl cater eval --json` end to end: the JSON's shape, AAPA ahead of the
-//! heuristic, and the exit codes for bad data (1) and usage / I/O errors (2).
+//! heuristic, a split and the per-video CSV, skipped videos reported (and exit 1 with `--strict`),
+//! and the exit codes for bad data (1) and usage / I/O errors (2).
 #![allow(clippy::unwrap_used, reason = "tests")]
 
 use std::path::{Path, PathBuf};
@@ -45,7 +46,12 @@ fn generate_then_eval_reports_table_one_and_aapa_wins() {
     let data = dir.join("data");
     let output = kpl(&["cater", "generate", "--videos", "8", "--seed", "3", "--out", data.to_str().unwrap()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert_eq!(std::fs::read_dir(data.join("bb")).unwrap().count(), 8);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("% contained") && stderr.contains("snitch is contained in"), "{stderr}");
+    let beside = std::fs::read_dir(data.join("scenes"))
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().file_name().to_str().unwrap().ends_with("_bb.json"));
+    assert_eq!(beside.count(), 8);
     for perception in ["perfect", "detector"] {
         let aapa = eval_json(&data, "aapa", perception, &dir);
         let heuristic = eval_json(&data, "heuristic", perception, &dir);
@@ -68,7 +74,53 @@ fn generate_then_eval_reports_table_one_and_aapa_wins() {
 }
 
 #[test]
-fn bad_data_exits_1_and_missing_data_exits_2() {
+fn a_split_and_per_video_results() {
+    let dir = scratch("split");
+    let data = dir.join("data");
+    assert!(
+        kpl(&[
+            "cater",
+            "generate",
+            "--videos",
+            "3",
+            "--seed",
+            "2",
+            "--motion",
+            "all",
+            "--out",
+            data.to_str().unwrap()
+        ])
+        .status
+        .success()
+    );
+    let list = dir.join("samples.txt");
+    std::fs::write(&list, "videos/CATER_new_000002.avi\nCATER_new_000000\n").unwrap();
+    let csv = dir.join("per-video.csv");
+    let output = kpl(&[
+        "cater",
+        "eval",
+        "--data",
+        data.to_str().unwrap(),
+        "--model",
+        "heuristic",
+        "--videos",
+        list.to_str().unwrap(),
+        "--frames",
+        "from-first-detection",
+        "--per-video",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<&str> = text.lines().collect();
+    assert!(rows[0].starts_with("videos_names,visible_mean_iou,occluded_mean_iou"), "{}", rows[0]);
+    assert_eq!(rows.len(), 3);
+    assert!(rows[1].starts_with("CATER_new_000002,") && rows[2].starts_with("CATER_new_000000,"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_videos_are_skipped_and_reported_strict_exits_1_missing_data_exits_2() {
     let dir = scratch("codes");
     let data = dir.join("data");
     assert!(
@@ -77,28 +129,26 @@ fn bad_data_exits_1_and_missing_data_exits_2() {
             .success()
     );
     let missing = dir.join("nothing");
-    let args = |d: &Path| {
-        vec![
-            "cater".to_owned(),
-            "eval".into(),
-            "--data".into(),
-            d.to_str().unwrap().into(),
-            "--model".into(),
-            "aapa".into(),
-            "--perception".into(),
-            "perfect".into(),
-        ]
+    let run = |d: &Path, extra: &[&str]| {
+        let mut a = vec!["cater", "eval", "--data", d.to_str().unwrap(), "--model", "aapa"];
+        a.extend_from_slice(extra);
+        kpl(&a)
     };
-    let run = |d: &Path| {
-        let a = args(d);
-        kpl(&a.iter().map(String::as_str).collect::<Vec<_>>())
-    };
-    assert_eq!(run(&missing).status.code(), Some(2));
-    let scene = std::fs::read_dir(data.join("scenes")).unwrap().next().unwrap().unwrap().path();
+    assert_eq!(run(&missing, &[]).status.code(), Some(2));
+    let scene = data.join("scenes").join("CATER_new_000001.json");
     std::fs::write(&scene, "{ not json").unwrap();
-    let output = run(&data);
-    assert_eq!(output.status.code(), Some(1), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(String::from_utf8_lossy(&output.stderr).contains(scene.file_name().unwrap().to_str().unwrap()));
+    let output = run(&data, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("skipped CATER_new_000001:") && stderr.contains("CATER_new_000001.json"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("evaluated 1 videos (1 skipped)"), "{stderr}");
+    assert_eq!(run(&data, &["--strict"]).status.code(), Some(1));
+    // No video left to score: bad data.
+    std::fs::write(data.join("scenes").join("CATER_new_000000.json"), "[]").unwrap();
+    assert_eq!(run(&data, &[]).status.code(), Some(1));
     assert_eq!(kpl(&["cater", "eval", "--model", "nope"]).status.code(), Some(2));
     let help = kpl(&["cater", "eval", "--help"]);
     assert!(String::from_utf8_lossy(&help.stdout).contains("kpl cater eval --data"));

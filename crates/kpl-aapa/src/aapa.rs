@@ -32,7 +32,8 @@ use crate::geometry::{
 };
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
-    Action, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,
+    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
+    Symbol, WorldState,
 };
 
 /// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
@@ -103,9 +104,9 @@ impl Aapa {
         let p = &self.params;
         self.validate_inputs(time, percepts, actions, &previous)?;
         let (previous_time, previous_camera) = (previous.time, previous.camera);
-        let previous_anchors = match previous {
-            Cow::Borrowed(w) => w.anchors.clone(),
-            Cow::Owned(w) => w.anchors,
+        let (previous_anchors, mut bindings) = match previous {
+            Cow::Borrowed(w) => (w.anchors.clone(), w.bindings.clone()),
+            Cow::Owned(w) => (w.anchors, w.bindings),
         };
         let dt_seconds = previous_time.map(|t| (time - t) as f64 / 1e6);
         let mut notes = Vec::new();
@@ -147,8 +148,15 @@ impl Aapa {
         let mut cost = Vec::with_capacity(percepts.len() * cols);
         for percept in percepts {
             for w in &work {
+                if w.anchor.attachment.as_ref().is_some_and(|a| a.hidden) {
+                    // Contained: it cannot be what was perceived.
+                    cost.push(f64::INFINITY);
+                    continue;
+                }
                 let same_type = percept.object_type == w.anchor.object_type;
-                cost.push(alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch));
+                let c = alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch);
+                let tentative = p.extensions.established_first && w.anchor.confidence < ESTABLISHED;
+                cost.push(if tentative { 2.0 * c } else { c });
             }
         }
         let pairs = assign(&cost, percepts.len(), cols, p.theta);
@@ -228,12 +236,13 @@ impl Aapa {
             self.reacquire(&mut work, time, &mut notes);
         }
 
-        // Effects of actions: attachments (III-B.2b) and motion.
+        // Effects of actions: attachments (III-B.2b) and motion. Actions moving one of several
+        // identical objects wait for its motion to tell which (bindings).
+        self.decide_bindings(&mut bindings, time, &mut work, &mut notes);
         for action in actions {
-            for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, &mut work, p.theta_anch, &mut notes);
-            }
+            self.apply_action(action, time, &mut work, &mut bindings, &mut notes);
         }
+        forget_stale_bindings(&mut bindings, time, &mut notes);
 
         // 2. Hypothesis reasoning and confidence for anchors not aligned this cycle.
         let index = symbol_index(&work);
@@ -297,7 +306,154 @@ impl Aapa {
             anchors: work.into_iter().map(|w| w.anchor).collect(),
             relations,
             notes,
+            bindings,
         })
+    }
+
+    /// Applies one action event: directly when its moving object (argument 0) is known; a `started`
+    /// event naming a type several anchors share opens a binding instead, and the matching
+    /// `completed` event closes it.
+    fn apply_action(
+        &self,
+        action: &Action,
+        time: Time,
+        work: &mut [Work],
+        bindings: &mut Vec<Binding>,
+        notes: &mut Vec<String>,
+    ) {
+        let theta_anch = self.params.theta_anch;
+        if self.rules_for(action).next().is_none() {
+            return;
+        }
+        let ambiguous = action.args.first().is_some_and(|arg| {
+            !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) && candidates(arg, work).len() > 1
+        });
+        if !ambiguous {
+            for rule in self.rules_for(action) {
+                apply_rule(rule, action, time, work, theta_anch, notes);
+            }
+            return;
+        }
+        match action.phase {
+            ActionPhase::Started => {
+                let taken = bound_symbols(bindings);
+                let candidates = candidates(&action.args[0], work)
+                    .into_iter()
+                    .filter(|&i| !taken.contains(&work[i].anchor.symbol))
+                    .map(|i| Candidate {
+                        symbol: work[i].anchor.symbol.clone(),
+                        start: centre(&work[i].anchor.bbox),
+                        onset: None,
+                    })
+                    .collect();
+                bindings.push(Binding {
+                    action: action.clone(),
+                    started: time,
+                    candidates,
+                    bound: None,
+                    completed: false,
+                });
+            }
+            ActionPhase::Completed => {
+                let open = bindings
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| {
+                        !b.completed && b.action.name == action.name && b.action.args == action.args
+                    })
+                    .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
+                    .map(|(i, _)| i);
+                let actor = match open {
+                    Some(i) => {
+                        let symbol = match bindings[i].bound.clone() {
+                            Some(symbol) => Some(symbol),
+                            None => {
+                                let taken = bound_symbols(bindings);
+                                let symbol = near_other(action, &bindings[i], work, theta_anch, &taken)
+                                    .or_else(|| first_mover(&bindings[i], work, &taken, 0.0))
+                                    .or_else(|| {
+                                        resolve(&action.args[0], work, theta_anch)
+                                            .map(|k| work[k].anchor.symbol.clone())
+                                    });
+                                if let Some(symbol) = &symbol {
+                                    let started = bindings[i].action.clone();
+                                    self.apply_bound(&started, symbol, time, work, notes);
+                                }
+                                symbol
+                            }
+                        };
+                        bindings[i].bound = symbol.clone();
+                        bindings[i].completed = true;
+                        symbol
+                    }
+                    None => resolve(&action.args[0], work, theta_anch).map(|k| work[k].anchor.symbol.clone()),
+                };
+                match actor {
+                    Some(symbol) => self.apply_bound(action, &symbol, time, work, notes),
+                    None => {
+                        notes.push(format!("action `{}`: no anchor for `{}`", action.name, action.args[0]))
+                    }
+                }
+            }
+        }
+    }
+
+    /// Applies an action's rules with its moving object named by symbol.
+    fn apply_bound(
+        &self,
+        action: &Action,
+        symbol: &Symbol,
+        time: Time,
+        work: &mut [Work],
+        notes: &mut Vec<String>,
+    ) {
+        let mut bound = action.clone();
+        bound.args[0] = symbol.clone();
+        for rule in self.rules_for(&bound) {
+            apply_rule(rule, &bound, time, work, self.params.theta_anch, notes);
+        }
+    }
+
+    /// Notes which candidates started moving, decides the open bindings (oldest first) whose
+    /// moving object now shows, and applies their started effects.
+    fn decide_bindings(
+        &self,
+        bindings: &mut [Binding],
+        time: Time,
+        work: &mut [Work],
+        notes: &mut Vec<String>,
+    ) {
+        for binding in bindings.iter_mut().filter(|b| b.bound.is_none()) {
+            for c in binding.candidates.iter_mut().filter(|c| c.onset.is_none()) {
+                if displacement(c, work).is_some_and(|d| d >= ONSET_PX) {
+                    c.onset = Some(time);
+                }
+            }
+        }
+        let mut order: Vec<usize> = (0..bindings.len()).collect();
+        order.sort_by_key(|&k| bindings[k].started);
+        for k in order {
+            let b = &bindings[k];
+            if b.bound.is_some() || names_single_other(&b.action, work) {
+                continue;
+            }
+            // Two actions on the type started together: the order of motion cannot tell which is
+            // which; wait for their completion.
+            let twin = bindings.iter().enumerate().any(|(j, o)| {
+                j != k
+                    && o.bound.is_none()
+                    && o.started == b.started
+                    && o.action.args.first() == b.action.args.first()
+            });
+            if twin {
+                continue;
+            }
+            let taken = bound_symbols(bindings);
+            if let Some(symbol) = first_mover(&bindings[k], work, &taken, BINDING_MIN_MOVE) {
+                self.apply_bound(&bindings[k].action, &symbol, time, work, notes);
+                bindings[k].bound = Some(symbol);
+            }
+        }
     }
 
     fn validate_inputs(
@@ -387,8 +543,8 @@ impl Aapa {
         Ok(())
     }
 
-    /// Extension: a confirmed new anchor of a type whose older anchor is unseen takes the old
-    /// symbol (the object moved out of θ's reach while hidden, or leapt).
+    /// Extension: a confirmed new anchor of a type whose older anchor is unseen, of about the same
+    /// size, takes the old symbol (the object moved out of θ's reach while hidden, or leapt).
     fn reacquire(&self, work: &mut [Work], time: Time, notes: &mut Vec<String>) {
         let p = &self.params;
         let index = symbol_index(work);
@@ -414,6 +570,7 @@ impl Aapa {
                         && old.anchor.is_anchored(p.theta_anch)
                         && old.anchor.object_type == new.anchor.object_type
                         && old.anchor.first_seen < new.anchor.first_seen
+                        && similar_size(&old.anchor.bbox, &new.anchor.bbox)
                         && !has_anchored_ancestor(m, work, &index, p.theta_anch)
                 })
                 .min_by(|&a, &b| {
@@ -471,8 +628,9 @@ impl Aapa {
             let parent_box = work[parent].anchor.bbox;
             let w = &mut work[i];
             if w.aligned {
-                w.anchor.attachment =
-                    Some(geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation));
+                let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
+                geometry.hidden = att.hidden;
+                w.anchor.attachment = Some(geometry);
             } else if w.anchor.status == AnchorStatus::Attached {
                 let k = if self.params.extensions.scale_attached {
                     scale(&parent_box) / att.parent_scale
@@ -570,6 +728,13 @@ fn stop_moving(anchor: &mut Anchor) {
     anchor.moving_since = None;
 }
 
+/// Whether two boxes could be the same object seen twice: their scales (square roots of the areas)
+/// within a factor 1.5 of each other.
+fn similar_size(a: &BBox, b: &BBox) -> bool {
+    let ratio = scale(a) / scale(b);
+    (1.0 / 1.5..=1.5).contains(&ratio)
+}
+
 /// Where each anchor is in `work`, by symbol. Only attachments' parents are looked up in it, so a
 /// cycle without attachments (most cycles) builds none.
 fn symbol_index(work: &[Work]) -> HashMap<Symbol, usize> {
@@ -615,6 +780,144 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         offset: [c[0] - p[0], c[1] - p[1]],
         size: size(child),
         parent_scale: scale(parent),
+        hidden: false,
+    }
+}
+
+/// How far (pixels) the moving object of a binding must have moved before the binding is decided.
+const BINDING_MIN_MOVE: f64 = 2.0;
+/// Bindings kept at most; beyond, the oldest are dropped (a source that starts actions and never
+/// completes them must not grow the world state without bound).
+const MAX_BINDINGS: usize = 64;
+
+/// The anchors of a type.
+/// The anchors of a type an action can mean: those established (confidence of at least
+/// [`ESTABLISHED`]) if there are any, else all. A short-lived false detection of the type is then no
+/// rival to the object that has been there all along.
+fn candidates(object_type: &str, work: &[Work]) -> Vec<usize> {
+    let all: Vec<usize> = (0..work.len())
+        .filter(|&i| !work[i].removed && &*work[i].anchor.object_type == object_type)
+        .collect();
+    let established: Vec<usize> =
+        all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+    if established.is_empty() { all } else { established }
+}
+
+/// The confidence from which an anchor counts as established for action arguments.
+const ESTABLISHED: f64 = 0.5;
+
+fn bound_symbols(bindings: &[Binding]) -> Vec<Symbol> {
+    bindings.iter().filter_map(|b| b.bound.clone()).collect()
+}
+
+/// How far (pixels) a candidate must move from where it was when the action started to count as
+/// having started moving.
+const ONSET_PX: f64 = 1.0;
+
+/// How far a candidate is from where it was when the action started (`None` if it is gone).
+fn displacement(c: &Candidate, work: &[Work]) -> Option<f64> {
+    let w = work.iter().find(|w| !w.removed && w.anchor.symbol == c.symbol)?;
+    let now = centre(&w.anchor.bbox);
+    Some(((now[0] - c.start[0]).powi(2) + (now[1] - c.start[1]).powi(2)).sqrt())
+}
+
+/// The candidate of a binding that started moving first (ties: the one that moved furthest), once
+/// it has moved at least `min_move` pixels and no other candidate started in the same cycle unless
+/// it moved less than half as far. With `min_move` 0 (the action is over), simply that candidate,
+/// or the one that moved furthest if none was seen to start.
+fn first_mover(binding: &Binding, work: &[Work], taken: &[Symbol], min_move: f64) -> Option<Symbol> {
+    let mut moves: Vec<(Option<Time>, f64, &Symbol)> = binding
+        .candidates
+        .iter()
+        .filter(|c| !taken.contains(&c.symbol))
+        .filter_map(|c| Some((c.onset, displacement(c, work)?, &c.symbol)))
+        .collect();
+    // Earliest onset first (none last), then the furthest.
+    moves.sort_by(|a, b| {
+        let onset = |o: Option<Time>| o.unwrap_or(Time::MAX);
+        onset(a.0).cmp(&onset(b.0)).then(b.1.total_cmp(&a.1))
+    });
+    let &(onset, distance, symbol) = moves.first()?;
+    if min_move <= 0.0 {
+        return Some(symbol.clone());
+    }
+    let onset = onset?;
+    let rival = moves.iter().skip(1).find(|m| m.0 == Some(onset));
+    let clear = distance >= min_move && rival.is_none_or(|r| distance >= 2.0 * r.1 + 0.5);
+    clear.then(|| symbol.clone())
+}
+
+/// The anchor of a type (other than `to`) whose box's bottom centre is nearest `to`'s.
+fn nearest(object_type: &str, to: usize, work: &[Work]) -> Option<usize> {
+    let target = bottom_centre(&work[to].anchor.bbox);
+    candidates(object_type, work).into_iter().filter(|&i| i != to).min_by(|&a, &b| {
+        let d = |i: usize| {
+            let p = bottom_centre(&work[i].anchor.bbox);
+            (p[0] - target[0]).powi(2) + (p[1] - target[1]).powi(2)
+        };
+        d(a).total_cmp(&d(b))
+    })
+}
+
+/// Whether an action names, besides its moving object, another argument that is a single anchor
+/// (by symbol or as the only one of its type).
+fn names_single_other(action: &Action, work: &[Work]) -> bool {
+    action.args.iter().skip(1).any(|arg| {
+        work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1
+    })
+}
+
+/// For an action that names another, single object: the candidate nearest it.
+fn near_other(
+    action: &Action,
+    binding: &Binding,
+    work: &[Work],
+    theta_anch: f64,
+    taken: &[Symbol],
+) -> Option<Symbol> {
+    let other = action.args.iter().skip(1).find_map(|arg| {
+        let single =
+            work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1;
+        if single { resolve(arg, work, theta_anch) } else { None }
+    })?;
+    let target = bottom_centre(&work[other].anchor.bbox);
+    binding
+        .candidates
+        .iter()
+        .filter(|c| !taken.contains(&c.symbol))
+        .filter_map(|c| {
+            let w = work.iter().find(|w| !w.removed && w.anchor.symbol == c.symbol)?;
+            let p = bottom_centre(&w.anchor.bbox);
+            Some(((p[0] - target[0]).powi(2) + (p[1] - target[1]).powi(2), c.symbol.clone()))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, symbol)| symbol)
+}
+
+/// Drops bindings whose action should long be over (a missed `completed` event) and keeps at most
+/// [`MAX_BINDINGS`].
+fn forget_stale_bindings(bindings: &mut Vec<Binding>, time: Time, notes: &mut Vec<String>) {
+    // A completed binding is kept only while an undecided action on its type is open.
+    let undecided: Vec<Symbol> = bindings
+        .iter()
+        .filter(|b| b.bound.is_none())
+        .filter_map(|b| b.action.args.first().cloned())
+        .collect();
+    bindings.retain(|b| !b.completed || b.action.args.first().is_some_and(|t| undecided.contains(t)));
+    bindings.retain(|b| {
+        let stale = b.action.expected_end.is_some_and(|end| time > end.saturating_add(1_000_000));
+        if stale {
+            notes.push(format!(
+                "action `{}` started at {} never completed; forgotten",
+                b.action.name, b.started
+            ));
+        }
+        !stale
+    });
+    if bindings.len() > MAX_BINDINGS {
+        let excess = bindings.len() - MAX_BINDINGS;
+        notes.push(format!("{excess} unfinished actions forgotten (more than {MAX_BINDINGS} open)"));
+        bindings.drain(..excess);
     }
 }
 
@@ -640,9 +943,20 @@ fn apply_rule(
     theta_anch: f64,
     notes: &mut Vec<String>,
 ) {
+    // Other arguments that name a type several anchors share are the one nearest the moving object
+    // (argument 0): what a cone comes down over is where it ends.
     let lookup = |k: usize, work: &[Work], notes: &mut Vec<String>| -> Option<usize> {
         let arg = action.args.get(k)?;
-        let found = resolve(arg, work, theta_anch);
+        let near = if k == 0 { None } else { action.args.first().and_then(|a| resolve(a, work, theta_anch)) };
+        let found = match near {
+            Some(actor)
+                if candidates(arg, work).len() > 1
+                    && !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) =>
+            {
+                nearest(arg, actor, work)
+            }
+            _ => resolve(arg, work, theta_anch),
+        };
         if found.is_none() {
             notes.push(format!("action `{}`: no anchor for `{arg}`", action.name));
         }
@@ -650,7 +964,7 @@ fn apply_rule(
     };
     for effect in &rule.effects {
         match effect {
-            Effect::Attach { child, parent, relation, place_child } => {
+            Effect::Attach { child, parent, relation, place_child, hides_child } => {
                 let (Some(c), Some(pa)) = (lookup(*child, work, notes), lookup(*parent, work, notes)) else {
                     continue;
                 };
@@ -679,7 +993,9 @@ fn apply_rule(
                 {
                     w.anchor.bbox = from_bottom_centre(bottom_centre(&parent_box), size(&w.anchor.bbox));
                 }
-                w.anchor.attachment = Some(geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel));
+                let mut attachment = geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel);
+                attachment.hidden = *hides_child;
+                w.anchor.attachment = Some(attachment);
             }
             Effect::Detach { child, parent } => {
                 let Some(c) = lookup(*child, work, notes) else { continue };

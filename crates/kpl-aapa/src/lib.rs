@@ -27,6 +27,6 @@ pub use params::{
     RelationRule,
 };
 pub use types::{
-    Action, ActionPhase, Anchor, AnchorStatus, Attachment, CameraPose, Percept, Relation, Symbol, WorldState,
-    bbox_array,
+    Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
+    Symbol, WorldState, bbox_array,
 };

@@ -74,6 +74,10 @@ pub struct Extensions {
     /// to restore the size (the paper names box size under partial occlusion as a failure). Off by
     /// default: it describes the sensor.
     pub restore_partial_boxes: bool,
+    /// Alignment favours established anchors (confidence of at least 0.5): the cost of eq. (1) to a
+    /// tentative anchor counts double, so a short-lived false detection kept as occluded does not
+    /// take the object that has been there all along when it reappears.
+    pub established_first: bool,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -97,6 +101,7 @@ impl Default for Extensions {
             scale_attached: true,
             motion_profile: MotionProfile::EaseInOut,
             restore_partial_boxes: false,
+            established_first: true,
         }
     }
 }
@@ -145,6 +150,10 @@ pub enum Effect {
         relation: Option<RelationRule>,
         #[serde(default)]
         place_child: ChildPlacement,
+        /// The child cannot be seen while attached (a cone over what it contains): its anchor is
+        /// not aligned to percepts until it is detached, so no other detection can take it.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        hides_child: bool,
     },
     /// The child is no longer attached; with `parent`, only if that is its parent (a gripper that
     /// lets go of a part it has just inserted does not undo the insertion).
@@ -220,8 +229,9 @@ impl Params {
             .map(|mut r| {
                 r.effects.retain(|e| matches!(e, Effect::Attach { .. } | Effect::DetachChildren { .. }));
                 for e in &mut r.effects {
-                    if let Effect::Attach { place_child, .. } = e {
+                    if let Effect::Attach { place_child, hides_child, .. } = e {
                         *place_child = ChildPlacement::Keep;
+                        *hides_child = false;
                     }
                 }
                 r
@@ -236,6 +246,7 @@ impl Params {
                 scale_attached: false,
                 motion_profile: MotionProfile::ConstantVelocity,
                 restore_partial_boxes: false,
+                established_first: false,
             },
             ..Params::cater()
         }
@@ -266,7 +277,7 @@ impl ActionRule {
     /// | `screw(obj, base)` | `attached(obj, base)`, `screwed(obj, base)` |
     /// | `mount(obj, base)` | `attached(obj, base)`, `mounted(obj, base)` |
     /// | `move(agent, obj)` started / completed | obj moving / stopped |
-    /// | `_contain(cone, obj)` completed | `attached(obj, cone)`, `contained(obj, cone)` |
+    /// | `_contain(cone, obj)` completed | `attached(obj, cone)`, `contained(obj, cone)`, obj hidden |
     /// | `_slide(obj)`, `_pick_place(obj)`, `_contain(cone, ..)` started / completed | moving / stopped |
     /// | `_pick_place(cone)` started | the cone's children released |
     pub fn defaults() -> Vec<ActionRule> {
@@ -276,6 +287,7 @@ impl ActionRule {
             parent,
             relation: Some(RelationRule { name: name.to_owned(), args }),
             place_child,
+            hides_child: false,
         };
         let rule = |action: &str, phase, effects| ActionRule { action: action.to_owned(), phase, effects };
         vec![
@@ -301,7 +313,13 @@ impl ActionRule {
                 Completed,
                 vec![
                     Effect::StopMoving { object: 0 },
-                    attach(1, 0, "contained", [1, 0], ChildPlacement::AtParentIfApart),
+                    Effect::Attach {
+                        child: 1,
+                        parent: 0,
+                        relation: Some(RelationRule { name: "contained".into(), args: [1, 0] }),
+                        place_child: ChildPlacement::AtParentIfApart,
+                        hides_child: true,
+                    },
                 ],
             ),
         ]

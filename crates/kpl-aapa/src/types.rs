@@ -133,6 +133,9 @@ pub struct Attachment {
     pub size: [f64; 2],
     /// The parent's scale (square root of its box area) when the geometry was fixed.
     pub parent_scale: f64,
+    /// The child cannot be seen while attached (contained): it is not aligned to percepts.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub hidden: bool,
 }
 
 /// One anchor: a symbol grounded in percepts (III-B).
@@ -202,6 +205,44 @@ pub struct WorldState {
     /// What this cycle could not use (an action naming no known anchor, ...). Cleared each cycle.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// Actions in progress whose moving object is named by a type that several anchors share: which
+    /// anchor it is, once its motion tells (or still undecided). Part of the memory, like the anchors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bindings: Vec<Binding>,
+}
+
+/// An anchor that may be the one an action moves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub symbol: Symbol,
+    /// Its box centre when the action started.
+    pub start: [f64; 2],
+    /// When it was first seen to have moved from there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub onset: Option<Time>,
+}
+
+/// An action whose first argument (the object it moves) names a type several anchors have, from its
+/// `started` event to its `completed` one. Its started effects wait until the anchor is known: for an
+/// action that names another, single object (`_contain(cone, snitch)`), the candidate nearest that
+/// object when the action completes; otherwise the candidate that started moving first after the
+/// action started (the earlier of two open actions on such a type takes the earlier mover; two
+/// started at once wait for their completion), or at completion the one that moved most.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Binding {
+    /// The `started` event.
+    pub action: Action,
+    /// When it started.
+    pub started: Time,
+    /// The anchors of the type then.
+    pub candidates: Vec<Candidate>,
+    /// The anchor decided on, once known (its started effects are then applied).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound: Option<Symbol>,
+    /// The action is over; the binding is kept while another action on the type is undecided, so
+    /// that one is not given this one's object.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub completed: bool,
 }
 
 impl WorldState {

@@ -470,3 +470,93 @@ fn partial_boxes_are_restored_only_when_one_side_is_being_cut() {
     let last = run(&aapa, &away).pop().unwrap();
     assert_eq!(last.anchor("s").unwrap().bbox, bx(106., 86., 114., 91.));
 }
+
+const CONE: &str = "large_red_cone_rubber";
+const SNITCH: &str = "small_gold_spl_metal";
+
+/// Two identical cones and the snitch, anchored; then the cone on the right (`right`, not the one
+/// the type alone would pick) comes down over the snitch: it rises for 5 frames, crosses, comes
+/// down, while the other one stays put or (`other_moves`) slides away at the same time.
+fn identical_cones(other_moves: bool) -> Vec<(Vec<Percept>, Vec<Action>)> {
+    let snitch = bx(100.0, 100.0, 110.0, 110.0);
+    let mut frames = Vec::new();
+    for f in 0..40 {
+        // Frames 10..=30: the right cone picks up (up 30 px over 5 frames), moves over the snitch, comes down.
+        let u = |a: f64, b: f64| ((f as f64 - a) / (b - a)).clamp(0.0, 1.0);
+        let lift = 30.0 * (u(10.0, 15.0) - u(25.0, 30.0));
+        let x = 200.0 + (100.0 - 200.0) * u(15.0, 25.0);
+        let right = bx(x - 8.0, 80.0 - lift, x + 18.0, 112.0 - lift);
+        // The left cone stays at 40, or slides left from frame 10 to 30.
+        let lx = if other_moves { 40.0 - 30.0 * u(10.0, 30.0) } else { 40.0 };
+        let left = bx(lx, 80.0, lx + 26.0, 112.0);
+        // The right cone is seen from frame 1: the left one is older, the one a type alone names.
+        let mut percepts = vec![p("cone0", CONE, left)];
+        if f > 0 {
+            percepts.push(p("cone1", CONE, right));
+        }
+        if f < 26 {
+            percepts.push(p("spl0", SNITCH, snitch));
+        }
+        let mut actions = Vec::new();
+        if f == 10 {
+            actions.push(Action::started("_contain", &[CONE, SNITCH], Some(30 * FRAME)));
+            if other_moves {
+                actions.push(Action::started("_slide", &[CONE], Some(30 * FRAME)));
+            }
+        }
+        if f == 30 {
+            actions.push(Action::completed("_contain", &[CONE, SNITCH]));
+            if other_moves {
+                actions.push(Action::completed("_slide", &[CONE]));
+            }
+        }
+        frames.push((percepts, actions));
+    }
+    frames
+}
+
+#[test]
+fn a_contain_by_one_of_two_identical_cones_attaches_to_the_one_that_moved() {
+    for other_moves in [false, true] {
+        let frames = identical_cones(other_moves);
+        let worlds = run(&cater(), &frames);
+        let last = worlds.last().unwrap();
+        let snitch = last.anchor("spl0").unwrap();
+        let parent = &snitch.attachment.as_ref().unwrap().parent;
+        let cone = last.anchor(parent).unwrap();
+        assert!(cone.bbox.x1 > 80.0, "other_moves {other_moves}: attached to {parent} at {:?}", cone.bbox);
+        assert_eq!(snitch.status, AnchorStatus::Attached);
+        assert!(last.has_relation("contained", "spl0", parent));
+        // No binding is left open once the actions completed.
+        assert!(last.bindings.iter().all(|b| b.completed), "{:?}", last.bindings);
+    }
+}
+
+#[test]
+fn a_contained_object_is_not_taken_by_another_detection() {
+    let mut frames = identical_cones(false);
+    // After the contain, a false detection of the snitch's class appears near the cone, then goes.
+    for (percepts, _) in &mut frames[31..34] {
+        percepts.push(p("ghost", SNITCH, bx(130.0, 95.0, 140.0, 105.0)));
+    }
+    let worlds = run(&cater(), &frames);
+    let snitch = worlds.last().unwrap().anchor("spl0").unwrap().clone();
+    assert_eq!(snitch.status, AnchorStatus::Attached);
+    assert!((snitch.bbox.x1 - 100.0).abs() < 3.0, "{:?}", snitch.bbox);
+}
+
+#[test]
+fn an_action_that_never_completes_is_forgotten() {
+    let aapa = cater();
+    let cones = vec![p("a", CONE, bx(0.0, 0.0, 20.0, 20.0)), p("b", CONE, bx(100.0, 0.0, 120.0, 20.0))];
+    let mut world = WorldState::default();
+    for f in 0..80 {
+        let actions =
+            if f == 20 { vec![Action::started("_slide", &[CONE], Some(25 * FRAME))] } else { vec![] };
+        world = aapa.step(f * FRAME, &cones, &actions, None, &world).unwrap();
+        if f == 21 {
+            assert_eq!(world.bindings.len(), 1, "an open binding");
+        }
+    }
+    assert!(world.bindings.is_empty());
+}

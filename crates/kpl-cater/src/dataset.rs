@@ -1,17 +1,12 @@
-//! A data directory in LA-CATER's layout, written by the generator and read by the evaluation:
-//!
-//! ```text
-//! DIR/manifest.json                         generator, seed, number of videos
-//! DIR/scenes/<video>.json                   CATER scene JSON (objects, movements, camera)
-//! DIR/bb/<video>_bb.json                    LA-CATER ground truth boxes
-//! DIR/perception/<video>_perfect.json       perfect perception
-//! DIR/perception/<video>_detector.json      the simulated detector
-//! ```
+//! Generating a data directory in LA-CATER's layout ([`crate::layout`]): per video the CATER scene
+//! JSON, `<video>_bb.json` beside it, perfect and detector perception, and, for the whole set,
+//! OPNet's annotation files and a manifest with the frame mix per category.
 //!
 //! Generation is deterministic given the seed: video `i` draws from ChaCha8 seeded with the seed on
 //! stream `i`, so the output does not depend on the number of threads.
 
-use std::path::{Path, PathBuf};
+use std::collections::BTreeMap;
+use std::path::Path;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -19,11 +14,54 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::categories::{FrameCategories, carried_frames, contained_frames, visible_frames};
 use crate::detector::{DetectorNoise, detect_video, perfect};
 use crate::error::CaterError;
-use crate::formats::{GroundTruth, PerceptionFile, Scene, read_json, write_json};
+use crate::formats::{
+    Annotations, CameraField, FRAMES, GroundTruth, PerceptionFile, Scene, read_json, write_annotation_file,
+    write_json,
+};
+use crate::layout::{
+    ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, ground_truth_path,
+    perception_path, scene_path,
+};
 use crate::render::{Camera, Rendered, render};
-use crate::scene::simulate;
+use crate::sim::{Motion, directions, simulate};
+
+/// What the generator makes.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GeneratorConfig {
+    pub motion: Motion,
+    pub noise: DetectorNoise,
+}
+
+/// How many frames fall in each category over a set of videos (OPNet's definitions).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct FrameMix {
+    pub frames: usize,
+    pub visible: usize,
+    pub occluded: usize,
+    pub contained: usize,
+    pub carried: usize,
+    /// Videos in which the snitch is contained at some frame.
+    pub videos_with_containment: usize,
+}
+
+impl FrameMix {
+    fn add(&mut self, c: &FrameCategories) {
+        self.frames += c.frames();
+        self.visible += c.visible.iter().filter(|v| **v).count();
+        self.occluded += (0..c.frames()).filter(|&f| c.occluded(f)).count();
+        self.contained += c.contained.iter().filter(|v| **v).count();
+        self.carried += c.carried.iter().filter(|v| **v).count();
+        self.videos_with_containment += usize::from(c.contained.iter().any(|v| *v));
+    }
+
+    /// A category's share of all frames, in percent.
+    pub fn percent(&self, count: usize) -> f64 {
+        if self.frames == 0 { 0.0 } else { 100.0 * count as f64 / self.frames as f64 }
+    }
+}
 
 /// `manifest.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -31,39 +69,15 @@ pub struct Manifest {
     pub generator: String,
     pub seed: u64,
     pub videos: usize,
-}
-
-/// A perception mode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Perception {
-    Perfect,
-    Detector,
-}
-
-impl Perception {
-    pub fn name(self) -> &'static str {
-        match self {
-            Perception::Perfect => "perfect",
-            Perception::Detector => "detector",
-        }
-    }
+    /// `max-two` (LA-CATER) or `all` (every object moves).
+    pub motion: String,
+    pub frame_mix: FrameMix,
+    /// Videos drawn again because objects collided.
+    pub redraws: usize,
 }
 
 pub fn video_name(index: usize) -> String {
     format!("CATER_new_{index:06}")
-}
-
-pub fn scene_path(dir: &Path, video: &str) -> PathBuf {
-    dir.join("scenes").join(format!("{video}.json"))
-}
-
-pub fn ground_truth_path(dir: &Path, video: &str) -> PathBuf {
-    dir.join("bb").join(format!("{video}_bb.json"))
-}
-
-pub fn perception_path(dir: &Path, video: &str, perception: Perception) -> PathBuf {
-    dir.join("perception").join(format!("{video}_{}.json", perception.name()))
 }
 
 /// Everything generated for one video.
@@ -73,46 +87,66 @@ pub struct GeneratedVideo {
     pub ground_truth: GroundTruth,
     pub perfect: PerceptionFile,
     pub detector: PerceptionFile,
+    pub categories: FrameCategories,
+    pub redraws: usize,
 }
 
 /// Generates video `index` of a data set with this seed.
-pub fn generate_video(seed: u64, index: usize) -> GeneratedVideo {
+pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> GeneratedVideo {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(index as u64);
     let name = video_name(index);
-    let sim = simulate(&mut rng, &name);
-    let camera = Camera::new(&sim.scene.camera.unwrap_or_else(|| crate::scene::sample_camera(&mut rng)));
+    let sim = simulate(&mut rng, config.motion);
+    let camera = Camera::new(sim.camera);
     let frames: Vec<Vec<Rendered>> =
         sim.states.iter().map(|states| render(&camera, &sim.objects, states)).collect();
     let mut ground_truth = GroundTruth::default();
-    let gt_per_object: Vec<Vec<[i32; 4]>> = (0..sim.objects.len())
-        .map(|i| {
-            frames
-                .iter()
-                .map(|f| match f[i].bbox {
-                    Some(b) => {
-                        let (x1, y1) = (b.x1.round() as i32, b.y1.round() as i32);
-                        [x1, y1, b.x2.round() as i32 - x1, b.y2.round() as i32 - y1]
-                    }
-                    None => [0, 0, 0, 0],
-                })
-                .collect()
-        })
-        .collect();
-    for (object, boxes) in sim.objects.iter().zip(&gt_per_object) {
-        ground_truth.objects.insert(object.info.key(), boxes.clone());
+    for (i, object) in sim.objects.iter().enumerate() {
+        ground_truth.objects.insert(object.info.key(), frames.iter().map(|f| f[i].ground_truth).collect());
     }
-    let classes: Vec<String> = sim.objects.iter().map(|o| o.info.class()).collect();
-    let perfect_frames = frames
+    // One class index per distinct class: identical objects share theirs, as a detector's labels do.
+    let mut classes: Vec<String> = Vec::new();
+    let object_class: Vec<u32> = sim
+        .objects
         .iter()
-        .enumerate()
-        .map(|(f, frame)| {
-            let boxes: Vec<[i32; 4]> = gt_per_object.iter().map(|b| b[f]).collect();
-            perfect(frame, &boxes)
+        .map(|o| {
+            let class = o.info.class();
+            let index = classes.iter().position(|c| *c == class).unwrap_or_else(|| {
+                classes.push(class);
+                classes.len() - 1
+            });
+            index as u32
         })
         .collect();
+    let perfect_frames = frames.iter().map(|frame| perfect(frame, &object_class)).collect();
     let mut detector_classes = classes.clone();
-    let detector_frames = detect_video(&mut rng, &frames, &mut detector_classes, &DetectorNoise::default());
+    let detector_frames =
+        detect_video(&mut rng, &frames, &mut detector_classes, &object_class, &config.noise);
+    let objects = sim
+        .objects
+        .iter()
+        .map(|o| {
+            let mut info = o.info.clone();
+            info.pixel_coords = Some(camera.pixel_coords(info.coords));
+            info
+        })
+        .collect();
+    let scene = Scene {
+        video: name.clone(),
+        split: Some("new".into()),
+        image_index: Some(index as u64),
+        image_filename: Some(format!("{name}.avi")),
+        directions: directions(),
+        objects,
+        movements: sim.movements,
+        camera: Some(CameraField::Location(sim.camera)),
+    };
+    let visible = visible_frames(&scene, &ground_truth, FRAMES, 0.0).unwrap_or_else(|_| vec![false; FRAMES]);
+    let categories = FrameCategories {
+        visible,
+        contained: contained_frames(&scene, FRAMES),
+        carried: carried_frames(&scene, FRAMES),
+    };
     GeneratedVideo {
         perfect: PerceptionFile {
             video: name.clone(),
@@ -126,8 +160,10 @@ pub fn generate_video(seed: u64, index: usize) -> GeneratedVideo {
             classes: detector_classes,
             frames: detector_frames,
         },
-        scene: sim.scene,
+        scene,
         ground_truth,
+        categories,
+        redraws: sim.redraws,
     }
 }
 
@@ -135,13 +171,26 @@ fn create_dir(path: &Path) -> Result<(), CaterError> {
     std::fs::create_dir_all(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })
 }
 
-/// Writes `videos` videos into `dir` with `threads` workers.
-pub fn generate(dir: &Path, videos: usize, seed: u64, threads: usize) -> Result<Manifest, CaterError> {
-    for sub in ["scenes", "bb", "perception"] {
+/// The frame lists of a mask, as OPNet's annotation files hold them.
+fn frame_list(mask: &[bool]) -> Vec<usize> {
+    mask.iter().enumerate().filter(|(_, v)| **v).map(|(f, _)| f).collect()
+}
+
+/// Writes `videos` videos into `dir` with `threads` workers, then OPNet's annotation files and the
+/// manifest.
+pub fn generate(
+    dir: &Path,
+    videos: usize,
+    seed: u64,
+    threads: usize,
+    config: &GeneratorConfig,
+) -> Result<Manifest, CaterError> {
+    for sub in ["scenes", "perception", ANNOTATIONS_DIR] {
         create_dir(&dir.join(sub))?;
     }
     let next = AtomicUsize::new(0);
     let first_error: Mutex<Option<CaterError>> = Mutex::new(None);
+    let categories: Mutex<BTreeMap<usize, (String, FrameCategories, usize)>> = Mutex::new(BTreeMap::new());
     std::thread::scope(|scope| {
         for _ in 0..threads.max(1) {
             scope.spawn(|| {
@@ -150,12 +199,16 @@ pub fn generate(dir: &Path, videos: usize, seed: u64, threads: usize) -> Result<
                     if index >= videos {
                         break;
                     }
-                    if let Err(e) = write_video(dir, &generate_video(seed, index)) {
+                    let video = generate_video(seed, index, config);
+                    if let Err(e) = write_video(dir, &video) {
                         if let Ok(mut slot) = first_error.lock() {
                             slot.get_or_insert(e);
                         }
                         next.store(videos, Ordering::Relaxed);
                         break;
+                    }
+                    if let Ok(mut c) = categories.lock() {
+                        c.insert(index, (video.scene.video.clone(), video.categories, video.redraws));
                     }
                 }
             });
@@ -164,14 +217,40 @@ pub fn generate(dir: &Path, videos: usize, seed: u64, threads: usize) -> Result<
     if let Some(e) = first_error.into_inner().ok().flatten() {
         return Err(e);
     }
-    let manifest = Manifest { generator: format!("kpl-cater {}", env!("CARGO_PKG_VERSION")), seed, videos };
+    let categories = categories.into_inner().unwrap_or_default();
+    let mut mix = FrameMix::default();
+    let (mut contained, mut carried, mut visible) =
+        (Annotations::new(), Annotations::new(), Annotations::new());
+    let mut redraws = 0;
+    for (name, c, r) in categories.values() {
+        mix.add(c);
+        redraws += r;
+        contained.insert(name.clone(), frame_list(&c.contained));
+        carried.insert(name.clone(), frame_list(&c.carried));
+        visible.insert(name.clone(), frame_list(&c.visible));
+    }
+    let annotations = dir.join(ANNOTATIONS_DIR);
+    write_annotation_file(&annotations.join(CONTAINMENT_FILE), &contained)?;
+    write_annotation_file(&annotations.join(CARRIED_FILE), &carried)?;
+    write_annotation_file(&annotations.join(VISIBLE_FILE), &visible)?;
+    let manifest = Manifest {
+        generator: format!("kpl-cater {}", env!("CARGO_PKG_VERSION")),
+        seed,
+        videos,
+        motion: match config.motion {
+            Motion::MaxTwo => "max-two".into(),
+            Motion::All => "all".into(),
+        },
+        frame_mix: mix,
+        redraws,
+    };
     write_json(&dir.join("manifest.json"), &manifest)?;
     Ok(manifest)
 }
 
 /// Writes one video's four files, creating the layout's folders if needed.
 pub fn write_video(dir: &Path, video: &GeneratedVideo) -> Result<(), CaterError> {
-    for sub in ["scenes", "bb", "perception"] {
+    for sub in ["scenes", "perception"] {
         create_dir(&dir.join(sub))?;
     }
     let name = &video.scene.video;
@@ -179,25 +258,6 @@ pub fn write_video(dir: &Path, video: &GeneratedVideo) -> Result<(), CaterError>
     video.ground_truth.write(&ground_truth_path(dir, name))?;
     video.perfect.write(&perception_path(dir, name, Perception::Perfect))?;
     video.detector.write(&perception_path(dir, name, Perception::Detector))
-}
-
-/// The videos of a data directory: the stems of `scenes/*.json`, sorted.
-pub fn list_videos(dir: &Path) -> Result<Vec<String>, CaterError> {
-    let scenes = dir.join("scenes");
-    let entries =
-        std::fs::read_dir(&scenes).map_err(|source| CaterError::Io { path: scenes.clone(), source })?;
-    let mut names = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|source| CaterError::Io { path: scenes.clone(), source })?;
-        let path = entry.path();
-        if path.extension().is_some_and(|e| e == "json")
-            && let Some(stem) = path.file_stem().and_then(|s| s.to_str())
-        {
-            names.push(stem.to_owned());
-        }
-    }
-    names.sort();
-    Ok(names)
 }
 
 pub fn read_manifest(dir: &Path) -> Result<Manifest, CaterError> {

@@ -1,37 +1,36 @@
-//! Snitch localisation on CATER-style videos, in LA-CATER's formats (Shamsian et al., used by the
+//! Snitch localisation on CATER videos, in LA-CATER's formats (Shamsian et al.'s OPNet, used by the
 //! AAPA paper's Table I).
 //!
-//! - [`formats`]: `<video>_bb.json` ground truth, CATER scene JSON, prediction files, perception.
-//! - [`scene`], [`render`], [`detector`]: the generator (3D scenes under CATER's rules, a pinhole
-//!   camera at 320x240 with depth-ordered occlusion, perfect perception and a noisy detector).
-//! - [`dataset`]: the data directory layout; deterministic, parallel generation.
+//! - [`formats`]: `<video>_bb.json`, CATER scene JSON, OPNet's perception pickles and annotation
+//!   files, this project's perception JSON, prediction files; [`classes`]: class names and OPNet's
+//!   class indices; [`layout`]: where a data directory keeps them.
+//! - [`sim`], [`render`], [`detector`]: the generator (CATER's own procedure for objects and
+//!   movements, CLEVR's camera at 320x240 with depth-ordered occlusion, perfect perception and a
+//!   calibrated detector); [`dataset`]: deterministic, parallel generation of a directory.
 //! - [`models`]: OPNet's heuristic baseline and AAPA (with and without actions, and as published).
-//! - [`score`]: OPNet-style IoU / L2 per category with ±SEM; [`eval`] runs a model over a directory.
+//! - [`categories`]: OPNet's frame categories; [`score`]: its IoU scoring with ±SEM; [`eval`] runs a
+//!   model over a directory and reports skipped videos with their reasons.
 //!
 //! ```no_run
-//! use kpl_cater::{dataset, eval, models::Model};
+//! use kpl_cater::{dataset, eval, layout::Perception, models::Model};
 //! let dir = std::path::Path::new("/tmp/cater");
-//! dataset::generate(dir, 10, 7, 2)?;
-//! let report = eval::evaluate(&eval::EvalOptions {
-//!     data: dir.to_owned(),
-//!     model: Model::Aapa,
-//!     perception: dataset::Perception::Perfect,
-//!     params: None,
-//!     threads: 2,
-//!     predictions_dir: None,
-//! })?;
+//! dataset::generate(dir, 10, 7, 2, &dataset::GeneratorConfig::default())?;
+//! let report = eval::evaluate(&eval::EvalOptions::new(dir, Model::Aapa, Perception::Perfect))?;
 //! println!("{:.2}", report.iou.overall.mean);
 //! # Ok::<(), kpl_cater::CaterError>(())
 //! ```
 
+pub mod categories;
+pub mod classes;
 pub mod dataset;
 pub mod detector;
 mod error;
 pub mod eval;
 pub mod formats;
+pub mod layout;
 pub mod models;
 pub mod render;
-pub mod scene;
 pub mod score;
+pub mod sim;
 
 pub use error::CaterError;

@@ -1,12 +1,17 @@
-//! Rendering a simulated frame to boxes: a pinhole camera at 320x240, each object's silhouette as
-//! the convex hull of its projected outline, ground-truth boxes (the whole object, hidden or not,
-//! clipped to the image) and depth-ordered occlusion: sample points of an object's silhouette are
-//! hidden by any nearer object's silhouette. Contained objects are not rendered.
+//! Rendering a simulated frame to boxes: CLEVR's pinhole camera at 320x240, each object's silhouette
+//! as the convex hull of its projected outline, the ground-truth box as OPNet's fork of CATER's
+//! renderer writes it (the bounds of the whole object's projection clamped to the image, rounded as
+//! Python rounds, `[x, y, w, h]`), and depth-ordered occlusion: sample points of an object's
+//! silhouette are hidden by any nearer object's silhouette, and an object under a cone is hidden.
+//!
+//! Objects are CLEVR's unit shapes scaled by their size and centred on their location: a cube of
+//! half extent `s`, a sphere (and the snitch) of radius `s`, a cylinder of radius `s` and height
+//! `2s`, a cone of base radius `s` from `z - s` to its apex at `z + s`.
 
 use kpl_core::BBox;
 
-use crate::formats::{HEIGHT, SceneCamera, WIDTH};
-use crate::scene::{ObjectState, Shape, SimObject};
+use crate::formats::{HEIGHT, WIDTH};
+use crate::sim::{FOCAL_PX, ObjectState, Shape, SimObject, camera_axes};
 
 /// Below this visible fraction an object counts as not visible (and perfect perception omits it).
 pub const VISIBLE_FRACTION: f64 = 0.1;
@@ -29,7 +34,7 @@ fn normalize(a: V3) -> V3 {
     [a[0] / n, a[1] / n, a[2] / n]
 }
 
-/// A pinhole camera looking at a point with the world's z axis up.
+/// CLEVR's camera at a location, with its base orientation.
 #[derive(Debug, Clone, Copy)]
 pub struct Camera {
     location: V3,
@@ -40,11 +45,9 @@ pub struct Camera {
 }
 
 impl Camera {
-    pub fn new(c: &SceneCamera) -> Camera {
-        let forward = normalize(sub(c.look_at, c.location));
-        let right = normalize(cross(forward, [0.0, 0.0, 1.0]));
-        let down = cross(forward, right);
-        Camera { location: c.location, right, down, forward, focal: c.focal_px }
+    pub fn new(location: [f64; 3]) -> Camera {
+        let [right, down, forward] = camera_axes();
+        Camera { location, right, down, forward, focal: FOCAL_PX }
     }
 
     /// Pixel coordinates, or `None` behind the camera.
@@ -60,6 +63,13 @@ impl Camera {
         ])
     }
 
+    /// CLEVR's `pixel_coords`: rounded pixel position and depth along the view.
+    pub fn pixel_coords(&self, p: V3) -> [f64; 3] {
+        let z = dot(sub(p, self.location), self.forward);
+        let [u, v] = self.project(p).unwrap_or([0.0, 0.0]);
+        [u.round(), v.round(), z]
+    }
+
     fn distance(&self, p: V3) -> f64 {
         let d = sub(p, self.location);
         dot(d, d).sqrt()
@@ -69,30 +79,36 @@ impl Camera {
 /// What the renderer knows of one object in one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rendered {
-    /// The full box clipped to the image, `None` when the object is entirely outside it.
+    /// The ground-truth box `[x, y, w, h]` as written to `<video>_bb.json`.
+    pub ground_truth: [i32; 4],
+    /// The whole box clipped to the image, `None` when the object is entirely outside it.
     pub bbox: Option<BBox>,
-    /// Fraction of its silhouette that is in the image and not hidden (0 when contained).
+    /// Fraction of its silhouette that is in the image and not hidden (0 under a cone).
     pub visible_fraction: f64,
-    /// The box of the visible part (what a detector sees), when anything is visible.
-    pub visible_bbox: Option<BBox>,
 }
 
-/// Silhouette outline points of an object in 3D.
+/// An object's outline points in 3D.
 fn outline(object: &SimObject, state: &ObjectState, camera: &Camera) -> Vec<V3> {
-    let [x, y, z] = state.position;
-    let s = object.half;
-    let circle = |centre: V3, radius: f64, n: usize| -> Vec<V3> {
+    let c = state.position;
+    let s = object.size;
+    let (sy, cy) = state.yaw.sin_cos();
+    let (st, ct) = state.tilt.sin_cos();
+    // Local -> world: about the object's y axis by the tilt, then about z by the yaw.
+    let place = |p: V3| {
+        let q = [ct * p[0] + st * p[2], p[1], -st * p[0] + ct * p[2]];
+        [c[0] + cy * q[0] - sy * q[1], c[1] + sy * q[0] + cy * q[1], c[2] + q[2]]
+    };
+    let circle = |z: f64, radius: f64, n: usize| -> Vec<V3> {
         (0..n)
             .map(|k| {
                 let a = k as f64 / n as f64 * std::f64::consts::TAU;
-                [centre[0] + radius * a.cos(), centre[1] + radius * a.sin(), centre[2]]
+                place([radius * a.cos(), radius * a.sin(), z])
             })
             .collect()
     };
     match object.shape {
         Shape::Sphere | Shape::Snitch => {
             // The circle perpendicular to the line of sight.
-            let c = [x, y, z + s];
             let v = normalize(sub(c, camera.location));
             let a = normalize(cross(v, [0.0, 0.0, 1.0]));
             let b = cross(v, a);
@@ -105,35 +121,26 @@ fn outline(object: &SimObject, state: &ObjectState, camera: &Camera) -> Vec<V3> 
                 .collect()
         }
         Shape::Cube => {
-            let h = 0.8 * s;
-            let (sin, cos) = state.yaw.sin_cos();
             let mut pts = Vec::with_capacity(8);
-            for (dx, dy) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
-                let (rx, ry) = (dx * cos - dy * sin, dx * sin + dy * cos);
-                pts.push([x + rx, y + ry, z]);
-                pts.push([x + rx, y + ry, z + 2.0 * h]);
+            for dx in [-s, s] {
+                for dy in [-s, s] {
+                    for dz in [-s, s] {
+                        pts.push(place([dx, dy, dz]));
+                    }
+                }
             }
             pts
         }
         Shape::Cylinder => {
-            let r = 0.8 * s;
-            let mut pts = circle([x, y, z], r, 12);
-            pts.extend(circle([x, y, z + 2.0 * r], r, 12));
+            let mut pts = circle(-s, s, 12);
+            pts.extend(circle(s, s, 12));
             pts
         }
         Shape::Cone => {
-            let mut pts = circle([x, y, z], s, 12);
-            pts.push([x, y, z + 2.0 * s]);
+            let mut pts = circle(-s, s, 12);
+            pts.push(place([0.0, 0.0, s]));
             pts
         }
-    }
-}
-
-/// Height of an object's centre above its base.
-fn centre_height(object: &SimObject) -> f64 {
-    match object.shape {
-        Shape::Cube | Shape::Cylinder => 0.8 * object.half,
-        Shape::Sphere | Shape::Snitch | Shape::Cone => object.half,
     }
 }
 
@@ -181,6 +188,29 @@ fn clip(b: BBox) -> Option<BBox> {
     (c.x1 < c.x2 && c.y1 < c.y2).then_some(c)
 }
 
+/// OPNet's `camera_view_bounds_2d` box from projected bounds: each bound clamped to the image, then
+/// `[round(x1), round(y1), round(x2 - x1), round(y2 - y1)]` with Python's rounding (ties to even).
+fn ground_truth_box(x1: f64, y1: f64, x2: f64, y2: f64) -> [i32; 4] {
+    let (x1, x2) = (x1.clamp(0.0, WIDTH), x2.clamp(0.0, WIDTH));
+    let (y1, y2) = (y1.clamp(0.0, HEIGHT), y2.clamp(0.0, HEIGHT));
+    [x1, y1, x2 - x1, y2 - y1].map(|v| v.round_ties_even() as i32)
+}
+
+/// Whether object `i` is under a cone: a larger cone whose base is below its top and whose axis is
+/// close enough that it is inside the cone (coming down over it, standing on it or lifting off it).
+fn under_cone(i: usize, objects: &[SimObject], states: &[ObjectState]) -> bool {
+    let [x, y, z] = states[i].position;
+    let (size, top) = (objects[i].size, states[i].position[2] + objects[i].size);
+    objects.iter().zip(states).enumerate().any(|(j, (cone, cs))| {
+        j != i
+            && cone.shape == Shape::Cone
+            && cone.size > size
+            && cs.position[2] - cone.size < top
+            && cs.position[2] - cone.size > z - size - 0.5
+            && ((cs.position[0] - x).powi(2) + (cs.position[1] - y).powi(2)).sqrt() < cone.size - 0.5 * size
+    })
+}
+
 /// Renders one frame.
 pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) -> Vec<Rendered> {
     struct Drawn {
@@ -192,7 +222,8 @@ pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) ->
     let drawn: Vec<Drawn> = objects
         .iter()
         .zip(states)
-        .map(|(object, state)| {
+        .enumerate()
+        .map(|(i, (object, state))| {
             let projected: Vec<[f64; 2]> =
                 outline(object, state, camera).into_iter().filter_map(|p| camera.project(p)).collect();
             let (mut x1, mut y1, mut x2, mut y2) =
@@ -203,55 +234,40 @@ pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) ->
                 x2 = x2.max(p[0]);
                 y2 = y2.max(p[1]);
             }
-            let [x, y, z] = state.position;
             Drawn {
                 hull: hull(projected),
                 bbox: BBox::new(x1, y1, x2, y2),
-                depth: camera.distance([x, y, z + centre_height(object)]),
-                drawn: !state.contained && x1.is_finite(),
+                depth: camera.distance(state.position),
+                drawn: x1.is_finite() && !under_cone(i, objects, states),
             }
         })
         .collect();
-    // An object under a cone whose rim is below the object's top is inside it: hidden whatever
-    // the depth order says (a cone coming down over it, or just lifting off it).
-    let inside_cone = |i: usize| {
-        let [x, y, z] = states[i].position;
-        let top = z + 2.0 * centre_height(&objects[i]);
-        objects.iter().zip(states).enumerate().any(|(j, (cone, cs))| {
-            j != i
-                && cone.shape == Shape::Cone
-                && !cs.contained
-                && cs.position[2] < top
-                && cone.half > objects[i].half
-                && ((cs.position[0] - x).powi(2) + (cs.position[1] - y).powi(2)).sqrt()
-                    < cone.half - 0.5 * objects[i].half
-        })
-    };
     drawn
         .iter()
-        .enumerate()
-        .map(|(i, d)| {
-            let bbox = if d.bbox.x1.is_finite() { clip(d.bbox) } else { None };
-            if !d.drawn || inside_cone(i) {
-                return Rendered { bbox, visible_fraction: 0.0, visible_bbox: None };
+        .map(|d| {
+            let finite = d.bbox.x1.is_finite();
+            let ground_truth = if finite {
+                ground_truth_box(d.bbox.x1, d.bbox.y1, d.bbox.x2, d.bbox.y2)
+            } else {
+                [0, 0, 0, 0]
+            };
+            let bbox = if finite { clip(d.bbox) } else { None };
+            if !d.drawn {
+                return Rendered { ground_truth, bbox, visible_fraction: 0.0 };
             }
             let occluders: Vec<&Drawn> = drawn
                 .iter()
-                .enumerate()
-                .filter(|&(j, o)| {
-                    j != i
-                        && o.drawn
+                .filter(|o| {
+                    o.drawn
                         && o.depth < d.depth
                         && o.bbox.x1 < d.bbox.x2
                         && d.bbox.x1 < o.bbox.x2
                         && o.bbox.y1 < d.bbox.y2
                         && d.bbox.y1 < o.bbox.y2
                 })
-                .map(|(_, o)| o)
                 .collect();
             let (w, h) = (d.bbox.width() / GRID as f64, d.bbox.height() / GRID as f64);
             let (mut total, mut seen) = (0usize, 0usize);
-            let mut vis = BBox::new(f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
             for gx in 0..GRID {
                 for gy in 0..GRID {
                     let p = [d.bbox.x1 + (gx as f64 + 0.5) * w, d.bbox.y1 + (gy as f64 + 0.5) * h];
@@ -269,27 +285,11 @@ pub fn render(camera: &Camera, objects: &[SimObject], states: &[ObjectState]) ->
                     });
                     if in_image && !hidden {
                         seen += 1;
-                        vis = BBox::new(
-                            vis.x1.min(p[0] - w / 2.0),
-                            vis.y1.min(p[1] - h / 2.0),
-                            vis.x2.max(p[0] + w / 2.0),
-                            vis.y2.max(p[1] + h / 2.0),
-                        );
                     }
                 }
             }
             let visible_fraction = if total == 0 { 0.0 } else { seen as f64 / total as f64 };
-            let visible_bbox = (seen > 0)
-                .then(|| {
-                    BBox::new(
-                        vis.x1.max(d.bbox.x1),
-                        vis.y1.max(d.bbox.y1),
-                        vis.x2.min(d.bbox.x2),
-                        vis.y2.min(d.bbox.y2),
-                    )
-                })
-                .and_then(clip);
-            Rendered { bbox, visible_fraction, visible_bbox }
+            Rendered { ground_truth, bbox, visible_fraction }
         })
         .collect()
 }

@@ -1,37 +1,33 @@
-//! OPNet-style scoring of snitch localisation.
-//!
-//! Matched to OPNet's evaluation code (Shamsian et al., `ResultsAnalyzer` in its tracking utilities
-//! and the containment annotations script; see docs/cater.md): IoU on integer boxes with the
+//! Scoring of snitch localisation as OPNet's `ResultsAnalyzer` does it: IoU on integer boxes with the
 //! +1-pixel convention (`(x2 - x1 + 1) * (y2 - y1 + 1)`), a mean per video over the frames of a
-//! category, a video without frames in a category left out of that category, and the mean ± SEM
-//! (sample standard deviation over √n) over videos. Categories per frame:
+//! category (a video without frames in a category is left out of it), and the mean ± SEM (sample
+//! standard deviation over √n, as pandas gives it) over videos. The second metric is the L2 distance
+//! of box centres in pixels (the AAPA paper's).
 //!
-//! - contained: from the end of a cone's `_contain` of the snitch to the start of that cone's next
-//!   `_pick_place` (to the last frame if none), inclusive;
-//! - carried: the frames of that cone's `_slide`s after the contain that end by the containment's end;
-//! - visible: the snitch is in the perfect perception of the frame;
-//! - occluded: neither visible nor contained.
-//!
-//! As in the AAPA paper (IV-C), frames count from the first frame the snitch is detected in the
-//! perception mode used. The second metric is the L2 distance of box centres in pixels.
+//! By default every frame counts, as in OPNet's code; [`FramesScored::FromFirstDetection`] counts
+//! frames from the first one in which the snitch is perceived, as the AAPA paper does (IV-C).
 
 use serde::{Deserialize, Serialize};
 
-use crate::formats::{IntBox, SNITCH_INSTANCE, Scene};
+use crate::categories::FrameCategories;
+use crate::formats::IntBox;
 
-/// IoU of two integer boxes, OPNet's +1 convention.
+/// IoU of two integer boxes, OPNet's +1 convention. Arithmetic is in 64 bits, so no box a file
+/// can hold overflows it; a box with no area gives 0.
 pub fn iou(a: IntBox, b: IntBox) -> f64 {
+    let [a, b] = [a, b].map(|x| x.map(i64::from));
     let w = (a[2].min(b[2]) - a[0].max(b[0]) + 1).max(0);
     let h = (a[3].min(b[3]) - a[1].max(b[1]) + 1).max(0);
-    let inter = f64::from(w) * f64::from(h);
-    let area = |x: IntBox| f64::from((x[2] - x[0] + 1).max(0)) * f64::from((x[3] - x[1] + 1).max(0));
+    let inter = w as f64 * h as f64;
+    let area = |x: [i64; 4]| (x[2] - x[0] + 1).max(0) as f64 * (x[3] - x[1] + 1).max(0) as f64;
     let union = area(a) + area(b) - inter;
     if union <= 0.0 { 0.0 } else { inter / union }
 }
 
 /// Distance of the box centres in pixels.
 pub fn centre_distance(a: IntBox, b: IntBox) -> f64 {
-    let c = |x: IntBox| [f64::from(x[0] + x[2]) / 2.0, f64::from(x[1] + x[3]) / 2.0];
+    let c =
+        |x: IntBox| [(f64::from(x[0]) + f64::from(x[2])) / 2.0, (f64::from(x[1]) + f64::from(x[3])) / 2.0];
     let (p, q) = (c(a), c(b));
     ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
 }
@@ -60,88 +56,55 @@ impl Category {
             Category::Overall => "overall",
         }
     }
-}
 
-/// Per-frame category membership of one video.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Categories {
-    pub visible: Vec<bool>,
-    pub contained: Vec<bool>,
-    pub carried: Vec<bool>,
-}
-
-impl Categories {
-    /// `visible[f]`: the snitch is visible in frame f (from perfect perception).
-    pub fn new(scene: &Scene, visible: Vec<bool>) -> Categories {
-        let frames = visible.len();
-        let (contained, carried) = containment_frames(scene, frames);
-        Categories { visible, contained, carried }
-    }
-
-    pub fn contains(&self, category: Category, frame: usize) -> bool {
-        match category {
-            Category::Visible => self.visible[frame],
-            Category::Occluded => !self.visible[frame] && !self.contained[frame],
-            Category::Contained => self.contained[frame],
-            Category::Carried => self.carried[frame],
+    pub fn contains(self, categories: &FrameCategories, frame: usize) -> bool {
+        match self {
+            Category::Visible => categories.visible[frame],
+            Category::Occluded => categories.occluded(frame),
+            Category::Contained => categories.contained[frame],
+            Category::Carried => categories.carried[frame],
             Category::Overall => true,
         }
     }
 }
 
-/// OPNet's containment rules on a scene's movements (see the module docs).
-pub fn containment_frames(scene: &Scene, frames: usize) -> (Vec<bool>, Vec<bool>) {
-    let mut contained = vec![false; frames];
-    let mut carried = vec![false; frames];
-    let last = frames.max(1) as i64 - 1;
-    let mark = |flags: &mut Vec<bool>, from: i64, to: i64| {
-        for f in from.max(0)..=to.min(last) {
-            flags[f as usize] = true;
-        }
-    };
-    for (instance, moves) in &scene.movements {
-        if !instance.contains("Cone") {
-            continue;
-        }
-        for (k, m) in moves.iter().enumerate() {
-            if !m.action.contains("_contain") || m.other.as_deref() != Some(SNITCH_INSTANCE) {
-                continue;
-            }
-            let later = &moves[k..];
-            let end = later.iter().find(|n| n.action.contains("_pick_place")).map_or(last, |n| n.start);
-            mark(&mut contained, m.end, end);
-            for slide in later.iter().filter(|n| n.action.contains("_slide") && n.end <= end) {
-                mark(&mut carried, slide.start, slide.end);
-            }
-        }
-    }
-    (contained, carried)
+/// Which frames of a video are scored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FramesScored {
+    /// Every frame (OPNet's analysis).
+    #[default]
+    All,
+    /// From the first frame in which the snitch is perceived (the AAPA paper, IV-C); a video in
+    /// which it never is contributes nothing.
+    FromFirstDetection,
 }
 
-/// One video's mean IoU and mean L2 per category (`None`: no frame of that category).
+/// One video's mean IoU and mean L2 per category (`None`: no scored frame of that category), and
+/// how many frames of each were scored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VideoScore {
     pub iou: [Option<f64>; 5],
     pub l2: [Option<f64>; 5],
+    pub frames: [usize; 5],
 }
 
-/// Scores predictions against the snitch's ground truth from `first_frame` on (no frame counts if
-/// the snitch is never detected).
+/// Scores predictions against the snitch's ground truth on the frames from `first_frame` on.
 pub fn score_video(
     predictions: &[IntBox],
     truth: &[IntBox],
-    categories: &Categories,
+    categories: &FrameCategories,
     first_frame: Option<usize>,
 ) -> VideoScore {
     let mut iou_sum = [0.0; 5];
     let mut l2_sum = [0.0; 5];
     let mut count = [0usize; 5];
-    let frames = predictions.len().min(truth.len()).min(categories.visible.len());
+    let frames = predictions.len().min(truth.len()).min(categories.frames());
     if let Some(first) = first_frame {
         for f in first..frames {
             let (i, d) = (iou(predictions[f], truth[f]), centre_distance(predictions[f], truth[f]));
             for (c, category) in Category::ALL.iter().enumerate() {
-                if categories.contains(*category, f) {
+                if category.contains(categories, f) {
                     iou_sum[c] += i;
                     l2_sum[c] += d;
                     count[c] += 1;
@@ -150,7 +113,7 @@ pub fn score_video(
         }
     }
     let mean = |sum: [f64; 5]| std::array::from_fn(|c| (count[c] > 0).then(|| sum[c] / count[c] as f64));
-    VideoScore { iou: mean(iou_sum), l2: mean(l2_sum) }
+    VideoScore { iou: mean(iou_sum), l2: mean(l2_sum), frames: count }
 }
 
 /// Mean ± SEM over the videos that have the category.
@@ -158,7 +121,7 @@ pub fn score_video(
 pub struct Summary {
     pub mean: f64,
     pub sem: f64,
-    /// Videos with at least one frame of the category.
+    /// Videos with at least one scored frame of the category.
     pub videos: usize,
 }
 

@@ -33,16 +33,20 @@ fn close(a: f64, b: f64) -> bool {
     (a.is_nan() && b.is_nan()) || a == b || (a - b).abs() <= 1e-12
 }
 
-fn counts_add_up(s: &Scores) {
+fn counts_add_up(s: &Scores, case: &Case) {
     let c = &s.clear;
     assert_eq!(c.matches + c.switches + c.misses, c.objects);
     assert_eq!(c.matches + c.switches + c.false_positives, c.predictions);
     assert_eq!(c.mostly_tracked + c.partially_tracked + c.mostly_lost, c.unique_objects);
     assert_eq!(s.identity.idtp + s.identity.idfn, c.objects);
     assert_eq!(s.identity.idtp + s.identity.idfp, c.predictions);
-    // A pair can only be a CLEAR match in frames where it is within the gate, so IDTP never
-    // exceeds the matches, and each trajectory is one assignment.
-    assert!(s.identity.idtp <= c.detections());
+    // In each frame the identity pairs within the gate form a matching, so IDTP is at most the
+    // smaller side summed over frames. It can exceed the CLEAR matches (seed 1396911834711900744:
+    // IDTP 46, CLEAR 44): CLEAR keeps last frame's pairs first, which can leave a frame's
+    // matching short of the largest one, as py-motmetrics does.
+    let pairs: usize = case.frames.iter().map(|(t, h)| t.len().min(h.len())).sum();
+    assert!(s.identity.idtp <= pairs, "IDTP {} > {pairs}", s.identity.idtp);
+    assert!(c.detections() <= pairs);
     for x in [s.identity.idf1, s.hota.hota, s.hota.det_a, s.hota.ass_a, s.hota.loc_a] {
         assert!(x.is_nan() || (0.0..=1.0).contains(&x), "{x}");
     }
@@ -94,8 +98,8 @@ proptest! {
         prop_assert!(close(a.identity.idp, b.identity.idr));
         prop_assert_eq!(&a.hota.per_alpha.tp, &b.hota.per_alpha.tp);
         prop_assert!(close(a.hota.hota, b.hota.hota) && close(a.hota.ass_a, b.hota.ass_a), "{} {}", a.hota.hota, b.hota.hota);
-        counts_add_up(&a);
-        counts_add_up(&b);
+        counts_add_up(&a, &case);
+        counts_add_up(&b, &case);
     }
 
     #[test]

@@ -367,6 +367,7 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             scale_attached: boolean(ctx, "scale_attached")?,
             motion_profile,
             restore_partial_boxes: boolean(ctx, "restore_partial_boxes")?,
+            established_first: boolean(ctx, "established_first")?,
         },
     })
 }
@@ -513,6 +514,11 @@ fn anchor_entry() -> Entry {
         "restore_partial_boxes",
         ext.restore_partial_boxes,
         "extension: restore the size of a detection cut by an overlapping one (for detectors that box the visible part)",
+    ))
+    .param(b(
+        "established_first",
+        ext.established_first,
+        "extension: alignment costs to tentative anchors (confidence below 0.5) count double",
     ))
     .param(Param::optional(
         "action_rules",

@@ -55,9 +55,10 @@ impl Source for Tracker {
         })
     }
 
-    /// A car that leaves the map is replaced by a new one: the traffic never ends.
+    /// Recorded traffic ends with its recording; in simulated traffic a car that leaves the map
+    /// is replaced by a new one, so it never ends.
     fn ends_by_itself(&self) -> bool {
-        false
+        self.params.traffic_file.is_some()
     }
 }
 

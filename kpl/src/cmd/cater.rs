@@ -1,33 +1,50 @@
-//! `kpl cater`: generate CATER-style videos in LA-CATER's layout and evaluate snitch localisation
-//! (the AAPA paper's Table I). Exit codes: 0 done, 1 the data is bad, 2 usage or I/O errors.
+//! `kpl cater`: generate CATER videos in LA-CATER's layout and evaluate snitch localisation (the AAPA
+//! paper's Table I) on them or on LA-CATER's own files. Exit codes: 0 done, 1 the data is bad (or,
+//! with `--strict`, a video was skipped), 2 usage or I/O errors.
 #![allow(clippy::print_stderr, reason = "the kpl binary is the one crate that prints")]
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Args, Subcommand, ValueEnum};
 use kpl_aapa::Params;
 use kpl_cater::CaterError;
-use kpl_cater::dataset::{self, Perception};
-use kpl_cater::eval::{self, EvalOptions, Report};
+use kpl_cater::dataset::{self, GeneratorConfig, Manifest};
+use kpl_cater::eval::{self, EvalOptions, PerceptionSource, Report, VisibleFrom, per_video_csv};
+use kpl_cater::layout::{self, Perception};
 use kpl_cater::models::Model;
-use kpl_cater::score::{Category, CategoryTable};
+use kpl_cater::score::{Category, CategoryTable, FramesScored};
+use kpl_cater::sim::Motion;
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Generate videos: scene JSON, `<video>_bb.json` ground truth, perfect and detector perception.
-    #[command(
-        after_help = "Example:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n\nLA-CATER's test set has 1371 videos (docs/cater.md)."
-    )]
+    /// Generate videos by CATER's procedure: scene JSON, `<video>_bb.json`, perfect and detector
+    /// perception, OPNet's annotation files.
+    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  \
+                      kpl cater generate --videos 20 --seed 2 --motion all --out /tmp/cater-all\n\n\
+                      LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
     #[command(
-        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
-                            kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json"
+        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  \
+                      kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
+                      kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json\n  \
+                      kpl cater eval --data /tmp/cater --model aapa --frames from-first-detection\n  \
+                      kpl cater eval --data /tmp/cater --model aapa --per-video /tmp/aapa.csv\n\n\
+                      LA-CATER's own files: --pickles DIR reads OPNet's perception pickles, --videos FILE a split, \
+                      --annotations DIR its annotation files (docs/cater.md)."
     )]
     Eval(EvalArgs),
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum MotionArg {
+    /// At most two objects or stacks move per segment, as LA-CATER was made.
+    MaxTwo,
+    /// Every object or stack moves in every segment (CATER's all_actions).
+    All,
 }
 
 #[derive(Debug, Args)]
@@ -41,6 +58,9 @@ pub struct GenerateArgs {
     /// Output directory (created if missing).
     #[arg(long)]
     out: PathBuf,
+    /// How many objects move per segment.
+    #[arg(long, value_enum, default_value = "max-two")]
+    motion: MotionArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -50,7 +70,7 @@ pub struct GenerateArgs {
 enum ModelArg {
     /// AAPA with CATER's actions (this implementation's extensions on).
     Aapa,
-    /// OPNet's programmed baseline: nearest object to the last known location, with its stack.
+    /// OPNet's programmed heuristic, as its code outputs it.
     Heuristic,
     /// AAPA without actions (the ablation).
     AapaNoActions,
@@ -62,28 +82,68 @@ enum ModelArg {
 enum PerceptionArg {
     /// Ground-truth boxes of the visible objects.
     Perfect,
-    /// The simulated noisy detector.
+    /// The simulated detector.
     Detector,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum FramesArg {
+    /// Every frame, as OPNet's analysis scores.
+    All,
+    /// From the first frame the snitch is perceived in, as the AAPA paper scores (IV-C).
+    FromFirstDetection,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum VisibleArg {
+    /// OPNet's definition: not in a cone and not covered by a nearer, larger object's box.
+    Opnet,
+    /// The snitch is in the perfect perception.
+    Perception,
 }
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Data directory written by `kpl cater generate` (or LA-CATER data in the same layout).
+    /// Data directory: `scenes/` (scene JSON and `<video>_bb.json`; `labels/` or `bb/` are looked in
+    /// for the latter too) and this project's `perception/`.
     #[arg(long)]
     data: PathBuf,
     #[arg(long, value_enum)]
     model: ModelArg,
-    #[arg(long, value_enum)]
+    /// This project's perception file to use.
+    #[arg(long, value_enum, default_value = "perfect")]
     perception: PerceptionArg,
+    /// Read OPNet's per-video perception pickles (`<video>.pkl`) from this directory instead.
+    #[arg(long, value_name = "DIR")]
+    pickles: Option<PathBuf>,
+    /// Evaluate only the videos this file lists (one name or path per line, OPNet's samples file).
+    #[arg(long, value_name = "FILE")]
+    videos: Option<PathBuf>,
+    /// OPNet's annotation files (containment, containment with move, visibility > 0); default
+    /// `DATA/containment_and_occlusions` when it exists, else computed from the scenes.
+    #[arg(long, value_name = "DIR")]
+    annotations: Option<PathBuf>,
+    /// Which frames are scored.
+    #[arg(long, value_enum, default_value = "all")]
+    frames: FramesArg,
+    /// How the visible category is decided.
+    #[arg(long, value_enum, default_value = "opnet")]
+    visible: VisibleArg,
     /// Also write the results as JSON to this file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
+    /// Write each video's results as CSV to this file.
+    #[arg(long, value_name = "FILE")]
+    per_video: Option<PathBuf>,
     /// AAPA parameters as JSON (missing fields keep the model's defaults).
     #[arg(long, value_name = "FILE")]
     params: Option<PathBuf>,
     /// Write each video's predictions as `<video>_bb.json` into this directory.
     #[arg(long, value_name = "DIR")]
     predictions: Option<PathBuf>,
+    /// Exit with 1 if any video was skipped (they are always listed).
+    #[arg(long)]
+    strict: bool,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -126,15 +186,37 @@ fn threads(requested: Option<usize>) -> usize {
 
 fn generate(args: GenerateArgs) -> Result<(), Failure> {
     let started = Instant::now();
-    let manifest = dataset::generate(&args.out, args.videos, args.seed, threads(args.threads))?;
+    let config = GeneratorConfig {
+        motion: match args.motion {
+            MotionArg::MaxTwo => Motion::MaxTwo,
+            MotionArg::All => Motion::All,
+        },
+        ..GeneratorConfig::default()
+    };
+    let manifest = dataset::generate(&args.out, args.videos, args.seed, threads(args.threads), &config)?;
     eprintln!(
-        "generated {} videos (seed {}) in {} in {:.1} s",
+        "generated {} videos (seed {}, motion {}) in {} in {:.1} s",
         manifest.videos,
         manifest.seed,
+        manifest.motion,
         args.out.display(),
         started.elapsed().as_secs_f64()
     );
+    eprintln!("{}", frame_mix(&manifest));
     Ok(())
+}
+
+fn frame_mix(manifest: &Manifest) -> String {
+    let m = &manifest.frame_mix;
+    format!(
+        "frames: {:.1} % visible, {:.1} % occluded, {:.1} % contained ({:.1} % carried); the snitch is contained in {} of {} videos",
+        m.percent(m.visible),
+        m.percent(m.occluded),
+        m.percent(m.contained),
+        m.percent(m.carried),
+        m.videos_with_containment,
+        manifest.videos
+    )
 }
 
 fn evaluate(args: EvalArgs) -> Result<(), Failure> {
@@ -144,13 +226,18 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
         ModelArg::AapaNoActions => Model::AapaNoActions,
         ModelArg::AapaPaper => Model::AapaPaper,
     };
-    let perception = match args.perception {
-        PerceptionArg::Perfect => Perception::Perfect,
-        PerceptionArg::Detector => Perception::Detector,
+    let perception = match (&args.pickles, args.perception) {
+        (Some(dir), _) => PerceptionSource::Pickles(dir.clone()),
+        (None, PerceptionArg::Perfect) => PerceptionSource::Json(Perception::Perfect),
+        (None, PerceptionArg::Detector) => PerceptionSource::Json(Perception::Detector),
     };
     let params = match &args.params {
         None => None,
-        Some(path) => Some(read_params(path, model, perception)?),
+        Some(path) => Some(read_params(path, model)?),
+    };
+    let videos = match &args.videos {
+        None => None,
+        Some(path) => Some(layout::read_video_list(path)?),
     };
     let started = Instant::now();
     let report = eval::evaluate(&EvalOptions {
@@ -160,25 +247,59 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
         params,
         threads: threads(args.threads),
         predictions_dir: args.predictions.clone(),
+        videos,
+        annotations: args.annotations.clone(),
+        frames: match args.frames {
+            FramesArg::All => FramesScored::All,
+            FramesArg::FromFirstDetection => FramesScored::FromFirstDetection,
+        },
+        visible: match args.visible {
+            VisibleArg::Opnet => VisibleFrom::Opnet,
+            VisibleArg::Perception => VisibleFrom::Perception(PerceptionSource::Json(Perception::Perfect)),
+        },
     })?;
     let elapsed = started.elapsed().as_secs_f64();
     let mut stdout = std::io::stdout().lock();
     let write_error = |e: std::io::Error| Failure::Usage(format!("writing the table: {e}"));
     stdout.write_all(table(&report).as_bytes()).map_err(write_error)?;
-    eprintln!("evaluated {} videos in {elapsed:.2} s", report.videos);
+    for s in report.skipped.iter().take(20) {
+        eprintln!("skipped {}: {}", s.video, s.reason);
+    }
+    if report.skipped.len() > 20 {
+        eprintln!("... and {} more skipped videos (all are in --json)", report.skipped.len() - 20);
+    }
+    eprintln!(
+        "evaluated {} videos ({} skipped) in {elapsed:.2} s; categories from {}",
+        report.videos,
+        report.skipped.len(),
+        report.categories_from
+    );
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&json_report(&report))
             .map_err(|e| Failure::Usage(format!("encoding the JSON report: {e}")))?;
-        std::fs::write(path, text + "\n").map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
+        write_file(path, &(text + "\n"))?;
+    }
+    if let Some(path) = &args.per_video {
+        write_file(path, &per_video_csv(&report))?;
+    }
+    if report.videos == 0 {
+        return Err(Failure::Data("no video could be scored".into()));
+    }
+    if args.strict && !report.skipped.is_empty() {
+        return Err(Failure::Data(format!("{} videos skipped (--strict)", report.skipped.len())));
     }
     Ok(())
 }
 
-fn read_params(path: &std::path::Path, model: Model, perception: Perception) -> Result<Params, Failure> {
+fn write_file(path: &Path, text: &str) -> Result<(), Failure> {
+    std::fs::write(path, text).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))
+}
+
+fn read_params(path: &Path, model: Model) -> Result<Params, Failure> {
     let text =
         std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
     // Fields missing from the file keep the model's defaults.
-    let mut base = serde_json::to_value(model.default_params(perception))
+    let mut base = serde_json::to_value(model.default_params())
         .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
     let overrides: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;
@@ -189,7 +310,8 @@ fn read_params(path: &std::path::Path, model: Model, perception: Perception) -> 
     serde_json::from_value(base).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))
 }
 
-/// `{"model", "perception", "videos", "iou": {category: {mean, sem}}, "l2": {...}}`.
+/// `{"model", "perception", "videos", "skipped", "frames", "categories_from", "frame_counts",
+/// "iou": {category: {mean, sem, videos}}, "l2": {...}}`.
 fn json_report(report: &Report) -> serde_json::Value {
     let metric = |t: &CategoryTable| {
         let mut map = serde_json::Map::new();
@@ -202,10 +324,16 @@ fn json_report(report: &Report) -> serde_json::Value {
         }
         serde_json::Value::Object(map)
     };
+    let counts: serde_json::Map<String, serde_json::Value> =
+        Category::ALL.iter().zip(report.frame_counts).map(|(c, n)| (c.name().to_owned(), n.into())).collect();
     serde_json::json!({
         "model": report.model,
         "perception": report.perception,
         "videos": report.videos,
+        "skipped": report.skipped,
+        "frames": report.frames,
+        "categories_from": report.categories_from,
+        "frame_counts": counts,
         "iou": metric(&report.iou),
         "l2": metric(&report.l2),
     })

@@ -14,8 +14,8 @@
 use std::path::PathBuf;
 
 use kpl_aapa::CameraPose;
-use kpl_cater::dataset::{self, Perception};
 use kpl_cater::formats::{PerceptionFile, Scene};
+use kpl_cater::layout::{self, Perception};
 use kpl_cater::models::{FRAME_US, actions_per_frame};
 use kpl_core::{Time, Value};
 use kpl_runtime::context::SourceContext;
@@ -62,8 +62,8 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn Source>, BuildError> {
         "detector" => Perception::Detector,
         _ => Perception::Perfect,
     };
-    let scene = Scene::read(&dataset::scene_path(&dir, &video)).map_err(|e| ctx.error(e.to_string()))?;
-    let perception = PerceptionFile::read(&dataset::perception_path(&dir, &video, perception))
+    let scene = Scene::read(&layout::scene_path(&dir, &video)).map_err(|e| ctx.error(e.to_string()))?;
+    let perception = PerceptionFile::read(&layout::perception_path(&dir, &video, perception))
         .map_err(|e| ctx.error(e.to_string()))?;
     Ok(Box::new(Video { scene, perception }))
 }

@@ -267,7 +267,7 @@ field_names! {
     partial = "partial", attachment = "attachment", parent = "parent", relation = "relation",
     offset = "offset", size = "size", parent_scale = "parent_scale", type_votes = "type_votes",
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
-    relations = "relations", notes = "notes",
+    relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -348,6 +348,9 @@ fn anchor_value(a: &Anchor) -> Value {
         geometry.push((n.offset.clone(), floats(&att.offset)));
         geometry.push((n.size.clone(), floats(&att.size)));
         geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
+        if att.hidden {
+            geometry.push((n.hidden.clone(), Value::Bool(true)));
+        }
         fields.push((n.attachment.clone(), named(geometry)));
     }
     if !type_votes.is_empty() {
@@ -373,6 +376,14 @@ pub(crate) fn world_to_value(w: &WorldState) -> Value {
     fields.push((n.anchors.clone(), Value::List(w.anchors.iter().map(anchor_value).collect())));
     fields.push((n.relations.clone(), Value::List(w.relations.iter().map(relation_value).collect())));
     fields.push((n.notes.clone(), Value::List(w.notes.iter().map(|note| Value::str(note)).collect())));
+    if !w.bindings.is_empty() {
+        // Open actions on one of several identical objects: memory, carried as the library's serde
+        // form (read back by `world_from_value`).
+        let json = serde_json::to_value(&w.bindings).unwrap_or_default();
+        if let Ok(value) = Value::from_json_untyped(&json) {
+            fields.push((n.bindings.clone(), value));
+        }
+    }
     named(fields)
 }
 

@@ -1,16 +1,20 @@
-//! The snitch localisation models: OPNet's programmed heuristic baseline, AAPA with CATER's actions,
-//! AAPA without actions (the ablation) and AAPA exactly as published (`aapa-paper`, no
-//! extensions, attachments from `_contain` only). Each turns a video's perception into one
-//! predicted snitch box per frame (`[0, 0, 0, 0]` when it has none, as the paper scores it).
+//! The snitch localisation models: OPNet's programmed heuristic ([`heuristic`]), AAPA with CATER's
+//! actions, AAPA without actions (the ablation) and AAPA exactly as published (`aapa-paper`, no
+//! extensions, attachments from `_contain` only). Each turns a video's perception into one predicted
+//! snitch box per frame (`[0, 0, 0, 0]` when AAPA has none, which the scoring counts as a miss, as
+//! the paper does).
+
+mod heuristic;
 
 use std::collections::HashMap;
 
 use kpl_aapa::{Aapa, Action, Params, WorldState};
 use kpl_core::{BBox, Time};
 
-use crate::dataset::Perception;
+pub use heuristic::heuristic;
+
 use crate::error::CaterError;
-use crate::formats::{IntBox, PerceptionFile, SNITCH_CLASS, Scene};
+use crate::formats::{IntBox, MovementKind, PerceptionFile, SNITCH_CLASS, Scene};
 
 /// Microseconds per frame (30 fps).
 pub const FRAME_US: Time = 33_333;
@@ -39,17 +43,11 @@ impl Model {
         Model::ALL.into_iter().find(|m| m.name() == name)
     }
 
-    /// The AAPA parameters this model uses unless overridden. With the detector, which boxes only
-    /// the visible part of a partly hidden object, `aapa` and `aapa-no-actions` restore partial
-    /// boxes; perfect perception gives whole boxes, so there it is off.
-    pub fn default_params(self, perception: Perception) -> Params {
+    /// The AAPA parameters this model uses unless overridden.
+    pub fn default_params(self) -> Params {
         match self {
             Model::AapaPaper => Params::paper_cater(),
-            _ => {
-                let mut params = Params::cater();
-                params.extensions.restore_partial_boxes = perception == Perception::Detector;
-                params
-            }
+            _ => Params::cater(),
         }
     }
 }
@@ -60,7 +58,9 @@ fn to_int(b: &BBox) -> IntBox {
 
 /// CATER's movements as AAPA action events, per frame: a `started` event at a move's first frame
 /// (with its end time) and a `completed` one at its last. Arguments are object classes, which is
-/// how AAPA's anchors (named by the detector) can be found from the annotations.
+/// how AAPA's anchors (named by the detector) can be found from the annotations. `_no_op` records
+/// (an object that stays put) and `_rotate`s (in place) are passed on too; AAPA's rules give them
+/// no effect. Moves past the video's last frame complete at frame `frames` and are not delivered.
 pub fn actions_per_frame(scene: &Scene, frames: usize) -> Vec<Vec<Action>> {
     let mut out = vec![Vec::new(); frames];
     let class_of: HashMap<&str, String> =
@@ -69,6 +69,9 @@ pub fn actions_per_frame(scene: &Scene, frames: usize) -> Vec<Vec<Action>> {
     for (instance, moves) in &scene.movements {
         let Some(actor) = class_of.get(instance.as_str()) else { continue };
         for m in moves {
+            if m.kind() == Some(MovementKind::NoOp) {
+                continue;
+            }
             let mut args: Vec<&str> = vec![actor.as_str()];
             if let Some(other) = m.other.as_deref().and_then(|o| class_of.get(o)) {
                 args.push(other.as_str());
@@ -124,55 +127,4 @@ pub fn predict(
             Ok(out)
         }
     }
-}
-
-/// OPNet's programmed baseline: follow the snitch while it is detected; when it (or the object
-/// being followed) disappears, switch to the detected object nearest to the last known location
-/// and push the lost one on a stack; when the object on top of the stack is detected again, go
-/// back to it. Objects are identified by class, as in OPNet's code.
-pub fn heuristic(perception: &PerceptionFile) -> Vec<IntBox> {
-    let snitch = perception.classes.iter().position(|c| c == SNITCH_CLASS).map(|i| i as u32);
-    let mut tracked = snitch;
-    let mut stack: Vec<Option<u32>> = Vec::new();
-    let mut last: [f64; 4] = [0.0; 4];
-    let mut out = Vec::with_capacity(perception.frames.len());
-    for detections in &perception.frames {
-        // One box per class: the first, as OPNet's padding keeps.
-        let find =
-            |class: Option<u32>| class.and_then(|c| detections.iter().find(|d| d.class == c)).map(|d| d.bbox);
-        let nearest = |to: [f64; 4]| -> Option<(u32, [f64; 4])> {
-            let centre = |b: [f64; 4]| [(b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0];
-            let c = centre(to);
-            detections
-                .iter()
-                .min_by(|a, b| {
-                    let da = centre(a.bbox);
-                    let db = centre(b.bbox);
-                    let d = |p: [f64; 2]| (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
-                    d(da).total_cmp(&d(db))
-                })
-                .map(|d| (d.class, d.bbox))
-        };
-        if let Some(b) = find(snitch) {
-            tracked = snitch;
-            stack.clear();
-            last = b;
-        } else if let Some(b) = find(tracked) {
-            // The followed object is visible: go back down the stack if its top reappeared.
-            match stack.last().copied().and_then(|top| find(top).map(|tb| (top, tb))) {
-                Some((top, tb)) => {
-                    stack.pop();
-                    tracked = top;
-                    last = tb;
-                }
-                None => last = b,
-            }
-        } else if let Some((class, b)) = nearest(last) {
-            stack.push(tracked);
-            tracked = Some(class);
-            last = b;
-        }
-        out.push(last.map(|v| v.round() as i32));
-    }
-    out
 }
