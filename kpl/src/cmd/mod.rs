@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod bench_anchor;
 pub mod bench_runtime;
+pub mod bench_situations;
 pub mod cater;
 pub mod check;
 pub mod explain;
