@@ -292,7 +292,7 @@ mod tests {
         let gap = call("time_gap", &[a.clone(), b.clone()]).as_f64().unwrap();
         assert!((gap - 16.0 / 30.0).abs() < 1e-9, "{gap}");
         assert_eq!(call("time_gap", &[b.clone(), a.clone()]), Value::Float(NO_TIME_GAP_S));
-        assert_eq!(call("wrong_way", &[a.clone()]), Value::Bool(false));
+        assert_eq!(call("wrong_way", &[a]), Value::Bool(false));
     }
 
     #[test]

@@ -19,8 +19,7 @@ use kpl_sim::recorded::{VehicleTypes, read_steps};
 const AFTER_HELP: &str = "\
 Examples:
   kpl run specs/traffic/sumo_situations.kpl --clock sim --out out
-  kpl situations out/sumo_situations --traffic specs/traffic/sumo/overtake/fcd.xml.gz \\
-      --network specs/traffic/sumo/overtake/net.xml.gz --vtypes specs/traffic/sumo/overtake/vtypes.xml
+  kpl situations out/sumo_situations --traffic specs/traffic/sumo/overtake/fcd.xml.gz
 
 The recognised situations are the recorded verdict records with `verdict: true`, `start` and `end`
 of the monitors named overtake, speeding, stopped, tailgating (other monitors are listed without a
@@ -39,10 +38,12 @@ pub struct Args {
     /// The recorded traffic the run observed: SUMO FCD output with `lane` and `pos` (gzipped or not).
     #[arg(long, value_name = "FILE")]
     traffic: PathBuf,
-    /// The road network of the traffic (speed limits, lanes, junctions).
+    /// The road network of the traffic (speed limits, lanes, junctions) [default: net.xml.gz
+    /// beside the traffic file].
     #[arg(long, value_name = "FILE")]
-    network: PathBuf,
-    /// The vehicle types of the traffic (lengths), as for `sim.uav_tracker`'s `vtypes_file`.
+    network: Option<PathBuf>,
+    /// The vehicle types of the traffic (lengths), as for `sim.uav_tracker`'s `vtypes_file`
+    /// [default: vtypes.xml beside the traffic file, if there is one; else SUMO's defaults].
     #[arg(long, value_name = "FILE")]
     vtypes: Option<PathBuf>,
     /// The stream of cars whose symbols the situations name.
@@ -102,9 +103,12 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         .then(|| (args.slack * 1e6).round() as kpl_core::Time)
         .ok_or((2, format!("--slack must be a number of seconds, not {}", args.slack)))?;
     let config = Config::new(args.max_distance).map_err(|e| (2, e.to_string()))?;
+    let beside = |name: &str| args.traffic.parent().map_or_else(|| PathBuf::from(name), |dir| dir.join(name));
+    let network_path = args.network.clone().unwrap_or_else(|| beside("net.xml.gz"));
     let network =
-        RoadNetwork::load(&args.network).map_err(|e| (2, format!("{}: {e}", args.network.display())))?;
-    let types = match &args.vtypes {
+        RoadNetwork::load(&network_path).map_err(|e| (2, format!("{}: {e}", network_path.display())))?;
+    let vtypes = args.vtypes.clone().or_else(|| Some(beside("vtypes.xml")).filter(|p| p.is_file()));
+    let types = match &vtypes {
         Some(path) => VehicleTypes::read(path).map_err(|e| (2, e.to_string()))?,
         None => VehicleTypes::builtin(),
     };
