@@ -36,6 +36,8 @@ codes = [
 ("E0144","Host declared twice","Each host has one `host` block.",["duplicate_host"]),
 ("E0145","Two deploy sections","A spec has at most one `deploy` section.",["deploy_twice"]),
 ("E0146","Invalid zenoh endpoint","Endpoints are zenoh locators `PROTOCOL/ADDRESS`, with a port for tcp, udp, tls, quic and ws (`tcp/127.0.0.1:7447`).",["bad_endpoint"]),
+("E0147","Link protocol not built in","kpl links hosts over `tcp/` and `tls/` (TLS needs the deployment's keys: `kpl keys`, then `kpl run --keys`); an endpoint of another protocol could not be opened by `kpl run`, so `kpl check` refuses it.",["protocol_not_built_in"]),
+("E0148","Empty deployment name","`deploy NAME { ... }` names the deployment (part of every key between its hosts); the name cannot be empty. Leave it out to use `default`, or give one with `kpl run --deployment`.",["empty_deployment_name"]),
 ("E0150","Link condition missing","A link specification needs `establish`, `reestablish` and `maintain` conditions.",["condition_missing"]),
 ("E0151","Link condition given twice","Each condition appears once in a link; combine alternatives with `and` / `or`.",["condition_twice"]),
 ("E0152","No producer of a type","A link from type A (or a monitor quantifying over A) needs a process that produces objects of exactly type A: a source or compute declared with that type, or a link `... -> A`. Name another stream with `input`.",["no_producer"]),

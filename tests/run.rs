@@ -3,7 +3,10 @@
 //! - each policy, applied to one recorded stream, gives the expected samples and counts;
 //! - a monitor's verdicts come at the violations and at the end;
 //! - malformed input is counted and reported with its line, the run goes on, `--strict` stops it;
-//! - `--for` and Ctrl-C end a wall-clock run cleanly, with the sinks flushed;
+//! - `--for` and Ctrl-C end a wall-clock run cleanly, with the sinks flushed; SIGTERM alike, with
+//!   the same summary and its own exit status;
+//! - hostile replay paths (a directory, `/dev/zero`, valid times near the end of 64 bits) give a
+//!   clear error, without spinning or growing;
 //! - `RUST_LOG` turns on the runtime's logs.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests
 
@@ -161,34 +164,139 @@ fn for_ends_a_wall_clock_run() {
     assert!(t.windows(2).all(|w| w[1] - w[0] == 10_000));
 }
 
-#[test]
-fn ctrl_c_stops_cleanly_and_flushes_the_sinks() {
-    let out = out_dir("interrupt");
-    let mut child =
-        kpl(&["run", "--quiet", "specs/run/endless.kpl", "--clock", "wall", "--out", out.to_str().unwrap()])
-            .spawn()
-            .unwrap();
-    // Wait until the run has written something, then interrupt it.
+/// Runs the endless spec on the wall clock until it has written samples, then sends it `signal`
+/// (`INT`, `TERM`); returns its exit status, standard error and output folder.
+fn interrupt_with(signal: &str) -> (Option<i32>, String, PathBuf) {
+    let out = out_dir(&format!("interrupt-{signal}"));
+    let mut child = kpl(&["run", "specs/run/endless.kpl", "--clock", "wall", "--out", out.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap());
+    // Wait until the run has written something (the sink's buffer went to the file), then stop it.
     let file = out.join("ticks.jsonl");
-    for _ in 0..200 {
+    for _ in 0..600 {
         std::thread::sleep(std::time::Duration::from_millis(50));
-        if std::fs::metadata(out.join("summary.json")).is_err()
-            && child.try_wait().unwrap().is_none()
-            && file.exists()
-        {
+        if std::fs::metadata(&file).is_ok_and(|m| m.len() > 0) || child.try_wait().unwrap().is_some() {
             break;
         }
     }
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    let status =
+        Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
     assert!(status.success());
     let status = child.wait().unwrap();
-    assert_eq!(status.code(), Some(130));
-    assert_eq!(summary(&out)["ending"], "interrupted");
-    let ticks = lines(&file); // every line is whole JSON: the sink was flushed, not cut
-    assert!(!ticks.is_empty());
-    let delivered = summary(&out)["summary"]["streams"][0]["delivered"].as_u64().unwrap();
-    assert_eq!(ticks.len() as u64, delivered, "every sample that reached the sink is in its file");
+    (status.code(), reader.join().unwrap(), out)
+}
+
+/// The summary table without what depends on timing (times and counts).
+fn summary_shape(stderr: &str) -> Vec<String> {
+    let start = stderr.find("run ended").unwrap_or_else(|| panic!("no summary:\n{stderr}"));
+    stderr[start..]
+        .lines()
+        .map(|l| {
+            let words: Vec<&str> = l
+                .split_whitespace()
+                .filter(|w| !w.chars().next().is_some_and(|c| c.is_ascii_digit()))
+                .collect();
+            let line = words.join(" ").replace("SIGTERM", "SIGNAL").replace("Ctrl-C", "SIGNAL");
+            // The output folder and the files' sizes differ between two runs; their names do not.
+            match line.split_once(' ') {
+                Some((_, "B" | "kB" | "MB")) => line.split(' ').next().unwrap_or("").to_string(),
+                _ if line.starts_with("outputs in ") => "outputs in OUT".to_string(),
+                _ => line,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn ctrl_c_and_sigterm_stop_alike_and_flush_the_sinks() {
+    let (int_code, int_err, int_out) = interrupt_with("INT");
+    let (term_code, term_err, term_out) = interrupt_with("TERM");
+    assert_eq!(int_code, Some(130), "{int_err}");
+    assert_eq!(term_code, Some(143), "{term_err}");
+    assert!(int_err.contains("run ended (interrupted by Ctrl-C)"), "{int_err}");
+    assert!(term_err.contains("run ended (interrupted by SIGTERM)"), "{term_err}");
+    assert_eq!(summary_shape(&int_err), summary_shape(&term_err), "the same summary");
+    for (out, signal) in [(&int_out, "SIGINT"), (&term_out, "SIGTERM")] {
+        let report = summary(out);
+        assert_eq!(report["ending"], "interrupted");
+        assert_eq!(report["signal"], signal);
+        let ticks = lines(&out.join("ticks.jsonl")); // every line is whole JSON: flushed, not cut
+        assert!(!ticks.is_empty());
+        let delivered = report["summary"]["streams"][0]["delivered"].as_u64().unwrap();
+        assert_eq!(ticks.len() as u64, delivered, "every sample that reached the sink is in its file");
+    }
+}
+
+/// Runs a spec with a hang guard, sampling the process's resident memory; returns its exit
+/// status, standard error and the largest resident set seen (bytes).
+fn run_watched(spec: &str, out: &Path, extra: &[&str]) -> (Option<i32>, String, u64) {
+    let mut child = kpl(&["run", "--quiet", spec, "--out", out.to_str().unwrap()])
+        .args(extra)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap());
+    let status_file = format!("/proc/{}/status", child.id());
+    let start = std::time::Instant::now();
+    let mut peak = 0u64;
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if let Ok(text) = std::fs::read_to_string(&status_file)
+            && let Some(kb) = text.lines().find_map(|l| l.strip_prefix("VmRSS:"))
+        {
+            let kb: u64 = kb.trim().trim_end_matches("kB").trim().parse().unwrap_or(0);
+            peak = peak.max(kb * 1024);
+        }
+        if start.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            panic!("`kpl run {spec}` did not end within two minutes (spinning?)");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    (status.code(), reader.join().unwrap(), peak)
+}
+
+#[test]
+fn hostile_replay_paths_get_a_clear_error() {
+    // A directory: refused when the run starts.
+    let out = out_dir("replay-dir");
+    let (code, stderr, _) = run_watched("specs/run/replay_directory.kpl", &out, &[]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("cannot replay specs/run/data: it is a directory"), "{stderr}");
+
+    // /dev/zero never ends a line: the replay stops at the limit, the run reports it and ends.
+    let out = out_dir("replay-zero");
+    for clock in ["sim", "wall"] {
+        let (code, stderr, peak) = run_watched("specs/run/replay_dev_zero.kpl", &out, &["--clock", clock]);
+        assert_eq!(code, Some(1), "{stderr}");
+        let report = summary(&out);
+        let failure = report["failures"][0].as_str().unwrap();
+        assert!(failure.contains("cannot replay /dev/zero:1: no line break within 16 MiB"), "{failure}");
+        // The limit, a read buffer and the runtime; not the gigabytes an unbounded line would take.
+        assert!(peak < 256 << 20, "resident memory peaked at {peak} bytes");
+    }
+
+    // Valid times near the end of 64 bits: kept in simulated time; not movable to the wall clock.
+    let out = out_dir("replay-far");
+    let (code, stderr, _) = run_watched("specs/run/replay_far_future.kpl", &out, &[]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let valid: Vec<i64> =
+        lines(&out.join("replayed.jsonl")).iter().map(|r| r["valid"].as_i64().unwrap()).collect();
+    assert_eq!(valid, [0, 1000, 9_223_372_036_854_775_000]);
+    let (code, stderr, _) =
+        run_watched("specs/run/replay_far_future.kpl", &out, &["--clock", "wall", "--for", "2s"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(lines(&out.join("replayed.jsonl")).len(), 2);
+    let replay = summary(&out)["summary"]["processes"][0].clone();
+    assert_eq!(replay["malformed"], 1, "{replay}");
+    let error = replay["malformed_examples"][0]["error"].as_str().unwrap();
+    assert!(error.contains("cannot be moved to the wall clock"), "{error}");
 }
 
 #[test]
@@ -279,8 +387,12 @@ fn a_host_that_receives_nothing_stops_at_the_end_of_for() {
     .env("KPL_ZENOH_PORT_BASE", "27447")
     .output()
     .unwrap();
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    // Nothing arrived from another host: the run is incomplete (exit status 3) and says why.
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(3), "{stderr}");
+    assert!(stderr.contains("incomplete: nothing arrived on `percepts` from another host"), "{stderr}");
     let report = summary(&out);
+    assert!(report["transport"]["inbound"].as_array().unwrap().iter().all(|s| s["received"] == 0));
     assert_eq!(report["ending"], "duration_reached");
     let elapsed = report["clock_elapsed"].as_i64().unwrap();
     assert!(

@@ -51,6 +51,10 @@ enum Command {
     List(cmd::list::Args),
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
+    /// Launch every host of a deployed spec on this machine, with one summary.
+    Launch(cmd::launch::Args),
+    /// Make the keys of a deployment: mutual TLS between its hosts, authenticated messages.
+    Keys(cmd::keys::Args),
     /// Score recorded object streams against ground truth: MOTA, IDF1, HOTA, ... per stream.
     Score(cmd::score::Args),
     /// Score recognised traffic situations against the true ones of the recorded traffic: precision and recall per kind.
@@ -109,6 +113,8 @@ pub fn main() -> ExitCode {
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Launch(args) => cmd::launch::run(args),
+        Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),
         Command::Situations(args) => cmd::situations::run(args),
         Command::Cater(command) => cmd::cater::run(command),
@@ -122,13 +128,14 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// Logs go to stderr; `RUST_LOG` selects what is shown. By default: KPL's warnings, and only the
-/// errors of zenoh's own crates (their warnings, such as a scouting delay, are about zenoh's
-/// internals; `kpl-zenoh` reports what a user can act on in its own words).
+/// Logs go to stderr; `RUST_LOG` selects what is shown. By default: KPL's warnings, what the hosts
+/// of a deployment say about each other (who is up, who is awaited), and only the errors of zenoh's
+/// own crates (their warnings, such as a scouting delay, are about zenoh's internals; `kpl-zenoh`
+/// reports what a user can act on in its own words).
 fn init_tracing() {
     use tracing_subscriber::EnvFilter;
-    const DEFAULT: &str = "warn,zenoh=error,zenoh_transport=error,zenoh_link=error,zenoh_link_tcp=error,\
-                           zenoh_config=error,zenoh_runtime=error";
+    const DEFAULT: &str = "warn,kpl_zenoh::transport=info,zenoh=error,zenoh_transport=error,zenoh_link=error,\
+                           zenoh_link_tcp=error,zenoh_link_tls=error,zenoh_config=error,zenoh_runtime=error";
     let ansi = report::colour();
     let builder = tracing_subscriber::fmt().with_ansi(ansi).with_writer(std::io::stderr);
     match EnvFilter::try_from_default_env() {

@@ -3,17 +3,22 @@
 //!
 //! The session of a host is configured by the deploy section and these environment variables:
 //! `KPL_ZENOH_CONFIG` (a zenoh configuration file to start from: TLS, access control),
-//! `KPL_ZENOH_PORT_BASE` (the first port of the loopback defaults, 7447) and `KPL_ZENOH_WAIT`
-//! (seconds a publisher waits for the hosts consuming its stream, 30).
+//! `KPL_ZENOH_PORT_BASE` (the first port of the loopback defaults, 7447), `KPL_ZENOH_WAIT`
+//! (seconds a host waits for the others, 30) and `KPL_KEYS` (the deployment's keys folder).
 
 use std::process::ExitCode;
 
 use kpl_zenoh::bench::{self, BenchOptions, Implementation, Payload, PeerTask};
 
-/// The transport `kpl run --host` uses. It opens a zenoh session only when a host sends or
-/// receives streams; a run without `--host` never does.
-pub fn factory() -> Option<Box<dyn kpl_runtime::run::TransportFactory>> {
-    Some(Box::new(kpl_zenoh::factory()))
+/// The transport `kpl run --host` uses, with the deployment's keys folder when given (`--keys`,
+/// over `KPL_KEYS`). It opens a zenoh session only when a host sends or receives streams; a run
+/// without `--host` never does.
+pub fn factory(keys: Option<&std::path::Path>) -> Option<Box<dyn kpl_runtime::run::TransportFactory>> {
+    let sessions = kpl_zenoh::Sessions::process();
+    if let Some(keys) = keys {
+        sessions.configure(|options| options.keys = Some(keys.to_path_buf()));
+    }
+    Some(Box::new(kpl_zenoh::ZenohFactory::new(sessions)))
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]

@@ -2,8 +2,9 @@
 //! for): every link stream and the tracker get sane scores, the JSON parses, the exported
 //! MOTChallenge-style files score the same with py-motmetrics and TrackEval (the Python of
 //! docs/scoring.md; needs `KPL_PYTHON` as set by scripts/test), a world model scored per type
-//! agrees with the link outputs it repeats, `--measured-only` leaves out predicted states, and bad
-//! input gets clear errors and exit codes.
+//! agrees with the link outputs it repeats, `--measured-only` leaves out predicted states, branch
+//! objects of predictions split at junctions (a run of `specs/traffic/sumo_random.kpl`) are left
+//! out unless `--branches`, and bad input gets clear errors and exit codes.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, reason = "tests")]
 
 use std::path::{Path, PathBuf};
@@ -173,6 +174,7 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     }
     let (all, only) = (stream(&report, "world[WorldObject]"), stream(&measured, "world[WorldObject]"));
     assert_eq!(all["alignment"]["measured"], "off");
+    assert_eq!(all["alignment"]["branches"], "none", "the bridge has no junction: no branch objects");
     assert_eq!(only["alignment"]["measured"], "applied");
     assert!(n(&only["alignment"]["left_out"]) > 100, "{}", only["alignment"]);
     assert!(n(&only["clear"]["false_positives"]) < n(&all["clear"]["false_positives"]) / 4);
@@ -189,6 +191,80 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "tracker"]);
     let text = String::from_utf8(o.stdout).unwrap();
     assert!(text.contains("--measured-only: tracker say nothing about which states were measured"), "{text}");
+}
+
+/// `specs/traffic/sumo_random.kpl` (recorded SUMO traffic on a network with junctions) run for
+/// 120 s of simulated time: on-road objects predicted through junctions split into branch objects.
+fn sumo_random_run() -> &'static Path {
+    static RUN: OnceLock<PathBuf> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let out = scratch("sumo_random");
+        let o = kpl(&[
+            "run",
+            "-q",
+            "specs/traffic/sumo_random.kpl",
+            "--for",
+            "120s",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    })
+}
+
+#[test]
+fn branch_objects_are_left_out_unless_asked_for() {
+    let run = sumo_random_run().to_str().unwrap();
+    let default = score_json(&[run]);
+    let branches = score_json(&[run, "--branches"]);
+    let (left, scored) = (stream(&default, "world_onroad"), stream(&branches, "world_onroad"));
+    assert_eq!(left["alignment"]["branches"], "left_out", "{}", left["alignment"]);
+    assert_eq!(scored["alignment"]["branches"], "scored", "{}", scored["alignment"]);
+    let states = n(&left["alignment"]["branch_states"]);
+    let objects = n(&left["alignment"]["branch_objects"]);
+    assert!(states > 20 && objects > 2 && objects < states, "{}", left["alignment"]);
+    assert_eq!(n(&scored["alignment"]["branch_states"]), states);
+    assert_eq!(n(&scored["alignment"]["branch_objects"]), objects);
+    // Left out, they are no hypotheses at all; scored, they are hypotheses of their own, most of
+    // them false positives (the car took one branch).
+    let (c_left, c_scored) = (&left["clear"], &scored["clear"]);
+    assert_eq!(n(&c_scored["predictions"]) - n(&c_left["predictions"]), states);
+    assert_eq!(c_scored["objects"], c_left["objects"]);
+    assert!(
+        n(&c_scored["false_positives"]) > n(&c_left["false_positives"]) + states / 2,
+        "{c_left} / {c_scored}"
+    );
+    assert!(f(&c_scored["mota"]) < f(&c_left["mota"]));
+    // Streams without branch objects say nothing, with or without --branches.
+    for report in [&default, &branches] {
+        for name in ["tracker", "vision_world", "onroad_car"] {
+            let s = stream(report, name);
+            assert_eq!(s["alignment"]["branches"], "none", "{name}: {}", s["alignment"]);
+            assert!(s["alignment"].get("branch_states").is_none(), "{name}");
+        }
+    }
+    // The table says what was left out, and how to score it.
+    let o = kpl(&["score", run]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let notes: Vec<&str> = text.lines().filter(|l| l.contains("branch objects")).collect();
+    assert_eq!(
+        notes,
+        [format!(
+            "note: world_onroad: {states} states of {objects} branch objects (records with `branch_of`: \
+             other hypotheses of predictions split at junctions) left out; --branches scores them"
+        )],
+        "{text}"
+    );
+    let o = kpl(&["score", run, "--branches", "--stream", "world_onroad"]);
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        text.contains(&format!(
+            "note: world_onroad: {states} states of {objects} branch objects scored as tracks"
+        )),
+        "{text}"
+    );
 }
 
 #[test]

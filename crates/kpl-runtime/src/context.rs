@@ -12,10 +12,13 @@ use crate::sample::Sample;
 use crate::stats::{Malformed, ProcessStats, RunStats};
 use crate::transport::RemoteSender;
 
-/// Asks every source to stop (Ctrl-C, the end of `--for`, a failure in a `--strict` run).
+/// Asks every source to stop (Ctrl-C or SIGTERM, the end of `--for`, a failure in a `--strict`
+/// run).
 #[derive(Debug, Clone, Default)]
 pub struct StopSignal {
     stopped: Arc<AtomicBool>,
+    /// Stopped because the run was interrupted, not because it was done.
+    interrupted: Arc<AtomicBool>,
     notify: Arc<tokio::sync::Notify>,
 }
 
@@ -23,6 +26,28 @@ impl StopSignal {
     pub fn stop(&self) {
         self.stopped.store(true, Ordering::SeqCst);
         self.notify.notify_waiters();
+    }
+
+    /// Stops because the run was interrupted (a signal, a `--strict` failure): streams to other
+    /// hosts then end as unfinished, and their consumers wait for this host to come back.
+    pub fn interrupt(&self) {
+        self.interrupted.store(true, Ordering::SeqCst);
+        self.stop();
+    }
+
+    pub fn is_interrupted(&self) -> bool {
+        self.interrupted.load(Ordering::SeqCst)
+    }
+
+    /// Resolves once the run is interrupted (not when it merely stops).
+    pub async fn interrupted(&self) {
+        loop {
+            let notified = self.notify.notified();
+            if self.is_interrupted() {
+                return;
+            }
+            notified.await;
+        }
     }
 
     pub fn is_stopped(&self) -> bool {
@@ -46,6 +71,8 @@ impl StopSignal {
 #[derive(Default)]
 pub struct Outputs {
     pub(crate) ports: Vec<Port>,
+    /// Whether the run was interrupted, when the outputs close.
+    stop: StopSignal,
 }
 
 #[derive(Default)]
@@ -61,8 +88,8 @@ impl std::fmt::Debug for Outputs {
 }
 
 impl Outputs {
-    pub(crate) fn with_ports(n: usize) -> Outputs {
-        Outputs { ports: (0..n).map(|_| Port::default()).collect() }
+    pub(crate) fn with_ports(n: usize, stop: StopSignal) -> Outputs {
+        Outputs { ports: (0..n).map(|_| Port::default()).collect(), stop }
     }
 
     /// Sends a sample to every consumer of output `port`. A consumer that has stopped is
@@ -96,12 +123,19 @@ impl Outputs {
         self.ports.iter().all(|p| p.local.is_empty() && p.remote.is_empty())
     }
 
-    /// Ends every output: local consumers see the end of their input, remote ones an end marker.
+    /// Ends every output: local consumers see the end of their input, remote ones an end marker
+    /// (saying whether the stream is finished or its run was interrupted).
     pub async fn close(&mut self) {
+        let finished = !self.stop.is_interrupted();
         for port in &mut self.ports {
             port.local.clear();
             for remote in &mut port.remote {
-                remote.end().await;
+                // A finished stream's end may wait for its consumers to confirm it; Ctrl-C or
+                // SIGTERM cuts that wait short (the end itself has gone out by then).
+                tokio::select! {
+                    () = remote.end(finished) => {}
+                    () = self.stop.interrupted(), if finished => {}
+                }
             }
             port.remote.clear();
         }

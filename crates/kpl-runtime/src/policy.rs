@@ -118,7 +118,7 @@ impl PolicyFilter {
         let mut ticked = false;
         while tick < sample.valid {
             ticked |= self.emit_tick(tick, now, out);
-            tick += period;
+            tick = tick.saturating_add(period);
         }
         if !ticked && !self.recent_used && self.most_recent.is_some() {
             // The previous sample fell between two ticks and a newer one replaces it.
@@ -127,7 +127,7 @@ impl PolicyFilter {
         self.recent_used = tick == sample.valid;
         if self.recent_used {
             self.deliver(sample.clone(), out);
-            tick += period;
+            tick = tick.saturating_add(period);
         }
         self.next_tick = Some(tick);
         self.most_recent = Some(sample);
@@ -148,7 +148,7 @@ impl PolicyFilter {
     pub fn deadline(&self) -> Option<Time> {
         match (self.policy.change, self.policy.max_delay, self.next_tick) {
             (Change::SampleEvery(_), Some(delay), Some(tick)) if self.most_recent.is_some() => {
-                Some(tick + delay)
+                Some(tick.saturating_add(delay))
             }
             _ => None,
         }
@@ -161,11 +161,15 @@ impl PolicyFilter {
         };
         let period = period.max(1);
         while let Some(tick) = self.next_tick {
-            if tick + delay > now || self.most_recent.is_none() {
+            if tick.saturating_add(delay) > now || self.most_recent.is_none() {
                 break;
             }
             self.emit_tick(tick, now, out);
-            self.next_tick = Some(tick + period);
+            if tick == Time::MAX {
+                self.next_tick = None;
+                break;
+            }
+            self.next_tick = Some(tick.saturating_add(period));
             // The value at later ticks is the same most recent one; the order policy now refers
             // to the tick emitted.
             self.last_valid = Some(self.last_valid.map_or(tick, |l| l.max(tick)));
@@ -173,10 +177,10 @@ impl PolicyFilter {
     }
 }
 
-/// The smallest multiple of `period` that is `>= t`.
+/// The smallest multiple of `period` that is `>= t` (the largest time when there is none).
 fn ceil_to(t: Time, period: Time) -> Time {
     let r = t.rem_euclid(period);
-    if r == 0 { t } else { t - r + period }
+    if r == 0 { t } else { (t - r).saturating_add(period) }
 }
 
 #[cfg(test)]

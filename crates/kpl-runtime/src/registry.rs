@@ -223,6 +223,12 @@ impl Registry {
         &self.signatures
     }
 
+    /// Sets the link protocols of the transport between hosts (`kpl-zenoh` does), which the
+    /// checker accepts in a deploy section's endpoints.
+    pub fn set_link_protocols(&mut self, protocols: &[&str]) {
+        self.signatures.set_link_protocols(protocols);
+    }
+
     /// Implementations of the functions that are not built into `kpl-mtl`.
     pub fn functions(&self) -> &[kpl_mtl::Function] {
         &self.functions

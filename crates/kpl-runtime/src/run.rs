@@ -28,7 +28,7 @@ use crate::registry::{BuildContext, BuildError, Extensions, Registry};
 use crate::sample::Sample;
 use crate::stats::{ProcessStats, RunStats, Summary};
 use crate::sync::{StateSync, SyncInput, SyncState};
-use crate::transport::{Remote, StreamKey, Transport, TransportError};
+use crate::transport::{Remote, StreamKey, Transport, TransportError, TransportReport};
 
 /// How to run a spec.
 #[derive(Debug, Clone)]
@@ -48,6 +48,9 @@ pub struct RunConfig {
     pub strict: bool,
     /// Run only this host's processes (`--host`).
     pub host: Option<String>,
+    /// The deployment's name (`--deployment`); `None`: the spec's (`deploy NAME { ... }`), else
+    /// [`DEFAULT_DEPLOYMENT`].
+    pub deployment: Option<String>,
     /// The counters to fill, when the caller wants to watch them while the run goes (the
     /// progress line of `kpl run`); a run without them counts in its own.
     pub stats: Option<Arc<RunStats>>,
@@ -64,8 +67,22 @@ impl Default for RunConfig {
             spec_name: "spec".into(),
             strict: false,
             host: None,
+            deployment: None,
             stats: None,
         }
+    }
+}
+
+/// The name of a deployment that neither `--deployment` nor the spec names.
+pub const DEFAULT_DEPLOYMENT: &str = "default";
+
+impl RunConfig {
+    /// The deployment's name: `--deployment`, else the spec's, else [`DEFAULT_DEPLOYMENT`].
+    pub fn deployment(&self, spec: &hir::Spec) -> String {
+        self.deployment
+            .clone()
+            .or_else(|| spec.deploy.as_ref().and_then(|d| d.name.clone()))
+            .unwrap_or_else(|| DEFAULT_DEPLOYMENT.to_string())
     }
 }
 
@@ -95,10 +112,48 @@ pub enum Ending {
     Strict,
 }
 
+/// The signal that interrupted a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Signal {
+    /// Ctrl-C.
+    #[serde(rename = "SIGINT")]
+    Interrupt,
+    /// What `kill`, `timeout`, systemd and container runtimes send.
+    #[serde(rename = "SIGTERM")]
+    Terminate,
+}
+
+impl Signal {
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::Interrupt => "SIGINT",
+            Signal::Terminate => "SIGTERM",
+        }
+    }
+
+    /// Waits for Ctrl-C or SIGTERM (only Ctrl-C where there is no SIGTERM).
+    pub async fn next() -> Signal {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            if let Ok(mut terminate) = signal(SignalKind::terminate()) {
+                return tokio::select! {
+                    _ = tokio::signal::ctrl_c() => Signal::Interrupt,
+                    _ = terminate.recv() => Signal::Terminate,
+                };
+            }
+        }
+        let _ = tokio::signal::ctrl_c().await;
+        Signal::Interrupt
+    }
+}
+
 /// What a run did.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RunReport {
     pub ending: Ending,
+    /// The signal that interrupted the run (with [`Ending::Interrupted`]).
+    pub signal: Option<Signal>,
     /// Clock time elapsed (simulated or wall), microseconds.
     pub clock_elapsed: Time,
     /// Wall time the run took, microseconds.
@@ -106,14 +161,31 @@ pub struct RunReport {
     /// Processes that stopped with an error.
     pub failures: Vec<String>,
     pub summary: Summary,
+    /// Streams between hosts (`--host`): who was up, what was lost, refused or cut short.
+    pub transport: Option<TransportReport>,
 }
 
-/// Opens the transport for streams between hosts (`kpl-zenoh` implements it).
+impl RunReport {
+    /// Inputs from other hosts that were cut short (their host lost) or delivered nothing: the
+    /// run is incomplete even though it ended normally.
+    pub fn incomplete(&self) -> Vec<String> {
+        let Some(transport) = &self.transport else { return Vec::new() };
+        let mut out: Vec<String> =
+            transport.cut_short().into_iter().map(|s| format!("cut short: {s}")).collect();
+        for stream in transport.received_nothing() {
+            out.push(format!("nothing arrived on `{stream}` from another host"));
+        }
+        out
+    }
+}
+
+/// Opens the transport for streams between hosts (`kpl-zenoh` implements it), for the host of
+/// `config` (`config.host`), in the deployment `config.deployment(spec)`.
 pub trait TransportFactory: Send + Sync {
     fn open<'a>(
         &'a self,
         spec: &'a hir::Spec,
-        host: &'a str,
+        config: &'a RunConfig,
     ) -> crate::process::BoxFuture<'a, Result<Arc<dyn Transport>, TransportError>>;
 }
 
@@ -173,15 +245,31 @@ pub async fn run_async(
     stats.start.store(clock.start(), Ordering::Relaxed);
     stats.observe_time(clock.start());
     let stop = StopSignal::default();
-    let end = config.duration.map(|d| clock.start() + d);
+    let end = config.duration.map(|d| clock.start().saturating_add(d));
+
+    // Ctrl-C and SIGTERM, from the start: a host waiting for the others stops cleanly too.
+    let signal: Arc<std::sync::Mutex<Option<Signal>>> = Arc::default();
+    let signals = {
+        let stop = stop.clone();
+        let signal = signal.clone();
+        tokio::spawn(async move {
+            let received = Signal::next().await;
+            tracing::info!("{}: stopping the run", received.name());
+            if let Ok(mut slot) = signal.lock() {
+                *slot = Some(received);
+            }
+            stop.interrupt();
+        })
+    };
+    let received_signal = move || signal.lock().ok().and_then(|s| *s);
+
     let local = local_processes(spec, config.host.as_deref())?;
 
-    // Ctrl-C and --for, from the start: waiting for other hosts counts in the run's time.
-    let interrupted = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let watchers = watch_for_the_end(&clock, end, &stop, &interrupted);
+    // --for, from the start: waiting for other hosts counts in the run's time.
+    let watchers = watch_for_the_end(&clock, end, &stop);
 
     let transport = match (&config.host, transport_factory) {
-        (Some(host), Some(factory)) if needs_transport(spec, &local) => Some(factory.open(spec, host).await?),
+        (Some(_), Some(factory)) if needs_transport(spec, &local) => Some(factory.open(spec, config).await?),
         (Some(_), None) if needs_transport(spec, &local) => {
             return Err(RunError::Host(
                 "this spec sends streams between hosts, but no transport is available".into(),
@@ -230,7 +318,7 @@ pub async fn run_async(
                     ProcessTask {
                         id,
                         kind,
-                        outputs: Outputs::with_ports(1 + process.ports.len()),
+                        outputs: Outputs::with_ports(1 + process.ports.len(), stop.clone()),
                         inputs: Vec::new(),
                     },
                 );
@@ -239,6 +327,8 @@ pub async fn run_async(
         }
     }
     if !errors.is_empty() {
+        signals.abort();
+        watchers.abort();
         return Err(RunError::Build(errors));
     }
 
@@ -269,26 +359,19 @@ pub async fn run_async(
         }
     }
 
-    // Streams to other hosts: one publisher per produced stream with remote consumers.
+    // Streams to other hosts: one publisher per produced stream with remote consumers, one
+    // subscription per received stream; then the transport waits for the consuming hosts, all
+    // streams at once.
+    let mut join = tokio::task::JoinSet::new();
     if let Some(transport) = &transport {
-        for (producer, port, hosts) in remote_streams(spec, &local) {
+        for (producer, port) in remote_streams(spec, &local) {
             let key = stream_key(config, spec, producer, port.clone());
-            let mut publisher = transport.publisher(&key).await?;
-            // The transport says which hosts are missing; a stop (Ctrl-C, --for) ends the wait.
-            let ready = tokio::select! {
-                ready = publisher.wait_for_subscribers(hosts) => ready,
-                () = stop.stopped() => 0,
-            };
-            tracing::debug!(stream = %key, ready, hosts, "consuming hosts subscribed");
+            let publisher = transport.publisher(&key).await?;
             if let Some(task) = tasks.get_mut(&producer) {
                 let index = port_index(&spec.processes[producer], port.as_deref());
                 task.outputs.ports[index].remote.push(publisher);
             }
         }
-    }
-
-    let mut join = tokio::task::JoinSet::new();
-    if let Some(transport) = &transport {
         for ((producer, port), senders) in remote_feeds {
             let key = stream_key(config, spec, producer, port);
             let receiver = transport.subscriber(&key).await?;
@@ -298,6 +381,10 @@ pub async fn run_async(
                 feed_remote(receiver, senders, feed_stats, run_stats, stop).await;
                 Ok::<(), (String, ProcessError)>(())
             });
+        }
+        tokio::select! {
+            () = transport.start() => {}
+            () = stop.stopped() => {}
         }
     }
 
@@ -362,23 +449,29 @@ pub async fn run_async(
                 tracing::error!(process = %name, "{error}");
                 if matches!(error, ProcessError::Strict { .. }) {
                     strict_failure = true;
-                    stop.stop();
+                    stop.interrupt();
                 }
                 failures.push(format!("{name}: {error}"));
             }
             Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
         }
     }
+    let signal = received_signal();
     let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))
-        && !interrupted.load(Ordering::SeqCst)
+        && signal.is_none()
         && !strict_failure;
     watchers.abort();
-    if let Some(transport) = transport {
-        transport.close().await;
-    }
+    signals.abort();
+    let transport_report = match transport {
+        Some(transport) => {
+            transport.clone().close().await;
+            Some(transport.report())
+        }
+        None => None,
+    };
     let ending = if strict_failure {
         Ending::Strict
-    } else if interrupted.load(Ordering::SeqCst) {
+    } else if signal.is_some() {
         Ending::Interrupted
     } else if duration_reached {
         Ending::DurationReached
@@ -387,33 +480,24 @@ pub async fn run_async(
     };
     Ok(RunReport {
         ending,
+        signal,
         clock_elapsed: clock.elapsed(),
         wall_elapsed: i64::try_from(wall_start.elapsed().as_micros()).unwrap_or(i64::MAX),
         failures,
         summary: stats.summary(),
+        transport: transport_report,
     })
 }
 
-/// Stops the run on Ctrl-C (setting `interrupted`) or when the clock reaches `end` (`--for`).
-fn watch_for_the_end(
-    clock: &Clock,
-    end: Option<Time>,
-    stop: &StopSignal,
-    interrupted: &Arc<std::sync::atomic::AtomicBool>,
-) -> tokio::task::JoinHandle<()> {
-    let (stop, interrupted, clock) = (stop.clone(), interrupted.clone(), clock.clone());
+/// Stops the run when the clock reaches `end` (`--for`); Ctrl-C and SIGTERM are watched by the
+/// run's signal task, which interrupts it.
+fn watch_for_the_end(clock: &Clock, end: Option<Time>, stop: &StopSignal) -> tokio::task::JoinHandle<()> {
+    let (stop, clock) = (stop.clone(), clock.clone());
     tokio::spawn(async move {
-        let duration = async {
-            match end {
-                Some(end) => clock.sleep_until(end).await,
-                None => std::future::pending().await,
-            }
-        };
-        tokio::select! {
-            _ = tokio::signal::ctrl_c() => interrupted.store(true, Ordering::SeqCst),
-            () = duration => {}
+        if let Some(end) = end {
+            clock.sleep_until(end).await;
+            stop.stop();
         }
-        stop.stop();
     })
 }
 
@@ -442,26 +526,29 @@ fn needs_transport(spec: &hir::Spec, local: &[ProcessId]) -> bool {
         .any(|p| p.inputs.iter().any(|i| local.contains(&p.id) != local.contains(&i.stream.producer)))
 }
 
-/// Streams produced here and consumed elsewhere: (producer, port, number of consuming hosts).
-fn remote_streams(spec: &hir::Spec, local: &[ProcessId]) -> Vec<(ProcessId, Option<String>, usize)> {
-    let mut hosts: BTreeMap<(ProcessId, Option<String>), std::collections::BTreeSet<String>> =
-        BTreeMap::new();
+/// Streams produced here and consumed elsewhere: (producer, port).
+fn remote_streams(spec: &hir::Spec, local: &[ProcessId]) -> Vec<(ProcessId, Option<String>)> {
+    let mut streams = std::collections::BTreeSet::new();
     for consumer in &spec.processes {
         if local.contains(&consumer.id) {
             continue;
         }
         for input in &consumer.inputs {
             if local.contains(&input.stream.producer) {
-                let host = spec.host_of(consumer.id).unwrap_or("").to_string();
-                hosts.entry((input.stream.producer, input.stream.port.clone())).or_default().insert(host);
+                streams.insert((input.stream.producer, input.stream.port.clone()));
             }
         }
     }
-    hosts.into_iter().map(|((p, port), h)| (p, port, h.len())).collect()
+    streams.into_iter().collect()
 }
 
 fn stream_key(config: &RunConfig, spec: &hir::Spec, producer: ProcessId, port: Option<String>) -> StreamKey {
-    StreamKey { spec: config.spec_name.clone(), producer: spec.processes[producer].name.clone(), port }
+    StreamKey {
+        deployment: config.deployment(spec),
+        spec: config.spec_name.clone(),
+        producer: spec.processes[producer].name.clone(),
+        port,
+    }
 }
 
 fn port_index(process: &hir::Process, port: Option<&str>) -> usize {
@@ -494,6 +581,10 @@ async fn feed_remote(
             }
             Some(Remote::Malformed { location, error }) => {
                 stats.malformed(crate::stats::Malformed { location, error })
+            }
+            Some(Remote::CutShort(why)) => {
+                tracing::warn!("{why}; ending the stream here");
+                break;
             }
             Some(Remote::End) | None => break,
         }

@@ -99,7 +99,7 @@ impl StateSync {
             .iter()
             .enumerate()
             .filter(|(i, input)| !input.feedback && values[*i].is_none())
-            .filter_map(|(_, input)| input.max_delay.map(|d| t + d))
+            .filter_map(|(_, input)| input.max_delay.map(|d| t.saturating_add(d)))
             .max()
     }
 
@@ -138,7 +138,7 @@ impl StateSync {
                 || values[i].is_some()
                 || self.ended[i]
                 || self.seen_up_to[i].is_some_and(|s| s > t)
-                || input.max_delay.is_some_and(|d| now >= t + d)
+                || input.max_delay.is_some_and(|d| now >= t.saturating_add(d))
         })
     }
 

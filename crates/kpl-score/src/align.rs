@@ -5,6 +5,13 @@
 //! recording may begin or end a frame apart: the link processes emit after the tracker). Inside
 //! that span, a ground-truth time without a snapshot of the stream (a missing frame) and a
 //! snapshot at a time without ground truth are errors unless [`Missing`] says what to do.
+//!
+//! Two filters choose the objects of a snapshot that are scored: branch objects (records with
+//! `branch_of`, the other hypotheses of a prediction split at a junction) are left out unless
+//! [`AlignOptions::score_branches`], and with [`AlignOptions::measured_only`] so are predicted
+//! states. What each left out is counted in the [`Alignment`].
+
+use std::collections::HashSet;
 
 use kpl_core::Time;
 use serde::Serialize;
@@ -32,6 +39,10 @@ pub struct AlignOptions {
     pub missing: Missing,
     /// Leave out the objects whose `measured` is false (states that were only predicted).
     pub measured_only: bool,
+    /// Score branch objects (records with `branch_of`) as tracks of their own; by default they
+    /// are left out: a branch object is one more hypothesis of where an object may be, not an
+    /// object, and would be scored as false positives.
+    pub score_branches: bool,
 }
 
 /// Whether predicted states were left out.
@@ -44,6 +55,21 @@ pub enum MeasuredFilter {
     Applied { left_out: usize },
     /// Asked for, but the stream's records have no `measured` field: every object is scored.
     NotAvailable,
+}
+
+/// What became of branch objects (records with `branch_of`) in the scored frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "branches")]
+pub enum BranchFilter {
+    /// No record with `branch_of` was left out or scored in the scored frames.
+    #[serde(rename = "none")]
+    NoBranches,
+    /// Their records were left out (the default).
+    LeftOut { branch_states: usize, branch_objects: usize },
+    /// Their records were scored as tracks of their own ([`AlignOptions::score_branches`]; with
+    /// `measured_only` those are left out as predicted states, never measured, and not counted
+    /// here).
+    Scored { branch_states: usize, branch_objects: usize },
 }
 
 /// What aligning did, for the report.
@@ -63,8 +89,11 @@ pub struct Alignment {
     pub missing_as: Missing,
     /// Stream snapshots inside the span at times without ground truth (not scored).
     pub extra: usize,
+    /// Predicted states left out (a branch object left out is counted under `branches` only).
     #[serde(flatten)]
     pub measured: MeasuredFilter,
+    #[serde(flatten)]
+    pub branches: BranchFilter,
 }
 
 /// A stream aligned with the ground truth.
@@ -145,26 +174,15 @@ pub fn align(
         }
     }
 
-    let filter = options.measured_only && stream.has_measured;
-    let mut left_out = 0;
+    let mut filter = ObjectFilter::new(options, stream.has_measured);
     let mut sequence = Sequence::new();
     let mut scored: Vec<Time> = Vec::with_capacity(pairs.len());
     for (t, s) in pairs {
         if s.is_none() && options.missing == Missing::Skip {
             continue;
         }
-        let hypotheses: Vec<&RecordedObject> = s
-            .map(|s| {
-                s.objects
-                    .iter()
-                    .filter(|o| {
-                        let keep = !filter || o.measured != Some(false);
-                        left_out += usize::from(!keep);
-                        keep
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let hypotheses: Vec<&RecordedObject> =
+            s.map(|s| s.objects.iter().filter(|o| filter.keep(o)).collect()).unwrap_or_default();
         sequence
             .push_frame(
                 t.time,
@@ -176,9 +194,10 @@ pub fn align(
     }
     let measured = match (options.measured_only, stream.has_measured) {
         (false, _) => MeasuredFilter::Off,
-        (true, true) => MeasuredFilter::Applied { left_out },
+        (true, true) => MeasuredFilter::Applied { left_out: filter.predicted },
         (true, false) => MeasuredFilter::NotAvailable,
     };
+    let branches = filter.branches();
     let alignment = Alignment {
         frames: scored.len(),
         from: scored.first().copied().unwrap_or(from),
@@ -189,6 +208,165 @@ pub fn align(
         missing_as: options.missing,
         extra: extra.len(),
         measured,
+        branches,
     };
     Ok(Aligned { sequence, alignment })
+}
+
+/// Chooses the objects of the scored snapshots that are scored, and counts the others.
+struct ObjectFilter<'a> {
+    score_branches: bool,
+    measured_only: bool,
+    /// Predicted states left out.
+    predicted: usize,
+    branch_states: usize,
+    branch_objects: HashSet<&'a str>,
+}
+
+impl<'a> ObjectFilter<'a> {
+    fn new(options: &AlignOptions, has_measured: bool) -> ObjectFilter<'a> {
+        ObjectFilter {
+            score_branches: options.score_branches,
+            measured_only: options.measured_only && has_measured,
+            predicted: 0,
+            branch_states: 0,
+            branch_objects: HashSet::new(),
+        }
+    }
+
+    /// Whether `object` is scored. A branch object left out is counted as such; one scored
+    /// (`score_branches`) is still subject to `measured_only`, and counted as a branch only when
+    /// it is scored.
+    fn keep(&mut self, object: &'a RecordedObject) -> bool {
+        let branch = object.branch_of.is_some();
+        if branch && !self.score_branches {
+            self.count_branch(object);
+            return false;
+        }
+        if self.measured_only && object.measured == Some(false) {
+            self.predicted += 1;
+            return false;
+        }
+        if branch {
+            self.count_branch(object);
+        }
+        true
+    }
+
+    fn count_branch(&mut self, object: &'a RecordedObject) {
+        self.branch_states += 1;
+        self.branch_objects.insert(&object.id);
+    }
+
+    fn branches(&self) -> BranchFilter {
+        let (branch_states, branch_objects) = (self.branch_states, self.branch_objects.len());
+        match (branch_states, self.score_branches) {
+            (0, _) => BranchFilter::NoBranches,
+            (_, false) => BranchFilter::LeftOut { branch_states, branch_objects },
+            (_, true) => BranchFilter::Scored { branch_states, branch_objects },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use serde_json::json;
+
+    use super::*;
+    use crate::recording::Recording;
+    use crate::scores::{Config, score};
+
+    /// Two frames: the true car1, its on-road object oo3 (measured, then predicted) and, in the
+    /// second frame, oo9, a branch object of oo3 within the gate of car1 and predicted, as the
+    /// anchoring writes them.
+    const SPLIT: &str = concat!(
+        r#"{"stream":"truth","valid":0,"value":[{"id":"car1","pos":[0.0,0.0]}]}"#,
+        "\n",
+        r#"{"stream":"truth","valid":100000,"value":[{"id":"car1","pos":[1.0,0.0]}]}"#,
+        "\n",
+        r#"{"stream":"onroad","valid":0,"value":[{"id":"oo3","pos":[0.5,0.0],"measured":true}]}"#,
+        "\n",
+        r#"{"stream":"onroad","valid":100000,"value":[{"id":"oo3","pos":[1.5,0.0],"measured":false,"likelihood":0.6},{"id":"oo9","pos":[1.0,1.0],"measured":false,"likelihood":0.4,"branch_of":"oo3"}]}"#,
+        "\n",
+    );
+
+    fn aligned(text: &str, options: AlignOptions) -> Aligned {
+        let rec = Recording::read_from(Path::new("rec.jsonl"), text.as_bytes()).unwrap();
+        assert_eq!(rec.problems().count, 0, "{:?}", rec.problems());
+        align(rec.stream("truth").unwrap(), rec.stream("onroad").unwrap(), &options).unwrap()
+    }
+
+    fn hypotheses(a: &Aligned) -> Vec<Vec<&str>> {
+        let ids = a.sequence.hypothesis_ids();
+        a.sequence.frames().iter().map(|f| f.hypotheses.iter().map(|h| ids.name(h.id)).collect()).collect()
+    }
+
+    #[test]
+    fn branch_objects_are_left_out_and_counted() {
+        let a = aligned(SPLIT, AlignOptions::default());
+        assert_eq!(hypotheses(&a), [vec!["oo3"], vec!["oo3"]]);
+        assert_eq!(a.alignment.branches, BranchFilter::LeftOut { branch_states: 1, branch_objects: 1 });
+        assert_eq!(a.alignment.measured, MeasuredFilter::Off);
+        let scores = score(&a.sequence, &Config::new(3.0).unwrap());
+        assert_eq!(scores.clear.false_positives, 0);
+        assert_eq!(scores.clear.mota, 1.0);
+        let json = serde_json::to_value(&a.alignment).unwrap();
+        assert_eq!(json["branches"], json!("left_out"));
+        assert_eq!(json["branch_states"], json!(1));
+        assert_eq!(json["branch_objects"], json!(1));
+        assert_eq!(json["measured"], json!("off"));
+    }
+
+    #[test]
+    fn branch_objects_are_scored_as_tracks_when_asked() {
+        let options = AlignOptions { score_branches: true, ..AlignOptions::default() };
+        let a = aligned(SPLIT, options);
+        assert_eq!(hypotheses(&a), [vec!["oo3"], vec!["oo3", "oo9"]]);
+        assert_eq!(a.alignment.branches, BranchFilter::Scored { branch_states: 1, branch_objects: 1 });
+        let scores = score(&a.sequence, &Config::new(3.0).unwrap());
+        assert_eq!(scores.clear.false_positives, 1, "the branch object is a false positive");
+        assert_eq!(serde_json::to_value(&a.alignment).unwrap()["branches"], json!("scored"));
+    }
+
+    #[test]
+    fn predicted_states_and_branch_objects_are_counted_once() {
+        // By default the branch object is left out as a branch, not as a predicted state.
+        let measured_only = AlignOptions { measured_only: true, ..AlignOptions::default() };
+        let a = aligned(SPLIT, measured_only);
+        assert_eq!(hypotheses(&a), [vec!["oo3"], vec![]]);
+        assert_eq!(a.alignment.measured, MeasuredFilter::Applied { left_out: 1 });
+        assert_eq!(a.alignment.branches, BranchFilter::LeftOut { branch_states: 1, branch_objects: 1 });
+        // Asked to score branch objects, the predicted-only filter still leaves them out (they are
+        // never measured), and they count as predicted states.
+        let both = AlignOptions { measured_only: true, score_branches: true, ..AlignOptions::default() };
+        let a = aligned(SPLIT, both);
+        assert_eq!(hypotheses(&a), [vec!["oo3"], vec![]]);
+        assert_eq!(a.alignment.measured, MeasuredFilter::Applied { left_out: 2 });
+        assert_eq!(a.alignment.branches, BranchFilter::NoBranches);
+    }
+
+    #[test]
+    fn a_stream_without_branch_objects_says_nothing() {
+        let plain = SPLIT.replace(r#","branch_of":"oo3""#, "");
+        for score_branches in [false, true] {
+            let a = aligned(&plain, AlignOptions { score_branches, ..AlignOptions::default() });
+            assert_eq!(hypotheses(&a), [vec!["oo3"], vec!["oo3", "oo9"]]);
+            assert_eq!(a.alignment.branches, BranchFilter::NoBranches);
+            let json = serde_json::to_value(&a.alignment).unwrap();
+            assert_eq!(json["branches"], json!("none"));
+            assert!(json.get("branch_states").is_none());
+        }
+    }
+
+    #[test]
+    fn branch_objects_of_frames_not_scored_are_not_counted() {
+        // The branch object's snapshot is past the ground truth's span: nothing is left out.
+        let truth_ends = SPLIT.lines().filter(|l| !l.contains(r#""stream":"truth","valid":100000"#));
+        let text: String = truth_ends.map(|l| format!("{l}\n")).collect();
+        let a = aligned(&text, AlignOptions::default());
+        assert_eq!(a.alignment.frames, 1);
+        assert_eq!(a.alignment.branches, BranchFilter::NoBranches);
+    }
 }

@@ -42,7 +42,7 @@ pub mod sequence;
 pub mod situations;
 mod time;
 
-pub use align::{AlignOptions, Aligned, Alignment, MeasuredFilter, Missing, align};
+pub use align::{AlignOptions, Aligned, Alignment, BranchFilter, MeasuredFilter, Missing, align};
 pub use clear::ClearMot;
 pub use error::{AlignError, ConfigError, ReadError, SelectError, SequenceError};
 pub use hota::Hota;

@@ -5,7 +5,8 @@
 //! `pos` (`[x, y]`, metres): the tracker's percepts and its `truth`, the outputs of link processes.
 //! A **world model** stream (`anchor.world_model`: records with `type` and `state.pos`) is split
 //! into one object stream per type, named `STREAM[TYPE]`. Other streams (change records,
-//! monitors, numbers) are listed but not scored.
+//! monitors, numbers) are listed but not scored. Besides `id` and `pos`, a record's `measured`
+//! and `branch_of` (a branch object of a prediction split at a junction) are read.
 //!
 //! Bad lines and records are counted with `FILE:LINE: what is wrong` and left out; reading goes
 //! on. Lines are limited to [`MAX_LINE_BYTES`] and folders to [`MAX_DEPTH`] levels, so a file
@@ -36,6 +37,9 @@ pub struct RecordedObject {
     pub pos: Pos,
     /// The record's `measured` field, when it has one.
     pub measured: Option<bool>,
+    /// The record's `branch_of` field: the object is a branch object, one of the other
+    /// hypotheses of the prediction of the object named (docs/anchoring.md).
+    pub branch_of: Option<String>,
 }
 
 /// The objects of a stream at one valid time.
@@ -559,7 +563,8 @@ fn world_model(
     }
 }
 
-/// A record as an object: `id` (a string or an integer), `pos` and an optional `measured`.
+/// A record as an object: `id` (a string or an integer), `pos`, an optional `measured` and an
+/// optional `branch_of`.
 fn object(item: &Json, pos: Option<&Json>) -> Result<RecordedObject, String> {
     let id = match item.get("id") {
         Some(Json::String(s)) => s.clone(),
@@ -580,7 +585,12 @@ fn object(item: &Json, pos: Option<&Json>) -> Result<RecordedObject, String> {
         Some(Json::Bool(b)) => Some(*b),
         Some(other) => return Err(format!("`{id}`: `measured` is {other}, not true or false")),
     };
-    Ok(RecordedObject { id, pos, measured })
+    let branch_of = match item.get("branch_of") {
+        None => None,
+        Some(Json::String(owner)) => Some(owner.clone()),
+        Some(other) => return Err(format!("`{id}`: `branch_of` is {other}, not a symbol")),
+    };
+    Ok(RecordedObject { id, pos, measured, branch_of })
 }
 
 #[cfg(test)]
@@ -648,6 +658,33 @@ mod tests {
         let err = rec.hypotheses(&["onroad_cars".into()], "t").unwrap_err();
         assert!(err.to_string().contains("did you mean `onroad_car`?"), "{err}");
         assert!(matches!(rec.truth(None), Err(SelectError::NoTruth { .. })));
+    }
+
+    #[test]
+    fn branch_objects_are_read_with_their_owner() {
+        // As the engine writes them: a link output (oo9 a branch object of oo3) and a world
+        // model (`branch_of` beside `type`, the state inside `state`).
+        let rec = read(concat!(
+            r#"{"stream":"world_onroad","valid":17100000,"value":[{"id":"oo3","lane":":259_4_0","likelihood":0.503,"measured":false,"pos":[725.06,633.29],"predicted_since":17100000},{"branch_of":"oo3","id":"oo9","lane":":259_3_0","likelihood":0.497,"measured":false,"pos":[725.24,633.38],"predicted_since":17100000}]}"#,
+            "\n",
+            r#"{"stream":"world","valid":17100000,"value":[{"id":"oo9","type":"OnRoadObject","status":"predicted","measured":false,"likelihood":0.497,"branch_of":"oo3","state":{"pos":[725.24,633.38],"branch_of":"oo3"}}]}"#,
+            "\n",
+            r#"{"stream":"world_onroad","valid":17200000,"value":[{"id":"oo3","pos":[725.5,634.0]},{"id":"oo9","pos":[725.6,634.1],"branch_of":9}]}"#,
+            "\n",
+        ));
+        let onroad = rec.stream("world_onroad").unwrap();
+        let owners: Vec<Option<&str>> =
+            onroad.snapshots[0].objects.iter().map(|o| o.branch_of.as_deref()).collect();
+        assert_eq!(owners, [None, Some("oo3")]);
+        let world = rec.stream("world[OnRoadObject]").unwrap();
+        assert_eq!(world.snapshots[0].objects[0].branch_of.as_deref(), Some("oo3"));
+        assert_eq!(rec.problems().count, 1, "{:?}", rec.problems());
+        assert!(
+            rec.problems().examples[0].contains("`branch_of` is 9, not a symbol"),
+            "{:?}",
+            rec.problems()
+        );
+        assert_eq!(onroad.snapshots[1].objects.len(), 1, "the bad record is left out");
     }
 
     #[test]

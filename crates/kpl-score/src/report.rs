@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use crate::align::{Alignment, MeasuredFilter, Missing};
+use crate::align::{Alignment, BranchFilter, MeasuredFilter, Missing};
 use crate::recording::Problems;
 use crate::scores::{Config, Scores};
 use crate::time::seconds;
@@ -104,6 +104,16 @@ impl Report {
                 && left_out > 0
             {
                 notes.push(format!("{name}: {left_out} predicted states left out"));
+            }
+            match a.branches {
+                BranchFilter::NoBranches => {}
+                BranchFilter::LeftOut { branch_states, branch_objects } => notes.push(format!(
+                    "{name}: {branch_states} states of {branch_objects} branch objects (records with `branch_of`: \
+                     other hypotheses of predictions split at junctions) left out; --branches scores them"
+                )),
+                BranchFilter::Scored { branch_states, branch_objects } => notes.push(format!(
+                    "{name}: {branch_states} states of {branch_objects} branch objects scored as tracks of their own"
+                )),
             }
         }
         let unfiltered: Vec<&str> = self

@@ -658,12 +658,19 @@ impl<'a> Checker<'a> {
                 continue;
             }
             host_spans.insert(&host.name.name, host.name.span);
+            let registry: &Registry = self.registry;
+            let protocols = registry.link_protocols();
             let endpoints = |lits: &[ast::Literal], diagnostics: &mut Vec<Diagnostic>| -> Vec<String> {
                 let mut out = Vec::new();
                 for lit in lits {
                     if let ast::LitKind::Str(s) = &lit.kind {
                         if !valid_endpoint(s) {
                             diagnostics.push(diag::bad_endpoint(lit.span, s));
+                        } else if let Some(protocol) = s.split('/').next()
+                            && !protocols.is_empty()
+                            && !protocols.iter().any(|p| p == protocol)
+                        {
+                            diagnostics.push(diag::protocol_not_built_in(lit.span, protocol, protocols));
                         }
                         out.push(s.clone());
                     }
@@ -710,7 +717,15 @@ impl<'a> Checker<'a> {
                 ));
             }
         }
-        Some(hir::Deploy { hosts })
+        let name = section.name.as_ref().and_then(|lit| match &lit.kind {
+            ast::LitKind::Str(name) if name.is_empty() => {
+                self.diagnostics.push(diag::empty_deployment_name(lit.span));
+                None
+            }
+            ast::LitKind::Str(name) => Some(name.clone()),
+            _ => None,
+        });
+        Some(hir::Deploy { name, hosts })
     }
 
     fn graph(&mut self, processes: &[hir::Process]) -> hir::ProcessGraph {

@@ -34,6 +34,8 @@ pub const STREAM_PLACED: &str = "E0143";
 pub const DUPLICATE_HOST: &str = "E0144";
 pub const DEPLOY_TWICE: &str = "E0145";
 pub const BAD_ENDPOINT: &str = "E0146";
+pub const PROTOCOL_NOT_BUILT_IN: &str = "E0147";
+pub const EMPTY_DEPLOYMENT_NAME: &str = "E0148";
 pub const CONDITION_MISSING: &str = "E0150";
 pub const CONDITION_TWICE: &str = "E0151";
 pub const NO_PRODUCER: &str = "E0152";
@@ -273,7 +275,20 @@ pub fn deploy_twice(span: Span, first: Span) -> Diagnostic {
 pub fn bad_endpoint(span: Span, endpoint: &str) -> Diagnostic {
     Diagnostic::error(BAD_ENDPOINT, span, format!("`{endpoint}` is not a zenoh endpoint"))
         .with_label("expected PROTOCOL/ADDRESS")
-        .with_hint("endpoints look like \"tcp/127.0.0.1:7447\", \"udp/192.168.1.2:7447\", \"quic/host:7447\" or \"tls/host:7447\"")
+        .with_hint("endpoints look like \"tcp/127.0.0.1:7447\" or \"tls/192.168.1.2:7447\"")
+}
+
+pub fn protocol_not_built_in(span: Span, protocol: &str, protocols: &[String]) -> Diagnostic {
+    let list: Vec<String> = protocols.iter().map(|p| format!("`{p}/`")).collect();
+    Diagnostic::error(PROTOCOL_NOT_BUILT_IN, span, format!("`{protocol}` links are not built into kpl"))
+        .with_label("kpl run could not open this endpoint")
+        .with_hint(format!("this kpl links hosts over {}", list.join(" and ")))
+}
+
+pub fn empty_deployment_name(span: Span) -> Diagnostic {
+    Diagnostic::error(EMPTY_DEPLOYMENT_NAME, span, "the deployment's name is empty")
+        .with_label("empty name")
+        .with_hint("name the deployment (`deploy trial { ... }`), or leave the name out for `default`")
 }
 
 pub fn condition_missing(span: Span, link: &str, kind: &str) -> Diagnostic {

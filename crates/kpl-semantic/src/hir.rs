@@ -391,6 +391,8 @@ impl Forget {
 
 #[derive(Debug, Clone)]
 pub struct Deploy {
+    /// The deployment's name (`deploy NAME { ... }`), part of every key between its hosts.
+    pub name: Option<String>,
     pub hosts: Vec<Host>,
 }
 

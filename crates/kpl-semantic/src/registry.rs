@@ -329,9 +329,23 @@ impl Function {
 pub struct Registry {
     entries: BTreeMap<(EntryKind, String), Entry>,
     functions: BTreeMap<String, Function>,
+    /// The link protocols of the transport between hosts (`tcp`, `tls`): the protocols a deploy
+    /// section's endpoints may use. Empty: no transport is known, endpoints are checked for their
+    /// form only.
+    link_protocols: Vec<String>,
 }
 
 impl Registry {
+    /// Sets the link protocols the transport between hosts has, so that `kpl check` refuses an
+    /// endpoint `kpl run` could not open.
+    pub fn set_link_protocols(&mut self, protocols: &[&str]) {
+        self.link_protocols = protocols.iter().map(|p| p.to_string()).collect();
+    }
+
+    pub fn link_protocols(&self) -> &[String] {
+        &self.link_protocols
+    }
+
     /// Adds (or replaces) an entry.
     pub fn add(&mut self, entry: Entry) {
         self.entries.insert((entry.kind, entry.name.clone()), entry);

@@ -404,9 +404,12 @@ pub struct MonitorDecl {
     pub span: Span,
 }
 
-/// `deploy { host uav listen ["tcp/127.0.0.1:7447"] { tracker, vision_world } ... }`
+/// `deploy { host uav listen ["tcp/127.0.0.1:7447"] { tracker, vision_world } ... }`, or with the
+/// deployment's name: `deploy trial { ... }`, `deploy "site-3" { ... }`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DeployDecl {
+    /// The deployment's name, a string (written as a name or a quoted string).
+    pub name: Option<Literal>,
     pub hosts: Vec<HostDecl>,
     #[serde(skip)]
     pub span: Span,

@@ -275,8 +275,16 @@ impl Formatter<'_> {
 
     fn deploy_decl(&mut self, decl: &ast::DeployDecl) {
         self.begin_line(decl.span, "", true);
-        self.out.push_str("deploy {");
-        self.end_line(decl.span.start + "deploy".len() as u32);
+        self.out.push_str("deploy ");
+        if let Some(name) = &decl.name {
+            match &name.kind {
+                ast::LitKind::Str(text) if is_plain_name(text) => self.out.push_str(text),
+                _ => literal(&mut self.out, name),
+            }
+            self.out.push(' ');
+        }
+        self.out.push('{');
+        self.end_line(decl.name.as_ref().map_or(decl.span.start + "deploy".len() as u32, |n| n.span.end));
         for host in &decl.hosts {
             self.begin_line(host.span, INDENT, false);
             let _ = write!(self.out, "host {}", host.name.name);
@@ -392,6 +400,16 @@ fn argument(out: &mut String, arg: &ast::Arg) {
             literal(out, value);
         }
     }
+}
+
+/// Whether `text` reads as a name (`trial`), so that it can be printed without quotes.
+fn is_plain_name(text: &str) -> bool {
+    const RESERVED: [&str; 11] =
+        ["true", "false", "not", "and", "or", "eventually", "always", "until", "forall", "exists", "inf"];
+    let mut chars = text.chars();
+    chars.next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !RESERVED.contains(&text)
 }
 
 fn literal(out: &mut String, lit: &ast::Literal) {

@@ -427,6 +427,7 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::forget_decl => "a forget declaration",
         Rule::monitor_decl => "a monitor",
         Rule::deploy_decl => "a deploy section",
+        Rule::deploy_name => "the deployment's name",
         Rule::host_decl => "a host `host NAME { ... }`",
         Rule::host_listen => "`listen`",
         Rule::host_connect => "`connect`",
@@ -960,6 +961,16 @@ impl<'d> Converter<'d> {
     fn deploy_decl(&mut self, pair: Pair<'_, Rule>) -> ast::DeployDecl {
         let span = self.span(&pair);
         let mut hosts = Vec::new();
+        let mut name = None;
+        for p in pair.clone().into_inner().filter(|p| p.as_rule() == Rule::deploy_name) {
+            if let Some(inner) = p.into_inner().next() {
+                let span = self.span(&inner);
+                name = Some(match inner.as_rule() {
+                    Rule::string => ast::Literal { kind: ast::LitKind::Str(self.string(inner)), span },
+                    _ => ast::Literal { kind: ast::LitKind::Str(inner.as_str().to_string()), span },
+                });
+            }
+        }
         for host in pair.into_inner().filter(|p| p.as_rule() == Rule::host_decl) {
             let host_span = self.span(&host);
             let mut decl = ast::HostDecl {
@@ -994,7 +1005,7 @@ impl<'d> Converter<'d> {
             }
             hosts.push(decl);
         }
-        ast::DeployDecl { hosts, span }
+        ast::DeployDecl { name, hosts, span }
     }
 
     fn interval(&mut self, pair: Pair<'_, Rule>) -> ast::Interval {

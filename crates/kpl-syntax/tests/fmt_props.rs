@@ -202,8 +202,11 @@ fn item() -> BoxedStrategy<String> {
         }),
         (name(), formula()).prop_map(|(n, f)| format!("monitor {n} = {f}")),
         (name(), type_name(), formula()).prop_map(|(n, t, f)| format!("identify {n} : {t} where {f}")),
-        proptest::collection::vec((name(), proptest::collection::vec(name(), 0..3), any::<bool>()), 0..3)
-            .prop_map(|hosts| {
+        (
+            proptest::collection::vec((name(), proptest::collection::vec(name(), 0..3), any::<bool>()), 0..3),
+            proptest::sample::select(vec!["", "trial ", "\"site-3\" ", "\"and\" ", "\"\" "]),
+        )
+            .prop_map(|(hosts, deployment)| {
                 let hosts: Vec<String> = hosts
                     .iter()
                     .map(|(h, ps, listen)| {
@@ -215,7 +218,7 @@ fn item() -> BoxedStrategy<String> {
                         format!("  host {h}{endpoints} {{ {} }}", ps.join(", "))
                     })
                     .collect();
-                format!("deploy {{\n{}\n}}", hosts.join("\n"))
+                format!("deploy {deployment}{{\n{}\n}}", hosts.join("\n"))
             }),
     ]
     .boxed()

@@ -206,7 +206,7 @@ const SPEC: &str = "bench";
 const IDLE: Duration = Duration::from_secs(10);
 
 fn key(name: &str) -> StreamKey {
-    StreamKey { spec: SPEC.into(), producer: name.into(), port: None }
+    StreamKey { deployment: "bench".into(), spec: SPEC.into(), producer: name.into(), port: None }
 }
 
 /// A two-host deploy section: `peer` listens on `port`, `main` dials it.
@@ -219,6 +219,7 @@ fn deploy(port: u16) -> hir::Deploy {
     };
     let endpoint = format!("tcp/127.0.0.1:{port}");
     hir::Deploy {
+        name: None,
         hosts: vec![
             host("peer", vec![endpoint.clone()], Vec::new()),
             host("main", Vec::new(), vec![endpoint]),

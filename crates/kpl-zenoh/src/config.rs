@@ -1,20 +1,23 @@
 //! Where a host's zenoh session listens and what it connects to, and the session's configuration:
-//! peer mode, multicast scouting off, explicit endpoints (docs/streams.md, "On the wire").
+//! peer mode, multicast scouting off, explicit endpoints, and with a deployment's keys mutual TLS
+//! and access control (docs/streams.md, "On the wire").
 //!
 //! Endpoints come from the spec's `deploy` section; a host that gives none gets loopback
 //! defaults, so the hosts of one spec find each other on one machine without any setup:
 //!
 //! - **listen**: the host's `listen` endpoints; without them, none if the host gives `connect`
-//!   endpoints (it only dials out), else `tcp/127.0.0.1:<base + i>` where `i` is the host's
-//!   position in the deploy section and `base` is 7447 (`KPL_ZENOH_PORT_BASE`);
+//!   endpoints (it only dials out), else `tcp/127.0.0.1:<base + i>` (`tls/...` with keys) where
+//!   `i` is the host's position in the deploy section and `base` is 7447 (`KPL_ZENOH_PORT_BASE`);
 //! - **connect**: the host's `connect` endpoints; without them, the listen endpoints of every host
 //!   before it in the deploy section, so each pair of hosts links once, the later one dialling.
 //!
 //! A run without `--host` (a spec using `zenoh.subscribe` or `zenoh.publish` to talk to programs
 //! outside it) counts as the first host of the default scheme: it listens on
-//! `tcp/127.0.0.1:<base>`. A zenoh configuration file (`KPL_ZENOH_CONFIG`) is the starting point
-//! when given (TLS certificates, access control, ...); endpoints of the deploy section replace its
-//! own, and the defaults apply only when neither gives any.
+//! `tcp/127.0.0.1:<base>`. A zenoh configuration file (`KPL_ZENOH_CONFIG`) is merged with these
+//! defaults: what it sets is kept (transport tuning, its own TLS files, access control rules),
+//! except what KPL needs (peer mode, multicast scouting off); its endpoints are used when the
+//! deploy section gives none, and the loopback defaults when neither does. With keys, KPL's TLS
+//! files and access-control rules are added to the file's.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -22,26 +25,39 @@ use std::time::Duration;
 use kpl_runtime::transport::TransportError;
 use kpl_semantic::hir;
 
+use crate::credentials::Credentials;
+
 /// The zenoh default port: host `i` of the default scheme listens on `DEFAULT_PORT_BASE + i`.
 pub const DEFAULT_PORT_BASE: u16 = 7447;
-/// How long a publisher waits for its subscribers at start-up by default.
+/// How long a host waits for other hosts by default: at start-up for the hosts consuming its
+/// streams, at the end for them to have the end, and for a producing host that is gone.
 pub const DEFAULT_SUBSCRIBER_WAIT: Duration = Duration::from_secs(30);
+/// How long a host waits by default for a producing host that went away (or never came) before it
+/// ends the streams from it as cut short.
+pub const DEFAULT_GIVE_UP: Duration = Duration::from_secs(120);
 /// The default capacity of a subscriber's queue in front of the runtime.
 pub const DEFAULT_QUEUE: usize = 4096;
 
 /// Options of the zenoh sessions of one process.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ZenohOptions {
-    /// A zenoh configuration file (JSON5) to start from (`KPL_ZENOH_CONFIG`).
+    /// A zenoh configuration file (JSON5) merged with the defaults (`KPL_ZENOH_CONFIG`).
     pub config_file: Option<PathBuf>,
     /// The first port of the loopback defaults (`KPL_ZENOH_PORT_BASE`).
     pub port_base: u16,
-    /// How long a publisher waits at start-up for the hosts that consume its stream
-    /// (`KPL_ZENOH_WAIT`, seconds).
+    /// How long a host waits for the others (`KPL_ZENOH_WAIT`, seconds): at start-up for the
+    /// hosts that consume its streams (then it goes on, and they get the streams from when they
+    /// come), and at the end for them to confirm they have the end.
     pub subscriber_wait: Duration,
+    /// How long a host waits for a producing host that went away or never came before it ends
+    /// the streams from it as cut short (`KPL_ZENOH_GIVE_UP`, seconds).
+    pub give_up: Duration,
     /// Samples buffered per subscription before zenoh's receiving thread waits (back-pressure
     /// to the publisher, which then blocks: nothing is dropped).
     pub queue: usize,
+    /// The deployment's keys folder (`--keys`, `KPL_KEYS`): mutual TLS between the hosts, access
+    /// control, and authentication tags on every message.
+    pub keys: Option<PathBuf>,
 }
 
 impl Default for ZenohOptions {
@@ -50,14 +66,17 @@ impl Default for ZenohOptions {
             config_file: None,
             port_base: DEFAULT_PORT_BASE,
             subscriber_wait: DEFAULT_SUBSCRIBER_WAIT,
+            give_up: DEFAULT_GIVE_UP,
             queue: DEFAULT_QUEUE,
+            keys: None,
         }
     }
 }
 
 impl ZenohOptions {
     /// The defaults, changed by the environment variables `KPL_ZENOH_CONFIG` (a zenoh config file),
-    /// `KPL_ZENOH_PORT_BASE` (a port) and `KPL_ZENOH_WAIT` (seconds).
+    /// `KPL_ZENOH_PORT_BASE` (a port), `KPL_ZENOH_WAIT` and `KPL_ZENOH_GIVE_UP` (seconds) and
+    /// `KPL_KEYS` (a keys folder).
     pub fn from_env() -> Result<ZenohOptions, TransportError> {
         Self::from_vars(|name| std::env::var(name).ok())
     }
@@ -73,12 +92,23 @@ impl ZenohOptions {
                 TransportError(format!("KPL_ZENOH_PORT_BASE=`{base}` is not a port number (1-65535)"))
             })?;
         }
-        if let Some(wait) = var("KPL_ZENOH_WAIT").filter(|p| !p.is_empty()) {
-            let seconds: f64 =
-                wait.trim().parse().ok().filter(|s: &f64| s.is_finite() && *s >= 0.0).ok_or_else(|| {
-                    TransportError(format!("KPL_ZENOH_WAIT=`{wait}` is not a number of seconds"))
-                })?;
-            options.subscriber_wait = Duration::from_secs_f64(seconds);
+        let seconds =
+            |name: &str| -> Result<Option<Duration>, TransportError> {
+                let Some(text) = var(name).filter(|p| !p.is_empty()) else { return Ok(None) };
+                let seconds: f64 =
+                    text.trim().parse().ok().filter(|s: &f64| s.is_finite() && *s >= 0.0).ok_or_else(
+                        || TransportError(format!("{name}=`{text}` is not a number of seconds")),
+                    )?;
+                Ok(Some(Duration::from_secs_f64(seconds.min(1e9))))
+            };
+        if let Some(wait) = seconds("KPL_ZENOH_WAIT")? {
+            options.subscriber_wait = wait;
+        }
+        if let Some(give_up) = seconds("KPL_ZENOH_GIVE_UP")? {
+            options.give_up = give_up;
+        }
+        if let Some(keys) = var("KPL_KEYS").filter(|p| !p.is_empty()) {
+            options.keys = Some(PathBuf::from(keys));
         }
         Ok(options)
     }
@@ -94,19 +124,21 @@ pub struct Endpoints {
 }
 
 /// The endpoints of `host` (a host of `deploy`), or of a run without `--host` when `host` is
-/// `None`.
+/// `None`. The loopback defaults are `tls/` links when `tls` (a deployment with keys).
 pub fn endpoints(
     deploy: Option<&hir::Deploy>,
     host: Option<&str>,
     port_base: u16,
+    tls: bool,
 ) -> Result<Endpoints, TransportError> {
+    let scheme = if tls { "tls" } else { "tcp" };
     let default_listen = |i: usize| -> Result<String, TransportError> {
         let port = u16::try_from(i).ok().and_then(|i| port_base.checked_add(i)).ok_or_else(|| {
             TransportError(format!(
                 "the default port of host {i} is past 65535 (KPL_ZENOH_PORT_BASE={port_base})"
             ))
         })?;
-        Ok(format!("tcp/127.0.0.1:{port}"))
+        Ok(format!("{scheme}/127.0.0.1:{port}"))
     };
     let (Some(deploy), Some(host)) = (deploy, host) else {
         return Ok(Endpoints { listen: vec![default_listen(0)?], connect: Vec::new(), explicit: false });
@@ -151,9 +183,9 @@ pub fn endpoints(
     Ok(endpoints)
 }
 
-/// The link protocols this build of kpl has.
+/// The link protocols of kpl's zenoh (what `kpl check` accepts in a deploy section).
 pub fn protocols() -> &'static [&'static str] {
-    if cfg!(feature = "tls") { &["tcp", "tls"] } else { &["tcp"] }
+    &["tcp", "tls"]
 }
 
 fn check_protocol(endpoint: &str) -> Result<(), TransportError> {
@@ -161,18 +193,25 @@ fn check_protocol(endpoint: &str) -> Result<(), TransportError> {
     if protocols().contains(&protocol) {
         return Ok(());
     }
-    let hint = if protocol == "tls" {
-        "build kpl with TLS: `cargo build --release --features kpl/zenoh-tls`".to_string()
-    } else {
-        format!("this build of kpl has the zenoh transports {}", protocols().join(", "))
-    };
-    Err(TransportError(format!("endpoint `{endpoint}`: `{protocol}` links are not built in ({hint})")))
+    Err(TransportError(format!(
+        "endpoint `{endpoint}`: `{protocol}` links are not built in (kpl links hosts over {})",
+        protocols().join(" and ")
+    )))
+}
+
+/// What a host's session needs beyond its endpoints when its deployment has keys.
+#[derive(Debug, Clone)]
+pub struct Security {
+    pub credentials: Credentials,
+    /// The access-control section (zenoh's `access_control`) for this host.
+    pub access_control: Option<serde_json::Value>,
 }
 
 /// The zenoh configuration of a session with these endpoints.
 pub fn session_config(
     endpoints: &Endpoints,
     options: &ZenohOptions,
+    security: Option<&Security>,
 ) -> Result<zenoh::Config, TransportError> {
     let mut config = match &options.config_file {
         Some(path) => zenoh::Config::from_file(path).map_err(|e| {
@@ -180,7 +219,20 @@ pub fn session_config(
         })?,
         None => zenoh::Config::default(),
     };
-    let from_file = options.config_file.is_some();
+    let defaults = zenoh::Config::default();
+    // What the file sets differs from zenoh's defaults (which listen on every interface).
+    let file_sets = |config: &zenoh::Config, key: &str| {
+        options.config_file.is_some() && config.get_json(key).ok() != defaults.get_json(key).ok()
+    };
+    let keep_file_endpoints = !endpoints.explicit
+        && (file_sets(&config, "listen/endpoints") || file_sets(&config, "connect/endpoints"));
+    let file_tls = file_sets(&config, "transport/link/tls/root_ca_certificate")
+        || file_sets(&config, "transport/link/tls/listen_certificate");
+    let file_access_control = if file_sets(&config, "access_control") {
+        config.get_json("access_control").ok().and_then(|json| serde_json::from_str(&json).ok())
+    } else {
+        None
+    };
     let set = |config: &mut zenoh::Config, key: &str, value: String| {
         config
             .insert_json5(key, &value)
@@ -194,21 +246,73 @@ pub fn session_config(
         "connect/retry",
         "{ period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2.0 }".into(),
     )?;
-    let file_has = |config: &zenoh::Config, key: &str| {
-        config.get_json(key).is_ok_and(|json| json.trim() != "[]" && json.trim() != "null")
-    };
-    let keep_file_endpoints = from_file
-        && !endpoints.explicit
-        && (file_has(&config, "listen/endpoints") || file_has(&config, "connect/endpoints"));
     if !keep_file_endpoints {
         set(&mut config, "listen/endpoints", json_list(&endpoints.listen))?;
         set(&mut config, "connect/endpoints", json_list(&endpoints.connect))?;
     }
+    let uses_tls = |list: &[String]| list.iter().any(|e| e.starts_with("tls/"));
+    match security {
+        Some(security) => {
+            let c = &security.credentials;
+            let path = |p: &std::path::Path| json_string(&p.display().to_string());
+            for (key, value) in [
+                ("transport/link/tls/root_ca_certificate", path(&c.ca)),
+                ("transport/link/tls/listen_certificate", path(&c.certificate)),
+                ("transport/link/tls/listen_private_key", path(&c.private_key)),
+                ("transport/link/tls/connect_certificate", path(&c.certificate)),
+                ("transport/link/tls/connect_private_key", path(&c.private_key)),
+                ("transport/link/tls/enable_mtls", "true".into()),
+                // The deployment's own authority signs only its hosts; which host is on the other
+                // side is its certificate's common name, which access control checks.
+                ("transport/link/tls/verify_name_on_connect", "false".into()),
+            ] {
+                set(&mut config, key, value)?;
+            }
+            if let Some(rules) = &security.access_control {
+                let merged = merge_access_control(file_access_control, rules.clone());
+                set(&mut config, "access_control", merged.to_string())?;
+            }
+        }
+        None if !file_tls && (uses_tls(&endpoints.listen) || uses_tls(&endpoints.connect)) => {
+            return Err(TransportError(
+                "`tls/` endpoints need the deployment's keys: make them with `kpl keys SPEC --out KEYS` \
+                 and run every host with `--keys KEYS` (or give TLS files in a KPL_ZENOH_CONFIG file)"
+                    .into(),
+            ));
+        }
+        None => {}
+    }
     Ok(config)
+}
+
+/// The file's access-control section with KPL's rules, subjects and policies added (KPL's
+/// default permission when the file has none).
+fn merge_access_control(file: Option<serde_json::Value>, ours: serde_json::Value) -> serde_json::Value {
+    let Some(mut merged) =
+        file.filter(|f| f.get("enabled").and_then(serde_json::Value::as_bool) == Some(true))
+    else {
+        return ours;
+    };
+    for list in ["rules", "subjects", "policies"] {
+        let extra = ours.get(list).and_then(serde_json::Value::as_array).cloned().unwrap_or_default();
+        match merged.get_mut(list).and_then(serde_json::Value::as_array_mut) {
+            Some(items) => items.extend(extra),
+            None => {
+                if let Some(object) = merged.as_object_mut() {
+                    object.insert(list.to_string(), serde_json::Value::Array(extra));
+                }
+            }
+        }
+    }
+    merged
 }
 
 fn json_list(items: &[String]) -> String {
     serde_json::to_string(items).unwrap_or_else(|_| "[]".into())
+}
+
+fn json_string(text: &str) -> String {
+    serde_json::to_string(text).unwrap_or_else(|_| "\"\"".into())
 }
 
 #[cfg(test)]
@@ -227,11 +331,12 @@ mod tests {
                     processes: Vec::new(),
                 })
                 .collect(),
+            name: None,
         }
     }
 
     fn of(d: &hir::Deploy, host: &str) -> (Vec<String>, Vec<String>) {
-        let e = endpoints(Some(d), Some(host), 7447).unwrap();
+        let e = endpoints(Some(d), Some(host), 7447, false).unwrap();
         (e.listen, e.connect)
     }
 
@@ -248,9 +353,12 @@ mod tests {
             of(&d, "c"),
             (strings(&["tcp/127.0.0.1:7449"]), strings(&["tcp/127.0.0.1:7447", "tcp/127.0.0.1:7448"]))
         );
-        assert!(!endpoints(Some(&d), Some("a"), 7447).unwrap().explicit);
-        let e = endpoints(Some(&d), Some("c"), 20000).unwrap();
+        assert!(!endpoints(Some(&d), Some("a"), 7447, false).unwrap().explicit);
+        let e = endpoints(Some(&d), Some("c"), 20000, false).unwrap();
         assert_eq!(e.listen, strings(&["tcp/127.0.0.1:20002"]));
+        let e = endpoints(Some(&d), Some("c"), 20000, true).unwrap();
+        assert_eq!(e.listen, strings(&["tls/127.0.0.1:20002"]));
+        assert_eq!(e.connect, strings(&["tls/127.0.0.1:20000", "tls/127.0.0.1:20001"]));
     }
 
     #[test]
@@ -266,24 +374,26 @@ mod tests {
 
     #[test]
     fn without_a_host_the_first_default() {
-        let e = endpoints(None, None, 7500).unwrap();
+        let e = endpoints(None, None, 7500, false).unwrap();
         assert_eq!((e.listen, e.connect), (strings(&["tcp/127.0.0.1:7500"]), vec![]));
     }
 
     #[test]
     fn errors_are_clear() {
         let d = deploy(&[("a", &["udp/127.0.0.1:9000"], &[])]);
-        let err = endpoints(Some(&d), Some("a"), 7447).unwrap_err().to_string();
+        let err = endpoints(Some(&d), Some("a"), 7447, false).unwrap_err().to_string();
         assert!(err.contains("`udp` links are not built in"), "{err}");
-        assert!(endpoints(Some(&d), Some("zz"), 7447).unwrap_err().to_string().contains("no host `zz`"));
+        assert!(
+            endpoints(Some(&d), Some("zz"), 7447, false).unwrap_err().to_string().contains("no host `zz`")
+        );
         let many = deploy(&[("a", &[], &[]), ("b", &[], &[])]);
-        let err = endpoints(Some(&many), Some("b"), 65535).unwrap_err().to_string();
+        let err = endpoints(Some(&many), Some("b"), 65535, false).unwrap_err().to_string();
         assert!(err.contains("past 65535"), "{err}");
-        if !cfg!(feature = "tls") {
-            let d = deploy(&[("a", &["tls/127.0.0.1:9000"], &[])]);
-            let err = endpoints(Some(&d), Some("a"), 7447).unwrap_err().to_string();
-            assert!(err.contains("features kpl/zenoh-tls"), "{err}");
-        }
+        // TLS is built in, but needs keys.
+        let d = deploy(&[("a", &["tls/127.0.0.1:9000"], &[])]);
+        let e = endpoints(Some(&d), Some("a"), 7447, false).unwrap();
+        let err = session_config(&e, &ZenohOptions::default(), None).unwrap_err().to_string();
+        assert!(err.contains("need the deployment's keys"), "{err}");
     }
 
     #[test]
@@ -298,12 +408,16 @@ mod tests {
         let err = ZenohOptions::from_vars(vars(&[("KPL_ZENOH_PORT_BASE", "70000")])).unwrap_err();
         assert!(err.to_string().contains("not a port number"), "{err}");
         assert!(ZenohOptions::from_vars(vars(&[("KPL_ZENOH_WAIT", "-1")])).is_err());
+        let o = ZenohOptions::from_vars(vars(&[("KPL_ZENOH_GIVE_UP", "7"), ("KPL_KEYS", "k")])).unwrap();
+        assert_eq!((o.give_up, o.keys), (Duration::from_secs(7), Some(PathBuf::from("k"))));
+        let err = ZenohOptions::from_vars(vars(&[("KPL_ZENOH_GIVE_UP", "soon")])).unwrap_err();
+        assert!(err.to_string().contains("KPL_ZENOH_GIVE_UP=`soon`"), "{err}");
     }
 
     #[test]
     fn the_session_is_a_peer_without_multicast() {
         let e = Endpoints { listen: strings(&["tcp/127.0.0.1:7447"]), connect: vec![], explicit: false };
-        let config = session_config(&e, &ZenohOptions::default()).unwrap();
+        let config = session_config(&e, &ZenohOptions::default(), None).unwrap();
         assert_eq!(config.get_json("mode").unwrap(), "\"peer\"");
         assert_eq!(config.get_json("scouting/multicast/enabled").unwrap(), "false");
         assert_eq!(config.get_json("listen/endpoints").unwrap(), "[\"tcp/127.0.0.1:7447\"]");
@@ -311,7 +425,7 @@ mod tests {
     }
 
     #[test]
-    fn a_config_file_is_the_starting_point() {
+    fn a_config_file_merges_with_the_defaults() {
         let dir = std::env::temp_dir().join(format!("kpl-zenoh-config-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("z.json5");
@@ -323,15 +437,47 @@ mod tests {
         let options = ZenohOptions { config_file: Some(path.clone()), ..ZenohOptions::default() };
         let defaults =
             Endpoints { listen: strings(&["tcp/127.0.0.1:7447"]), connect: vec![], explicit: false };
-        let config = session_config(&defaults, &options).unwrap();
+        let config = session_config(&defaults, &options, None).unwrap();
         assert_eq!(config.get_json("listen/endpoints").unwrap(), "[\"tcp/127.0.0.1:9999\"]");
         assert_eq!(config.get_json("scouting/multicast/enabled").unwrap(), "false");
-        let given = Endpoints { explicit: true, ..defaults };
-        let config = session_config(&given, &options).unwrap();
+        let given = Endpoints { explicit: true, ..defaults.clone() };
+        let config = session_config(&given, &options, None).unwrap();
         assert_eq!(config.get_json("listen/endpoints").unwrap(), "[\"tcp/127.0.0.1:7447\"]");
+
+        // A file without endpoints (only tuning, or only access control) keeps the loopback
+        // defaults, not zenoh's (every interface, a random port).
+        std::fs::write(
+            &path,
+            "{ transport: { link: { tx: { lease: 2000 } } }, access_control: { enabled: true, default_permission: 'allow', rules: [], subjects: [], policies: [] } }",
+        )
+        .unwrap();
+        let config = session_config(&defaults, &options, None).unwrap();
+        assert_eq!(config.get_json("listen/endpoints").unwrap(), "[\"tcp/127.0.0.1:7447\"]");
+        assert_eq!(config.get_json("transport/link/tx/lease").unwrap(), "2000");
+        assert_eq!(config.get_json("access_control/enabled").unwrap(), "true");
+
         std::fs::write(&path, "{ not json").unwrap();
-        let err = session_config(&given, &options).unwrap_err().to_string();
+        let err = session_config(&given, &options, None).unwrap_err().to_string();
         assert!(err.contains("cannot read the zenoh configuration"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn access_control_rules_are_added_to_the_files() {
+        let ours = serde_json::json!({
+            "enabled": true, "default_permission": "allow",
+            "rules": [{"id": "kpl-1"}], "subjects": [{"id": "kpl-host-a"}], "policies": [{"rules": ["kpl-1"]}],
+        });
+        assert_eq!(merge_access_control(None, ours.clone()), ours);
+        let file = serde_json::json!({
+            "enabled": true, "default_permission": "deny",
+            "rules": [{"id": "mine"}], "subjects": [], "policies": [],
+        });
+        let merged = merge_access_control(Some(file), ours.clone());
+        assert_eq!(merged["default_permission"], "deny", "the file's default stays");
+        assert_eq!(merged["rules"], serde_json::json!([{"id": "mine"}, {"id": "kpl-1"}]));
+        assert_eq!(merged["subjects"], serde_json::json!([{"id": "kpl-host-a"}]));
+        let disabled = serde_json::json!({"enabled": false});
+        assert_eq!(merge_access_control(Some(disabled), ours.clone()), ours);
     }
 }

@@ -1,25 +1,40 @@
-//! Key expressions: the one module that turns KPL names into zenoh keys.
+//! Key expressions: the one module that turns KPL names into zenoh keys (docs/streams.md, "Key
+//! expressions", is the reference).
 //!
-//! A stream between hosts is published on `kpl/<spec>/<producer>` (its default output) or
-//! `kpl/<spec>/<producer>/<port>` (a named output such as a link's `changes`). Every name is one
-//! key chunk, escaped with [`escape_chunk`] so that no name can contain a separator (`/`), a
-//! wildcard (`*`, `$`), a reserved character (`#`, `?`) or start a verbatim chunk (`@`).
+//! A stream between hosts is published on `kpl/<deployment>/<spec>/<producer>` (its default
+//! output) or `kpl/<deployment>/<spec>/<producer>/<port>` (a named output such as a link's
+//! `changes`). The deployment's name comes first, so deployments of one spec never exchange a
+//! sample. Every name is one key chunk, escaped with [`escape_chunk`] so that no name can contain
+//! a separator (`/`), a wildcard (`*`, `$`), a reserved character (`#`, `?`) or start a verbatim
+//! chunk (`@`).
 //!
-//! Beside the data, liveliness tokens say who is there (docs/streams.md, "On the wire"):
-//! `<stream>/@subscriber/<host>` for each host that subscribed to the stream, so a publisher can
-//! wait for every consuming host, and `<stream>/@publisher/<host>` for the producing host, so a
-//! subscriber notices when its producer went away without ending the stream. `@` chunks are
-//! verbatim in zenoh: no wildcard matches them, so an outside program subscribing to
-//! `kpl/<spec>/**` sees the data of every stream and none of the tokens.
+//! Beside the data, liveliness tokens say who is there, and one queryable keeps each stream's end:
+//! - `<stream>/@subscriber/<host>`: a host subscribed to the stream (a publisher waits for every
+//!   consuming host, and counts what it publishes while one is away);
+//! - `<stream>/@publisher/<host>`: the producing host is there (a subscriber notices when it goes
+//!   away and comes back);
+//! - `<stream>/@done/<host>`: a consuming host has the stream's end (the producing host waits for
+//!   it before it leaves);
+//! - `<stream>/@end`: the producing host answers queries with the end of the stream once it has
+//!   ended, for a host that subscribes late or was away when the end went out;
+//! - `kpl/<deployment>/<spec>/@host/<host>`: the host runs.
+//!
+//! `@` chunks are verbatim in zenoh: no wildcard matches them, so an outside program subscribing
+//! to `kpl/<deployment>/<spec>/**` sees the data of every stream and none of the tokens.
 
 use kpl_runtime::transport::StreamKey;
 
 /// The first chunk of every key KPL publishes on.
 pub const ROOT: &str = "kpl";
 
+/// The keys of a deployment of a spec: `kpl/<deployment>/<spec>`.
+pub fn deployment(deployment: &str, spec: &str) -> String {
+    format!("{ROOT}/{}/{}", escape_chunk(deployment), escape_chunk(spec))
+}
+
 /// The key expression a stream is published on.
 pub fn stream(key: &StreamKey) -> String {
-    let mut out = format!("{ROOT}/{}/{}", escape_chunk(&key.spec), escape_chunk(&key.producer));
+    let mut out = format!("{}/{}", deployment(&key.deployment, &key.spec), escape_chunk(&key.producer));
     if let Some(port) = &key.port {
         out.push('/');
         out.push_str(&escape_chunk(port));
@@ -45,6 +60,31 @@ pub fn publisher_token(key: &StreamKey, host: &str) -> String {
 /// Matches the publisher tokens of a stream.
 pub fn publisher_tokens(key: &StreamKey) -> String {
     format!("{}/@publisher/*", stream(key))
+}
+
+/// The liveliness token a consuming host declares once it has the end of a stream.
+pub fn done_token(key: &StreamKey, host: &str) -> String {
+    format!("{}/@done/{}", stream(key), escape_chunk(host))
+}
+
+/// Matches the done tokens of a stream.
+pub fn done_tokens(key: &StreamKey) -> String {
+    format!("{}/@done/*", stream(key))
+}
+
+/// Where the producing host answers with the end of a stream.
+pub fn end(key: &StreamKey) -> String {
+    format!("{}/@end", stream(key))
+}
+
+/// The liveliness token of a running host.
+pub fn host_token(deployment_name: &str, spec: &str, host: &str) -> String {
+    format!("{}/@host/{}", deployment(deployment_name, spec), escape_chunk(host))
+}
+
+/// Matches the tokens of every running host of a deployment.
+pub fn host_tokens(deployment_name: &str, spec: &str) -> String {
+    format!("{}/@host/*", deployment(deployment_name, spec))
 }
 
 /// The last chunk of a token's key, unescaped: the host that declared it.
@@ -132,19 +172,44 @@ mod tests {
     use super::*;
 
     fn key(spec: &str, producer: &str, port: Option<&str>) -> StreamKey {
-        StreamKey { spec: spec.into(), producer: producer.into(), port: port.map(String::from) }
+        StreamKey {
+            deployment: "trial".into(),
+            spec: spec.into(),
+            producer: producer.into(),
+            port: port.map(String::from),
+        }
     }
 
     #[test]
     fn keys_of_streams() {
-        assert_eq!(stream(&key("bridge", "tracker", None)), "kpl/bridge/tracker");
+        assert_eq!(stream(&key("bridge", "tracker", None)), "kpl/trial/bridge/tracker");
         assert_eq!(
             stream(&key("bridge", "vision_world", Some("changes"))),
-            "kpl/bridge/vision_world/changes"
+            "kpl/trial/bridge/vision_world/changes"
         );
-        assert_eq!(stream(&key("my spec*", "p", None)), "kpl/my%20spec%2A/p");
-        assert_eq!(subscriber_token(&key("s", "p", None), "ground"), "kpl/s/p/@subscriber/ground");
-        assert_eq!(token_host("kpl/s/p/@subscriber/gr%C3%B6und").as_deref(), Some("gröund"));
+        assert_eq!(stream(&key("my spec*", "p", None)), "kpl/trial/my%20spec%2A/p");
+        let other = StreamKey { deployment: "site-3/b".into(), ..key("s", "p", None) };
+        assert_eq!(stream(&other), "kpl/site-3%2Fb/s/p");
+        assert_eq!(subscriber_token(&key("s", "p", None), "ground"), "kpl/trial/s/p/@subscriber/ground");
+        assert_eq!(done_token(&key("s", "p", Some("o")), "g"), "kpl/trial/s/p/o/@done/g");
+        assert_eq!(end(&key("s", "p", None)), "kpl/trial/s/p/@end");
+        assert_eq!(host_token("trial", "s", "uav"), "kpl/trial/s/@host/uav");
+        assert_eq!(token_host("kpl/trial/s/p/@subscriber/gr%C3%B6und").as_deref(), Some("gröund"));
+    }
+
+    #[test]
+    fn tokens_are_out_of_reach_of_wildcards() {
+        let all = zenoh::key_expr::KeyExpr::try_from("kpl/trial/s/**").unwrap();
+        for token in [
+            subscriber_token(&key("s", "p", None), "g"),
+            publisher_token(&key("s", "p", Some("o")), "g"),
+            end(&key("s", "p", None)),
+            host_token("trial", "s", "g"),
+        ] {
+            let token = zenoh::key_expr::KeyExpr::try_from(token).unwrap();
+            assert!(!all.intersects(&token), "{token}");
+        }
+        assert!(all.intersects(&zenoh::key_expr::KeyExpr::try_from(stream(&key("s", "p", None))).unwrap()));
     }
 
     #[test]

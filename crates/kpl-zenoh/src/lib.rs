@@ -2,10 +2,14 @@
 //! runtime (`kpl-runtime`) knows only its `Transport` traits; this is the one crate that depends on
 //! zenoh.
 //!
-//! - [`keys`]: the key expressions of streams (`kpl/<spec>/<producer>[/<port>]`) and tokens;
+//! - [`keys`]: the key expressions of streams (`kpl/<deployment>/<spec>/<producer>[/<port>]`) and
+//!   tokens;
 //! - [`codec`]: the wire format, one encode and one decode function (docs/streams.md);
+//! - [`envelope`]: who sent a message, its place in its stream, and its authentication tag;
 //! - [`config`]: each host's endpoints (the deploy section, or loopback defaults) and its session's
-//!   configuration: peer mode, multicast scouting off, explicit endpoints;
+//!   configuration: peer mode, multicast scouting off, explicit endpoints, and with keys mutual TLS
+//!   and access control;
+//! - [`credentials`]: a deployment's keys (`kpl keys`) and what each host reads of them;
 //! - [`Sessions`]: the one zenoh session of a host process;
 //! - [`ZenohFactory`] / [`ZenohTransport`]: what `kpl run --host` sends streams through;
 //! - `zenoh.subscribe` and `zenoh.publish` ([`register`]);
@@ -17,6 +21,8 @@
 pub mod bench;
 pub mod codec;
 pub mod config;
+pub mod credentials;
+pub mod envelope;
 pub mod keys;
 mod outside;
 mod session;
@@ -26,7 +32,7 @@ use std::sync::Arc;
 
 pub use config::ZenohOptions;
 pub use session::{HostSession, Sessions};
-pub use transport::{ZenohFactory, ZenohReceiver, ZenohSender, ZenohTransport};
+pub use transport::{Plan, ZenohFactory, ZenohReceiver, ZenohSender, ZenohTransport};
 
 /// Adds `zenoh.subscribe` and `zenoh.publish` to a registry; they use this process's session
 /// ([`Sessions::process`]), the same one as [`factory`].
@@ -36,6 +42,7 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
 
 /// As [`register`], with the given sessions.
 pub fn register_with(registry: &mut kpl_runtime::Registry, sessions: Arc<Sessions>) {
+    registry.set_link_protocols(config::protocols());
     outside::register(registry, sessions);
 }
 

@@ -3,17 +3,18 @@
 //! the host's endpoints ([`crate::config`]), the others get the same one, and it closes when the
 //! run closes its transport or the last user lets go of it.
 
-use std::sync::{Arc, OnceLock, Weak};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 use kpl_runtime::transport::TransportError;
 use kpl_semantic::hir;
 
-use crate::config::{self, Endpoints, ZenohOptions};
+use crate::config::{self, Endpoints, Security, ZenohOptions};
+use crate::credentials::Credentials;
 
 /// Opens (once) the zenoh session of this process.
 #[derive(Debug)]
 pub struct Sessions {
-    options: Result<ZenohOptions, TransportError>,
+    options: Mutex<Result<ZenohOptions, TransportError>>,
     current: tokio::sync::Mutex<Weak<HostSession>>,
 }
 
@@ -25,6 +26,8 @@ pub struct HostSession {
     pub host: Option<String>,
     pub endpoints: Endpoints,
     pub options: ZenohOptions,
+    /// The host's share of its deployment's keys (`--keys`).
+    pub credentials: Option<Credentials>,
 }
 
 impl HostSession {
@@ -39,7 +42,7 @@ impl HostSession {
 
 impl Sessions {
     pub fn new(options: ZenohOptions) -> Arc<Sessions> {
-        Arc::new(Sessions { options: Ok(options), current: tokio::sync::Mutex::new(Weak::new()) })
+        Arc::new(Sessions { options: Mutex::new(Ok(options)), current: tokio::sync::Mutex::new(Weak::new()) })
     }
 
     /// The sessions of this process, with options from the environment
@@ -49,15 +52,25 @@ impl Sessions {
         PROCESS
             .get_or_init(|| {
                 Arc::new(Sessions {
-                    options: ZenohOptions::from_env(),
+                    options: Mutex::new(ZenohOptions::from_env()),
                     current: tokio::sync::Mutex::new(Weak::new()),
                 })
             })
             .clone()
     }
 
-    pub fn options(&self) -> Result<&ZenohOptions, TransportError> {
-        self.options.as_ref().map_err(Clone::clone)
+    pub fn options(&self) -> Result<ZenohOptions, TransportError> {
+        self.options.lock().map_err(|_| TransportError("the zenoh options are unusable".into()))?.clone()
+    }
+
+    /// Changes the options of sessions opened from now on (the command line's `--keys` over the
+    /// environment's `KPL_KEYS`).
+    pub fn configure(&self, change: impl FnOnce(&mut ZenohOptions)) {
+        if let Ok(mut options) = self.options.lock()
+            && let Ok(options) = options.as_mut()
+        {
+            change(options);
+        }
     }
 
     /// The open session, or a new one for `host` of `deploy` (a run without `--host`: `None`).
@@ -67,7 +80,18 @@ impl Sessions {
         deploy: Option<&hir::Deploy>,
         host: Option<&str>,
     ) -> Result<Arc<HostSession>, TransportError> {
-        let options = self.options()?.clone();
+        self.open_with(deploy, host, None).await
+    }
+
+    /// As [`Sessions::open`], with access-control rules for a new session of a deployment with
+    /// keys (the transport between hosts opens the session first, with the rules of its streams).
+    pub async fn open_with(
+        &self,
+        deploy: Option<&hir::Deploy>,
+        host: Option<&str>,
+        access_control: Option<serde_json::Value>,
+    ) -> Result<Arc<HostSession>, TransportError> {
+        let options = self.options()?;
         let mut current = self.current.lock().await;
         if let Some(open) = current.upgrade() {
             if open.host.as_deref() != host {
@@ -79,8 +103,15 @@ impl Sessions {
             }
             return Ok(open);
         }
-        let endpoints = config::endpoints(deploy, host, options.port_base)?;
-        let zenoh_config = config::session_config(&endpoints, &options)?;
+        let credentials = match (&options.keys, host) {
+            (Some(dir), Some(host)) => Some(Credentials::load(dir, host)?),
+            _ => None,
+        };
+        let endpoints = config::endpoints(deploy, host, options.port_base, credentials.is_some())?;
+        let security = credentials
+            .clone()
+            .map(|credentials| Security { credentials, access_control: access_control.clone() });
+        let zenoh_config = config::session_config(&endpoints, &options, security.as_ref())?;
         let who = host.map_or_else(|| "this run".to_string(), |h| format!("host `{h}`"));
         let session = zenoh::open(zenoh_config).await.map_err(|e| {
             TransportError(format!(
@@ -88,8 +119,9 @@ impl Sessions {
                 endpoints.listen, endpoints.connect
             ))
         })?;
-        tracing::info!(listen = ?endpoints.listen, connect = ?endpoints.connect, "zenoh session of {who} open");
-        let open = Arc::new(HostSession { session, host: host.map(String::from), endpoints, options });
+        tracing::info!(listen = ?endpoints.listen, connect = ?endpoints.connect, keys = credentials.is_some(), "zenoh session of {who} open");
+        let open =
+            Arc::new(HostSession { session, host: host.map(String::from), endpoints, options, credentials });
         *current = Arc::downgrade(&open);
         Ok(open)
     }

@@ -10,6 +10,8 @@ pub mod check;
 pub mod explain;
 pub mod fmt;
 pub mod graph;
+pub mod keys;
+pub mod launch;
 pub mod list;
 pub mod mtl;
 pub mod run;

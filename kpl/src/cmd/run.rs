@@ -10,6 +10,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use clap::Args as ClapArgs;
 use kpl_core::{Time, TimeUnit};
+use kpl_runtime::run::Signal;
 use kpl_runtime::stats::RunStats;
 use kpl_runtime::{ClockKind, Ending, RunConfig, RunReport};
 
@@ -25,7 +26,7 @@ pub enum ClockArg {
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/ticks.kpl --clock wall --for 5s --out /tmp/run\n  kpl run specs/zenoh/two_hosts.kpl --host b --clock wall --for 3s   # one host of a deployed spec\n\nOutputs of file sinks go under --out (default out/SPEC); the files written are listed at the end,\nwith what the processes achieved (objects anchored, symbols kept across gaps) and a summary per\nstream (produced, delivered, dropped by reason, policy violations), also written to summary.json\nthere (docs/runtime.md describes it field by field). While it runs, a progress line counts the\nsamples of every stream. Ctrl-C stops the run cleanly: sinks are flushed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors, 130 interrupted."
+    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/ticks.kpl --clock wall --for 5s --out /tmp/run\n  kpl run specs/zenoh/endless.kpl --host producer --clock wall --for 3s   # one host only\n\nOutputs of file sinks go under --out (default out/SPEC); the files written are listed at the end,\nwith what the processes achieved (objects anchored, symbols kept across gaps) and a summary per\nstream (produced, delivered, dropped by reason, policy violations), also written to summary.json\nthere (docs/runtime.md describes it field by field). While it runs, a progress line counts the\nsamples of every stream. Ctrl-C and SIGTERM stop the run alike, cleanly: sinks are flushed,\nthe summary is printed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors,\n3 an input from another host was cut short (its host lost) or nothing arrived from another host,\n130 Ctrl-C, 143 SIGTERM."
 )]
 pub struct Args {
     /// The spec to run.
@@ -34,6 +35,14 @@ pub struct Args {
     /// hosts go over zenoh.
     #[arg(long)]
     pub host: Option<String>,
+    /// The deployment's name (default: the spec's `deploy NAME`, else `default`); hosts of
+    /// different deployments never exchange samples.
+    #[arg(long, requires = "host")]
+    pub deployment: Option<String>,
+    /// The deployment's keys folder (made by `kpl keys`): mutual TLS between the hosts, access
+    /// control, authenticated messages. Also KPL_KEYS.
+    #[arg(long, requires = "host")]
+    pub keys: Option<PathBuf>,
     /// Which clock drives the run.
     #[arg(long, value_enum, default_value = "sim")]
     pub clock: ClockArg,
@@ -99,8 +108,13 @@ pub fn run(args: Args) -> ExitCode {
         spec_name: stem,
         strict: args.strict,
         host: args.host.clone(),
+        deployment: args.deployment.clone(),
         stats: Some(Arc::new(RunStats::default())),
     };
+    if args.deployment.as_deref() == Some("") {
+        eprintln!("error: --deployment needs a name");
+        return ExitCode::from(2);
+    }
     if args.host.is_some()
         && config.clock == ClockKind::Sim
         && spec.deploy.as_ref().is_some_and(|d| d.hosts.len() > 1)
@@ -111,7 +125,7 @@ pub fn run(args: Args) -> ExitCode {
         return ExitCode::from(2);
     }
     let registry = crate::registry::registry();
-    let transport = crate::transport::factory();
+    let transport = crate::transport::factory(args.keys.as_deref());
     let started = SystemTime::now();
     let progress = (!args.quiet).then(|| {
         let stats = config.stats.clone().unwrap_or_default();
@@ -140,11 +154,23 @@ pub fn run(args: Args) -> ExitCode {
         text.push_str(&results(&report));
         text.push_str(&outputs(&out_dir, started));
         let _ = std::io::stderr().lock().write_all(text.as_bytes());
+    } else {
+        // Quiet, but an exit status 3 says why.
+        for incomplete in report.incomplete() {
+            eprintln!("incomplete: {incomplete}");
+        }
     }
+    exit_code(&report)
+}
+
+/// The exit status of a run (documented in `--help` and docs/runtime.md).
+fn exit_code(report: &RunReport) -> ExitCode {
     match report.ending {
+        Ending::Interrupted if report.signal == Some(Signal::Terminate) => ExitCode::from(143),
         Ending::Interrupted => ExitCode::from(130),
         Ending::Strict => ExitCode::from(1),
         _ if !report.failures.is_empty() => ExitCode::from(1),
+        _ if !report.incomplete().is_empty() => ExitCode::from(3),
         _ => ExitCode::SUCCESS,
     }
 }
@@ -280,7 +306,10 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
     let how = match report.ending {
         Ending::SourcesEnded => "every source ended",
         Ending::DurationReached => "--for reached",
-        Ending::Interrupted => "interrupted",
+        Ending::Interrupted => match report.signal {
+            Some(Signal::Terminate) => "interrupted by SIGTERM",
+            _ => "interrupted by Ctrl-C",
+        },
         Ending::Strict => "stopped at a malformed input (--strict)",
     };
     let kind = if clock == ClockKind::Sim { "simulated" } else { "clock" };
@@ -343,7 +372,66 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
     for failure in &report.failures {
         let _ = writeln!(out, "failed: {failure}");
     }
+    if let Some(transport) = &report.transport {
+        describe_hosts(&mut out, transport);
+    }
+    for incomplete in report.incomplete() {
+        let _ = writeln!(out, "incomplete: {incomplete}");
+    }
     out
+}
+
+/// Streams between hosts: who came and went, what was lost, refused or cut short.
+fn describe_hosts(out: &mut String, transport: &kpl_runtime::transport::TransportReport) {
+    let _ = writeln!(out, "host `{}` of deployment `{}`:", transport.host, transport.deployment);
+    for h in &transport.hosts {
+        let seen = match h.first_seen_s {
+            Some(s) => format!("up after {s:.1} s"),
+            None => "never seen".to_string(),
+        };
+        let mut line = format!("  host `{}`: {seen}", h.host);
+        if h.lost > 0 {
+            let _ = write!(
+                line,
+                ", went away {} time(s), came back {} time(s), away {:.1} s{}",
+                h.lost,
+                h.returned,
+                h.away_s,
+                if h.up_at_end { "" } else { " (away at the end)" }
+            );
+        }
+        let _ = writeln!(out, "{line}");
+    }
+    for s in &transport.inbound {
+        let ending = match &s.ending {
+            kpl_runtime::transport::InboundEnding::Open => "open when the run stopped".to_string(),
+            kpl_runtime::transport::InboundEnding::End => "ended by its producer".to_string(),
+            kpl_runtime::transport::InboundEnding::CutShort(why) => format!("cut short: {why}"),
+        };
+        let _ = writeln!(
+            out,
+            "  `{}` from `{}`: {} received, {} lost, {} refused, producer restarted {} time(s); {ending}",
+            s.stream, s.from, s.received, s.lost, s.refused, s.producer_restarts
+        );
+        for r in &s.refused_examples {
+            let _ = writeln!(out, "    refused at {}: {}", r.location, r.error);
+        }
+    }
+    for s in &transport.outbound {
+        let missed: Vec<String> = s.missed.iter().map(|(h, n)| format!("{n} while `{h}` was away")).collect();
+        let _ = writeln!(
+            out,
+            "  `{}` sent: {} published{}{}",
+            s.stream,
+            s.published,
+            if missed.is_empty() { String::new() } else { format!(", {}", missed.join(", ")) },
+            if s.end_not_confirmed.is_empty() {
+                String::new()
+            } else {
+                format!("; the end not confirmed by {}", s.end_not_confirmed.join(", "))
+            }
+        );
+    }
 }
 
 #[cfg(test)]

@@ -20,7 +20,9 @@ outputs; a world model is scored per type) is compared with the ground truth (th
 `*.truth`, the tracker's `truth` port) at the same valid times. Metrics: MOTA, MOTP (metres), IDF1,
 IDP, IDR, identity switches, fragmentations, mostly tracked / partially tracked / mostly lost
 (py-motmetrics' definitions), HOTA, DetA, AssA, LocA (TrackEval's, similarity max(0, 1 - d / Z)
-with Z twice the gate). See docs/scoring.md.
+with Z twice the gate). Branch objects of predictions split at junctions (records with
+`branch_of`) are hypotheses, not objects: they are left out and counted unless --branches. See
+docs/scoring.md.
 Exit status: 0 every stream scored, 1 the recording cannot be scored as asked (no ground truth,
 an unknown stream, times that do not match), 2 usage or I/O errors.";
 
@@ -45,6 +47,10 @@ pub struct Args {
     /// Leave out states that were only predicted (records with `measured: false`).
     #[arg(long)]
     measured_only: bool,
+    /// Score branch objects (records with `branch_of`: the other hypotheses of a prediction split
+    /// at a junction) as tracks of their own; by default they are left out, and counted.
+    #[arg(long)]
+    branches: bool,
     /// What to do with ground-truth times at which a stream has no snapshot.
     #[arg(long, value_enum, default_value = "error")]
     missing: MissingArg,
@@ -102,6 +108,7 @@ pub fn run(args: Args) -> ExitCode {
                 MissingArg::Skip => Missing::Skip,
             },
             measured_only: args.measured_only,
+            score_branches: args.branches,
         },
     };
     let scored = match kpl_score::score_recording(&recording, &options) {

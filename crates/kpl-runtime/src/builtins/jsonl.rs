@@ -10,10 +10,17 @@
 //! value of the wrong type, NaN where a number is needed, or an available time going backwards is
 //! counted as malformed with its file and line, and the replay goes on (`--strict` stops the run).
 //! With simulated time samples keep their recorded times; with wall-clock time they are shifted so
-//! the first one happens when the run starts.
+//! the first one happens when the run starts (a time that the shift would take past the range of
+//! 64-bit microseconds is malformed, not wrapped).
+//!
+//! Hostile paths are refused or bounded: a directory is refused when the run starts; a line is at
+//! most [`MAX_LINE`] bytes (a longer one, such as `/dev/zero` gives, ends the replay as a failure
+//! of the process, so memory stays bounded); so does a read error; and
+//! the replay yields to the run between lines, so a file of nothing but bad lines neither blocks
+//! Ctrl-C nor starves the other processes.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::PathBuf;
 
 use kpl_core::{Time, Value, ValueType};
@@ -94,26 +101,98 @@ struct Replay {
     clock: ClockKind,
 }
 
+/// The longest line replay reads: a longer one is not a sample line (`/dev/zero` has no line
+/// breaks at all), and reading on would hold it all in memory.
+pub const MAX_LINE: usize = 16 << 20;
+
+/// How many lines replay reads without emitting before it lets the other tasks run.
+const LINES_PER_YIELD: usize = 256;
+
+/// One line of a replayed file.
+#[derive(Debug, PartialEq, Eq)]
+pub(crate) enum Line<'a> {
+    Text(&'a str),
+    NotUtf8,
+    /// Longer than the limit: the rest of the file is not read.
+    TooLong,
+    End,
+}
+
+/// Reads lines of at most `limit` bytes, reusing one buffer.
+pub(crate) struct LineReader<R> {
+    reader: R,
+    buffer: Vec<u8>,
+    limit: usize,
+}
+
+impl<R: BufRead> LineReader<R> {
+    pub(crate) fn new(reader: R, limit: usize) -> LineReader<R> {
+        LineReader { reader, buffer: Vec::new(), limit }
+    }
+
+    /// The next line without its line break (`\n` or `\r\n`).
+    pub(crate) fn next_line(&mut self) -> std::io::Result<Line<'_>> {
+        self.buffer.clear();
+        let limit = u64::try_from(self.limit).unwrap_or(u64::MAX).saturating_add(1);
+        let read = (&mut self.reader).take(limit).read_until(b'\n', &mut self.buffer)?;
+        if read == 0 {
+            return Ok(Line::End);
+        }
+        if self.buffer.last() == Some(&b'\n') {
+            self.buffer.pop();
+            if self.buffer.last() == Some(&b'\r') {
+                self.buffer.pop();
+            }
+        } else if self.buffer.len() > self.limit {
+            return Ok(Line::TooLong);
+        }
+        Ok(std::str::from_utf8(&self.buffer).map_or(Line::NotUtf8, Line::Text))
+    }
+}
+
 impl Source for Replay {
     fn run<'a>(&'a mut self, ctx: &'a mut SourceContext) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
             let Some(reader) = self.reader.take() else { return Ok(()) };
+            let mut lines = LineReader::new(reader, MAX_LINE);
             let display = self.path.display().to_string();
             let mut shift: Option<Time> = None;
             let mut last_available: Option<Time> = None;
-            for (index, line) in reader.lines().enumerate() {
-                let location = format!("{display}:{}", index + 1);
-                let line = match line {
-                    Ok(line) => line,
-                    Err(e) => {
-                        ctx.malformed(&location, format!("cannot read the line: {e}"))?;
+            let mut number = 0usize;
+            let mut since_yield = 0usize;
+            loop {
+                number += 1;
+                since_yield += 1;
+                if since_yield >= LINES_PER_YIELD {
+                    since_yield = 0;
+                    tokio::task::yield_now().await;
+                    if ctx.should_stop() {
+                        break;
+                    }
+                }
+                let location = format!("{display}:{number}");
+                let line = match lines.next_line() {
+                    Ok(Line::Text(line)) => line,
+                    Ok(Line::End) => break,
+                    Ok(Line::NotUtf8) => {
+                        ctx.malformed(&location, "the line is not UTF-8 text")?;
                         continue;
+                    }
+                    Ok(Line::TooLong) => {
+                        return Err(ProcessError::failed(format!(
+                            "cannot replay {location}: no line break within {} MiB (not a JSON lines file?); \
+                             the rest of the file is not read",
+                            MAX_LINE >> 20
+                        )));
+                    }
+                    Err(e) => {
+                        return Err(ProcessError::failed(format!("cannot read {location}: {e}")));
                     }
                 };
                 if line.trim().is_empty() {
                     continue;
                 }
-                let (stream, mut sample) = match decode_line(&line, &self.ty) {
+                let (stream, mut sample) = match decode_line(line, &self.ty) {
                     Ok(decoded) => decoded,
                     Err(error) => {
                         ctx.malformed(&location, error)?;
@@ -132,13 +211,26 @@ impl Source for Replay {
                     )?;
                     continue;
                 }
-                last_available = Some(sample.available);
                 let shift = *shift.get_or_insert_with(|| match self.clock {
                     ClockKind::Sim => 0,
-                    ClockKind::Wall => ctx.clock.start() - sample.available,
+                    ClockKind::Wall => ctx.clock.start().saturating_sub(sample.available),
                 });
-                sample.valid += shift;
-                sample.available += shift;
+                let (Some(valid), Some(available)) =
+                    (sample.valid.checked_add(shift), sample.available.checked_add(shift))
+                else {
+                    ctx.malformed(
+                        &location,
+                        format!(
+                            "valid {} / available {} cannot be moved to the wall clock (by {shift} us): \
+                             past the range of 64-bit microseconds",
+                            sample.valid, sample.available
+                        ),
+                    )?;
+                    continue;
+                };
+                last_available = Some(sample.available);
+                (sample.valid, sample.available) = (valid, available);
+                since_yield = 0;
                 if !ctx.wait_until(sample.available).await {
                     break;
                 }
@@ -215,6 +307,13 @@ pub(super) fn register(registry: &mut Registry) {
             let path = ctx.input_path(ctx.param("path").and_then(Value::as_str).unwrap_or(""));
             let file =
                 File::open(&path).map_err(|e| ctx.error(format!("cannot open {}: {e}", path.display())))?;
+            // A directory opens on Unix, and then every read fails.
+            if file.metadata().is_ok_and(|m| m.is_dir()) {
+                return Err(ctx.error(format!(
+                    "cannot replay {}: it is a directory (give a JSON lines file)",
+                    path.display()
+                )));
+            }
             Ok(Box::new(Replay {
                 path,
                 reader: Some(BufReader::new(file)),
@@ -254,6 +353,24 @@ mod tests {
         let line = encode_line("s", &sample);
         assert_eq!(line, r#"{"stream":"s","valid":100,"available":120,"value":[1.5,-2.0]}"#);
         assert_eq!(decode_line(&line, &ValueType::Vec2).unwrap(), ("s".to_string(), sample));
+    }
+
+    #[test]
+    fn lines_are_bounded() {
+        let text = "one\r\ntwo\n\nthree-is-long\nlast";
+        let mut lines = LineReader::new(BufReader::new(text.as_bytes()), 8);
+        assert_eq!(lines.next_line().unwrap(), Line::Text("one"));
+        assert_eq!(lines.next_line().unwrap(), Line::Text("two"));
+        assert_eq!(lines.next_line().unwrap(), Line::Text(""));
+        assert_eq!(lines.next_line().unwrap(), Line::TooLong);
+        // An endless stream without line breaks (as /dev/zero) is cut at the limit: the reader
+        // holds at most the limit and one buffer.
+        let mut zeros = LineReader::new(BufReader::new(std::io::repeat(0)), 1 << 20);
+        assert_eq!(zeros.next_line().unwrap(), Line::TooLong);
+        assert!(zeros.buffer.capacity() <= 4 << 20, "{}", zeros.buffer.capacity());
+        let mut invalid = LineReader::new(BufReader::new(&b"\xff\xfe\n"[..]), 8);
+        assert_eq!(invalid.next_line().unwrap(), Line::NotUtf8);
+        assert_eq!(invalid.next_line().unwrap(), Line::End);
     }
 
     #[test]
