@@ -150,6 +150,46 @@ fn malformed_input_is_counted_reported_and_survived() {
     assert_eq!(lines(&strict_out.join("replayed.jsonl")).len(), 2, "what came before is flushed");
 }
 
+/// The process summaries of a run, by process name.
+fn processes(out: &Path) -> BTreeMap<String, Value> {
+    let report = summary(out);
+    let list = report["summary"]["processes"].as_array().unwrap();
+    list.iter().map(|p| (p["process"].as_str().unwrap().to_string(), p.clone())).collect()
+}
+
+#[test]
+fn a_replay_filters_its_stream_before_decoding() {
+    let out = out_dir("filter");
+    let result = run("specs/run/filter.kpl", &out, &[]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let streams = by_stream(&lines(&out.join("filtered.jsonl")));
+    let times = |name: &str| streams[name].iter().map(|(t, _)| *t).collect::<Vec<_>>();
+    assert_eq!(times("percepts"), [0, 100, 200]);
+    assert_eq!(times("speed"), [0, 100]);
+    let processes = processes(&out);
+    // Each source counts the line that is not JSON; the other stream's lines are not malformed.
+    assert_eq!(processes["percepts"]["malformed"], 1, "{:?}", processes["percepts"]);
+    assert_eq!(processes["speed"]["malformed"], 2, "{:?}", processes["speed"]);
+    assert_eq!(
+        processes["speed"]["malformed_examples"][1]["error"],
+        "value at `.`: expected a finite number, found the string \"fast\""
+    );
+    assert_eq!(processes["percepts"]["warnings"], serde_json::json!([]));
+}
+
+#[test]
+fn a_replay_whose_filter_matches_nothing_warns() {
+    let out = out_dir("filter-typo");
+    let result = run("specs/run/filter_typo.kpl", &out, &[]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let expected = "no sample of specs/run/data/mixed.jsonl is of stream \"percept\", so this source is \
+                    empty: its streams are \"percepts\" (3), \"speed\" (3); did you mean \"percepts\"?";
+    assert_eq!(processes(&out)["percepts"]["warnings"], serde_json::json!([expected]));
+    // Printed even with --quiet.
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains(&format!("warning: percepts: {expected}")), "{stderr}");
+}
+
 #[test]
 fn for_ends_a_wall_clock_run() {
     let out = out_dir("for");
@@ -519,5 +559,29 @@ fn a_pair_monitor_reports_an_overtake_as_one_episode_gated_or_not() {
     assert!(count("ungated") >= count("gated"), "{} < {}", count("ungated"), count("gated"));
     for r in &records {
         assert!(r["value"]["start"].as_i64().unwrap() <= r["value"]["end"].as_i64().unwrap(), "{r}");
+    }
+}
+
+/// A reader that stops early (`kpl graph ... | head`) ends the command quietly, as it ends `cat`:
+/// killed by SIGPIPE (or done, if it wrote everything before the pipe closed), never a panic.
+#[test]
+fn a_reader_that_stops_early_is_not_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    for args in [
+        ["graph", "specs/ok/overview.kpl", "--format", "dot"],
+        ["check", "specs/ok/overview.kpl", "--format", "json"],
+    ] {
+        let mut child = kpl(&args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+        drop(child.stdout.take());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!stderr.contains("panicked"), "kpl {}: {stderr}", args.join(" "));
+        assert!(
+            output.status.success() || output.status.signal() == Some(13),
+            "kpl {}: {:?} {stderr}",
+            args.join(" "),
+            output.status
+        );
     }
 }

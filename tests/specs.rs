@@ -162,6 +162,7 @@ fn every_command_has_help_with_an_example() {
         "fmt",
         "list",
         "run",
+        "convert",
         "score",
         "mtl",
         "mtl eval",

@@ -51,6 +51,8 @@ enum Command {
     List(cmd::list::Args),
     /// Run a spec: build its graph of knowledge processes and run it (sim or wall clock).
     Run(cmd::run::Args),
+    /// Convert a recording between JSON lines and MCAP, losing nothing.
+    Convert(cmd::convert::Args),
     /// Launch every host of a deployed spec on this machine, with one summary.
     Launch(cmd::launch::Args),
     /// Make the keys of a deployment: mutual TLS between its hosts, authenticated messages.
@@ -106,6 +108,12 @@ pub fn main() -> ExitCode {
     };
     report::set_color(cli.color);
     init_tracing();
+    // A reader that stops early (`kpl check | head`, `kpl explain E0101 | less`) ends the command
+    // quietly, as it ends cat or grep, instead of a panic in `println!`. Not for the commands that
+    // run a deployment: they write their sinks out and report on stderr whatever happens to stdout.
+    if !matches!(cli.command, Command::Run(_) | Command::Launch(_)) {
+        sigpipe::reset();
+    }
     match cli.command {
         Command::Check(args) => cmd::check::run(args),
         Command::Graph(args) => cmd::graph::run(args),
@@ -113,6 +121,7 @@ pub fn main() -> ExitCode {
         Command::Fmt(args) => cmd::fmt::run(args),
         Command::List(args) => cmd::list::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Convert(args) => cmd::convert::run(args),
         Command::Launch(args) => cmd::launch::run(args),
         Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),

@@ -193,3 +193,108 @@ fn help_shows_an_example() {
     let help = String::from_utf8(output.stdout).unwrap();
     assert!(help.contains("Example:") && help.contains("--every") && help.contains("--time-unit"), "{help}");
 }
+
+#[test]
+fn long_formulas_come_from_a_file() {
+    let trace = trace_file("formula_file.jsonl", TRACE);
+    let dir = trace.parent().unwrap().to_path_buf();
+    // 30,000 conjuncts: far past what a command line takes (128 KiB per argument on Linux).
+    let long: String = (0..30_000).map(|_| "x > 0").collect::<Vec<_>>().join(" and ");
+    let path = dir.join("long.mtl");
+    std::fs::write(&path, format!("always[0, 3] ({long})\n")).unwrap();
+    let run = |extra: &[&str]| {
+        let output = Command::new(env!("CARGO_BIN_EXE_kpl"))
+            .args(["mtl", "eval", "--trace"])
+            .arg(&trace)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            output.status.code(),
+            String::from_utf8(output.stdout).unwrap(),
+            String::from_utf8(output.stderr).unwrap(),
+        )
+    };
+    let (code, stdout, stderr) = run(&["--formula-file", path.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(json_lines(&stdout)[0], serde_json::json!({"verdict": true, "decided_at": 3}));
+    // Errors point into the file.
+    let bad = dir.join("bad.mtl");
+    std::fs::write(&bad, "always[0, 3]\n  (x > 0 and xydst(x, x) < 1)\n").unwrap();
+    let (code, _, stderr) = run(&["--formula-file", bad.to_str().unwrap()]);
+    assert_eq!(code, Some(1));
+    assert!(stderr.contains("bad.mtl:2:14") && stderr.contains("did you mean `xydist`?"), "{stderr}");
+    // One formula source, exactly.
+    let (code, _, _) = run(&[]);
+    assert_eq!(code, Some(2));
+    let (code, _, _) = run(&["--formula", "p", "--formula-file", path.to_str().unwrap()]);
+    assert_eq!(code, Some(2));
+    let (code, _, stderr) = run(&["--formula-file", "/nonexistent/f.mtl"]);
+    assert_eq!(code, Some(2), "{stderr}");
+}
+
+#[test]
+fn invalid_utf8_is_an_input_error_with_its_line_and_a_byte_order_mark_is_skipped() {
+    let dir = std::env::temp_dir().join(format!("kpl-mtl-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("latin1.jsonl");
+    let mut bytes = b"{\"t\": 0, \"p\": true}\n{\"t\": 1, \"p\": true, \"name\": \"M".to_vec();
+    bytes.extend_from_slice(&[0xfc, b'l', b'l', b'e', b'r']);
+    bytes.extend_from_slice(b"\"}\n");
+    std::fs::write(&bad, &bytes).unwrap();
+    assert_fails(&eval("always p", &bad, &[]), &["latin1.jsonl:2:", "not valid UTF-8"]);
+
+    let bom = dir.join("bom.jsonl");
+    std::fs::write(&bom, b"\xEF\xBB\xBF{\"t\": 0, \"p\": true}\n{\"t\": 1, \"p\": false}\n").unwrap();
+    let run = eval("always p", &bom, &[]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert_eq!(json_lines(&run.stdout)[0], serde_json::json!({"verdict": false, "decided_at": 1}));
+}
+
+#[test]
+fn every_prints_each_verdict_as_soon_as_it_and_the_earlier_ones_are_known() {
+    use std::io::{BufRead, BufReader, Write};
+    // The trace comes through a pipe, one state at a time; each verdict must come out before the
+    // trace ends. `eventually[0, 2] q` from state i is known at most 2 states later.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kpl"))
+        .args(["mtl", "eval", "--formula", "eventually[0, 2] q", "--every", "--trace", "/dev/stdin"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let (lines, rx) = std::sync::mpsc::channel::<String>();
+    let stdout = child.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            if lines.send(line.unwrap()).is_err() {
+                break;
+            }
+        }
+    });
+    let mut printed = Vec::new();
+    for t in 0..200i64 {
+        writeln!(stdin, "{{\"t\": {t}, \"q\": {}}}", t % 5 == 4).unwrap();
+        stdin.flush().unwrap();
+        if t >= 2 {
+            // State t - 2's verdict is known now (the window [t - 2, t] is closed).
+            let line = rx
+                .recv_timeout(std::time::Duration::from_secs(120))
+                .expect("a verdict before the trace ends");
+            printed.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
+        }
+    }
+    drop(stdin);
+    while let Ok(line) = rx.recv_timeout(std::time::Duration::from_secs(120)) {
+        printed.push(serde_json::from_str(&line).unwrap());
+    }
+    assert!(child.wait().unwrap().success());
+    reader.join().unwrap();
+    assert_eq!(printed.len(), 200);
+    for (i, v) in printed.iter().enumerate() {
+        let t = i as i64;
+        // q at every t with t % 5 == 4; from t, a q within [t, t + 2] (and inside the trace).
+        let want = (t..=(t + 2).min(199)).any(|u| u % 5 == 4);
+        assert_eq!(v, &serde_json::json!({"t": t, "verdict": want}), "state {t}");
+    }
+}

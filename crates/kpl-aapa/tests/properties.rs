@@ -79,12 +79,16 @@ fn check(previous: &WorldState, world: &WorldState, actions: &[Action], params: 
     // One parent per child: exactly one `attached` relation per attached anchor.
     let attached = world.relations.iter().filter(|r| &*r.name == "attached").count();
     assert_eq!(attached, world.anchors.iter().filter(|a| a.attachment.is_some()).count());
-    // No anchor is removed while attached to an anchored ancestor (unless an action this cycle
-    // concerned it or its parents).
+    // No anchor is removed while attached to an anchored ancestor, unless an action concerned it
+    // or its parents this cycle: one given now, or an earlier one on one of several identical
+    // objects whose binding is decided now (its started effects, a pick-up that leaves the
+    // contents behind for example, are applied when its motion tells which object it moves).
+    let bindings_open = previous.bindings.iter().any(|b| b.bound.is_none());
     for a in &previous.anchors {
         if world.anchor(&a.symbol).is_none()
             && ancestors_anchored(previous, &a.symbol, params.theta_anch)
             && actions.is_empty()
+            && !bindings_open
         {
             let parent = &a.attachment.as_ref().unwrap().parent;
             let parent_now = world.anchor(parent);

@@ -1,7 +1,9 @@
-//! The three conditions of a link specification compiled once per link (`Formula`s shared by all
-//! the progressors of its per-object instances), the state a condition reads (`from`, `to` and,
-//! for identifications, `this`), and the **gate** of the reestablish condition: the distance
-//! within which a candidate pair is worth progressing at all.
+//! The three conditions of a link specification compiled once per link, the state a condition
+//! reads (`from`, `to` and, for identifications, `this`), a [`Condition`] of one object or pair
+//! (an instance of its formula's `ProgressorGroup`, so that the thousands of objects of a link
+//! share residuals and cached transitions: each object in a situation already seen costs its
+//! atoms and a lookup), and the **gate** of the reestablish condition: the distance within which
+//! a candidate pair is worth progressing at all.
 //!
 //! The gate is read off the formula: if `reestablish` can only become true when, at some state,
 //! `xydist(from.pos, to.pos) < c` (or `<=`, `dist`, `norm(from.pos - to.pos)`, objects instead
@@ -15,8 +17,11 @@
 
 use std::sync::Arc;
 
-use kpl_core::{TimeUnit, Value};
-use kpl_mtl::{BinOp, CompileError, Context, Formula, Function, Mtl, SlotId, State, Term};
+use kpl_core::{Time, TimeUnit, Value};
+use kpl_mtl::{
+    BinOp, CompileError, Context, EvalError, Formula, Function, InstanceId, Mtl, ProgressorGroup, SlotId,
+    State, Term,
+};
 use kpl_semantic::hir::{self, SPEC_TICK};
 use kpl_syntax::ast;
 
@@ -40,6 +45,53 @@ impl State for LinkState<'_> {
             TO => self.to,
             THIS => self.this,
             _ => None,
+        }
+    }
+}
+
+/// The condition of one object or pair: pending (an instance of the group of its formula, which
+/// the holder knows), or decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Condition {
+    Pending(InstanceId),
+    Decided(bool),
+}
+
+impl Condition {
+    /// A new condition of `group`'s formula, before its first state.
+    pub fn start(group: &mut ProgressorGroup) -> Condition {
+        Condition::Pending(group.start())
+    }
+
+    /// `None` while pending.
+    pub fn verdict(&self) -> Option<bool> {
+        match self {
+            Condition::Pending(_) => None,
+            Condition::Decided(v) => Some(*v),
+        }
+    }
+
+    /// Progresses a pending condition through its state at `time`; once decided, it is settled
+    /// and its instance leaves the group. A decided condition stays as it is.
+    pub fn step<S: State + ?Sized>(
+        &mut self,
+        group: &mut ProgressorGroup,
+        time: Time,
+        state: &S,
+    ) -> Result<Option<bool>, EvalError> {
+        let Condition::Pending(id) = *self else { return Ok(self.verdict()) };
+        let verdict = group.step(id, time, state)?;
+        if let Some(v) = verdict {
+            group.remove(id);
+            *self = Condition::Decided(v);
+        }
+        Ok(verdict)
+    }
+
+    /// Frees the instance of a pending condition that is no longer needed.
+    pub fn release(&self, group: &mut ProgressorGroup) {
+        if let Condition::Pending(id) = self {
+            group.remove(*id);
         }
     }
 }

@@ -34,7 +34,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Time, Value};
-use kpl_mtl::Formula;
+use kpl_mtl::ProgressorGroup;
 use kpl_semantic::hir;
 use kpl_syntax::ast;
 
@@ -125,8 +125,9 @@ pub(crate) struct Identification {
     pub done: bool,
     /// The object it resolved to.
     pub object: Option<ObjectKey>,
-    /// The description alone, for existing objects (`this`).
-    description: Arc<Formula>,
+    /// The description alone, for existing objects (`this`): the group of its conditions, one
+    /// per existing object.
+    description: ProgressorGroup,
     existing: BTreeMap<ObjectKey, Condition>,
 }
 
@@ -459,7 +460,7 @@ impl Anchoring {
         }
         let ident = self.identifications.len();
         for (l, formula) in per_link {
-            self.links[l as usize].identifications.push(LinkIdentification { ident, formula });
+            self.links[l as usize].identifications.push(LinkIdentification::new(ident, formula));
         }
         self.identifications.push(Identification {
             name: name.clone(),
@@ -468,7 +469,7 @@ impl Anchoring {
             partial,
             done: false,
             object: None,
-            description: description_only,
+            description: ProgressorGroup::new(description_only),
             existing: BTreeMap::new(),
         });
         self.pending.push((
@@ -1154,7 +1155,14 @@ impl Anchoring {
             keys.extend(self.store.objects_of(ty));
             let store = &self.store;
             let ident = &mut self.identifications[i];
-            ident.existing.retain(|k, _| store.get(*k).is_some());
+            let group = &mut ident.description;
+            ident.existing.retain(|k, condition| {
+                let present = store.get(*k).is_some();
+                if !present {
+                    condition.release(group);
+                }
+                present
+            });
             let mut found = None;
             for &key in &keys {
                 let Some(object) = store.get(key) else { continue };
@@ -1162,12 +1170,11 @@ impl Anchoring {
                     continue;
                 }
                 let condition =
-                    ident.existing.entry(key).or_insert_with(|| Condition::new(&ident.description));
-                let Condition::Pending(progressor) = condition else { continue };
+                    ident.existing.entry(key).or_insert_with(|| Condition::start(&mut ident.description));
+                let Condition::Pending(_) = condition else { continue };
                 let state = LinkState { from: &object.value, to: None, this: Some(&object.value) };
-                match progressor.step(time, &state) {
+                match condition.step(&mut ident.description, time, &state) {
                     Ok(Some(verdict)) => {
-                        *condition = Condition::Decided(verdict);
                         if verdict && found.is_none() {
                             found = Some(key);
                         }
@@ -1187,7 +1194,9 @@ impl Anchoring {
             let ident = &mut self.identifications[i];
             ident.done = true;
             ident.object = Some(key);
-            ident.existing.clear();
+            for condition in std::mem::take(&mut ident.existing).into_values() {
+                condition.release(&mut ident.description);
+            }
             let (name, partial) = (ident.name.clone(), ident.partial);
             let Some(object) = self.store.get_mut(key) else { continue };
             object.names.push(name.clone());

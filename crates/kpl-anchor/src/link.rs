@@ -21,9 +21,10 @@
 use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Time, Value};
-use kpl_mtl::{Formula, Progressor};
+use kpl_mtl::{Formula, ProgressorGroup};
 
 use crate::change::{Cause, Change, ChangeKind};
+pub use crate::conditions::Condition;
 use crate::conditions::{LinkConditions, LinkState};
 use crate::engine::{Anchoring, Identification, StepCtx};
 use crate::gate::GateGrid;
@@ -33,93 +34,36 @@ use crate::status;
 use crate::store::{LinkId, ObjectKey, Origin, StateOrigin, TypeId};
 use crate::units::LinkUnit;
 
-/// A condition being progressed, or its verdict.
+/// The groups that hold the link's conditions, one per formula: every object's establish
+/// condition is an instance of one group, every pair's reestablish condition of another, every
+/// link's maintain condition of a third, so instances in the same situation share their work.
 #[derive(Debug)]
-pub enum Condition {
-    Pending(Box<Progressor>),
-    Decided(bool),
-}
-
-impl Condition {
-    pub fn new(formula: &Arc<Formula>) -> Condition {
-        Condition::Pending(Box::new(Progressor::new(formula.clone())))
-    }
-
-    /// `None` while pending.
-    pub fn verdict(&self) -> Option<bool> {
-        match self {
-            Condition::Pending(_) => None,
-            Condition::Decided(v) => Some(*v),
-        }
-    }
-}
-
-/// Most progressors kept for reuse per condition of a link.
-const POOL_MAX: usize = 1024;
-
-/// Progressors of the link's three conditions that are no longer needed, kept for reuse: an
-/// object that reappears every few frames would otherwise allocate and free the arenas of two or
-/// three progressors each time. A reused progressor is [`Progressor::reset`], so it behaves as
-/// a new one.
-#[derive(Debug)]
-struct Pools {
+struct Groups {
     /// establish, reestablish, maintain
-    formulas: [Arc<Formula>; 3],
-    #[allow(clippy::vec_box)] // the boxes move in and out of `Condition::Pending` as they are
-    free: [Vec<Box<Progressor>>; 3],
+    by_kind: [ProgressorGroup; 3],
 }
 
 const ESTABLISH: usize = 0;
 const REESTABLISH: usize = 1;
 const MAINTAIN: usize = 2;
 
-impl Pools {
-    fn new(conditions: &LinkConditions) -> Pools {
-        Pools {
-            formulas: [
-                conditions.establish.clone(),
-                conditions.reestablish.clone(),
-                conditions.maintain.clone(),
+impl Groups {
+    fn new(conditions: &LinkConditions) -> Groups {
+        Groups {
+            by_kind: [
+                ProgressorGroup::new(conditions.establish.clone()),
+                ProgressorGroup::new(conditions.reestablish.clone()),
+                ProgressorGroup::new(conditions.maintain.clone()),
             ],
-            free: [Vec::new(), Vec::new(), Vec::new()],
         }
     }
 
     fn take(&mut self, kind: usize) -> Condition {
-        match self.free[kind].pop() {
-            Some(mut progressor) => {
-                progressor.reset();
-                Condition::Pending(progressor)
-            }
-            None => Condition::new(&self.formulas[kind]),
-        }
+        Condition::start(&mut self.by_kind[kind])
     }
 
-    fn give(&mut self, condition: Condition) {
-        let Condition::Pending(progressor) = condition else { return };
-        if let Some(kind) = self.formulas.iter().position(|f| Arc::ptr_eq(f, progressor.formula()))
-            && self.free[kind].len() < POOL_MAX
-        {
-            self.free[kind].push(progressor);
-        }
-    }
-
-    /// Settles a condition with its verdict, keeping its progressor for reuse.
-    fn decide(&mut self, condition: &mut Condition, verdict: bool) {
-        let old = std::mem::replace(condition, Condition::Decided(verdict));
-        self.give(old);
-    }
-
-    fn give_state(&mut self, state: InstanceState) {
-        match state {
-            InstanceState::Unlinked(u) => {
-                self.give(u.establish);
-                for candidate in u.candidates {
-                    self.give(candidate.condition);
-                }
-            }
-            InstanceState::Linked { maintain, .. } => self.give(maintain),
-        }
+    fn give(&mut self, kind: usize, condition: Condition) {
+        condition.release(&mut self.by_kind[kind]);
     }
 
     fn unlinked(&mut self) -> InstanceState {
@@ -142,11 +86,19 @@ pub struct Candidate {
     pub condition: Condition,
 }
 
-/// An identification this link may complete, with its formula (`reestablish and description`).
-#[derive(Debug, Clone)]
+/// An identification this link may complete, with its formula (`reestablish and description`)
+/// and the group of its conditions (one per unlinked object).
+#[derive(Debug)]
 pub struct LinkIdentification {
     pub ident: usize,
     pub formula: Arc<Formula>,
+    group: ProgressorGroup,
+}
+
+impl LinkIdentification {
+    pub fn new(ident: usize, formula: Arc<Formula>) -> LinkIdentification {
+        LinkIdentification { ident, group: ProgressorGroup::new(formula.clone()), formula }
+    }
 }
 
 #[derive(Debug)]
@@ -195,7 +147,7 @@ pub struct LinkProcess {
     pub conditions: LinkConditions,
     pub identifications: Vec<LinkIdentification>,
     pub(crate) instances: Vec<Option<Instance>>,
-    pools: Pools,
+    groups: Groups,
     grid: GateGrid<ObjectKey>,
     pub stats: LinkStats,
     /// The valid time of the link's last step.
@@ -277,7 +229,7 @@ impl LinkProcess {
         conditions: LinkConditions,
     ) -> LinkProcess {
         let grid = GateGrid::new(conditions.gate.unwrap_or(1.0));
-        let pools = Pools::new(&conditions);
+        let groups = Groups::new(&conditions);
         LinkProcess {
             name,
             from_ty,
@@ -287,7 +239,7 @@ impl LinkProcess {
             conditions,
             identifications: Vec::new(),
             instances: Vec::new(),
-            pools,
+            groups,
             grid,
             stats: LinkStats::default(),
             last_time: None,
@@ -307,7 +259,7 @@ impl LinkProcess {
             && let Some(instance) = slot.take()
         {
             self.stats.instances_removed += 1;
-            self.pools.give_state(instance.state);
+            self.give_state(instance.state);
         }
     }
 
@@ -316,9 +268,9 @@ impl LinkProcess {
         if let Some(Some(instance)) = self.instances.get_mut(from.index())
             && instance.from == from
         {
-            let fresh = self.pools.unlinked();
+            let fresh = self.groups.unlinked();
             let old = std::mem::replace(&mut instance.state, fresh);
-            self.pools.give_state(old);
+            self.give_state(old);
         }
     }
 
@@ -328,17 +280,35 @@ impl LinkProcess {
             self.instances.resize_with(i + 1, || None);
         }
         if let Some(old) = self.instances[i].replace(Instance { from, state }) {
-            self.pools.give_state(old.state);
+            self.give_state(old.state);
+        }
+    }
+
+    /// Frees the conditions of an instance's state that is left.
+    fn give_state(&mut self, state: InstanceState) {
+        match state {
+            InstanceState::Unlinked(u) => {
+                self.groups.give(ESTABLISH, u.establish);
+                for candidate in u.candidates {
+                    self.groups.give(REESTABLISH, candidate.condition);
+                }
+                for (ident, condition) in u.identifications {
+                    if let Some(li) = self.identifications.iter_mut().find(|li| li.ident == ident) {
+                        condition.release(&mut li.group);
+                    }
+                }
+            }
+            InstanceState::Linked { maintain, .. } => self.groups.give(MAINTAIN, maintain),
         }
     }
 
     fn set_unlinked(&mut self, from: ObjectKey) {
-        let state = self.pools.unlinked();
+        let state = self.groups.unlinked();
         self.set_state(from, state);
     }
 
     fn set_linked(&mut self, from: ObjectKey, to: ObjectKey) {
-        let state = self.pools.linked(to);
+        let state = self.groups.linked(to);
         self.set_state(from, state);
     }
 
@@ -473,12 +443,11 @@ impl LinkProcess {
             let Some(Instance { state: InstanceState::Unlinked(u), .. }) = &mut self.instances[i] else {
                 continue;
             };
-            if let Condition::Pending(progressor) = &mut u.establish {
+            if let Condition::Pending(_) = u.establish {
                 self.stats.condition_steps += 1;
                 let state = LinkState { from: &p_value, to: None, this: None };
-                match progressor.step(cx.time, &state) {
+                match u.establish.step(&mut self.groups.by_kind[ESTABLISH], cx.time, &state) {
                     Ok(Some(verdict)) => {
-                        self.pools.decide(&mut u.establish, verdict);
                         if verdict {
                             decisions.establish.push(p);
                         }
@@ -504,25 +473,25 @@ impl LinkProcess {
                     k += 1;
                 } else {
                     let dropped = u.candidates.swap_remove(k);
-                    self.pools.give(dropped.condition);
+                    self.groups.give(REESTABLISH, dropped.condition);
                 }
             }
             u.candidates.sort_by_key(|c| c.to);
             for &o in &near {
                 if !u.candidates.iter().any(|c| c.to == o) {
-                    u.candidates.push(Candidate { to: o, condition: self.pools.take(REESTABLISH) });
+                    u.candidates.push(Candidate { to: o, condition: self.groups.take(REESTABLISH) });
                 }
             }
+            let reestablish = &mut self.groups.by_kind[REESTABLISH];
             for candidate in &mut u.candidates {
-                let Condition::Pending(progressor) = &mut candidate.condition else { continue };
+                let Condition::Pending(_) = candidate.condition else { continue };
                 let Some(o) = store.get(candidate.to) else { continue };
                 let (hypothesis, to_value, distance) = closest(&o.value, &o.hypotheses, &p_value);
                 self.stats.condition_steps += 1;
                 self.stats.candidate_steps += 1;
                 let state = LinkState { from: &p_value, to: Some(to_value), this: None };
-                match progressor.step(cx.time, &state) {
+                match candidate.condition.step(reestablish, cx.time, &state) {
                     Ok(Some(verdict)) => {
-                        self.pools.decide(&mut candidate.condition, verdict);
                         if verdict {
                             decisions.reestablish.push(Match {
                                 distance,
@@ -549,8 +518,14 @@ impl LinkProcess {
             }
             // Identifications this link may complete: `to` and `this` are what the unit makes of p.
             let idents: &[Identification] = &*cx.identifications;
-            u.identifications.retain(|(ident, _)| !idents[*ident].done);
-            for link_ident in &self.identifications {
+            u.identifications.retain(|(ident, condition)| {
+                let done = idents[*ident].done;
+                if done && let Some(li) = self.identifications.iter_mut().find(|li| li.ident == *ident) {
+                    condition.release(&mut li.group);
+                }
+                !done
+            });
+            for link_ident in &mut self.identifications {
                 let ident = &idents[link_ident.ident];
                 if ident.done {
                     continue;
@@ -558,11 +533,12 @@ impl LinkProcess {
                 let position = match u.identifications.iter().position(|(k, _)| *k == link_ident.ident) {
                     Some(k) => k,
                     None => {
-                        u.identifications.push((link_ident.ident, Condition::new(&link_ident.formula)));
+                        let condition = Condition::start(&mut link_ident.group);
+                        u.identifications.push((link_ident.ident, condition));
                         u.identifications.len() - 1
                     }
                 };
-                let Condition::Pending(progressor) = &mut u.identifications[position].1 else { continue };
+                let Condition::Pending(_) = u.identifications[position].1 else { continue };
                 self.stats.unit_computations += 1;
                 let mut scratch = UnitMemory::default();
                 let mut call = UnitCall {
@@ -583,9 +559,8 @@ impl LinkProcess {
                 };
                 self.stats.condition_steps += 1;
                 let state = LinkState { from: &p_value, to: Some(&made), this: Some(&made) };
-                match progressor.step(cx.time, &state) {
+                match u.identifications[position].1.step(&mut link_ident.group, cx.time, &state) {
                     Ok(Some(verdict)) => {
-                        u.identifications[position].1 = Condition::Decided(verdict);
                         if verdict {
                             decisions.identify.push((link_ident.ident, p_seq, p));
                         }
@@ -608,12 +583,11 @@ impl LinkProcess {
             else {
                 continue;
             };
-            let Condition::Pending(progressor) = maintain else { continue };
+            let Condition::Pending(_) = maintain else { continue };
             self.stats.condition_steps += 1;
             let state = LinkState { from: &p_value, to: Some(&o_value), this: None };
-            match progressor.step(cx.time, &state) {
+            match maintain.step(&mut self.groups.by_kind[MAINTAIN], cx.time, &state) {
                 Ok(Some(verdict)) => {
-                    self.pools.decide(maintain, verdict);
                     if !verdict {
                         decisions.unlink.push((p, to));
                     }

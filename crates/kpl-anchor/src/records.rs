@@ -29,7 +29,7 @@ pub fn default_value(ty: &ValueType) -> Value {
         ValueType::Float => Value::Float(0.0),
         ValueType::Str => Value::str(""),
         ValueType::Vec2 => Value::Vec2([0.0, 0.0]),
-        ValueType::BBox => Value::BBox(kpl_core::BBox::default()),
+        ValueType::BBox => Value::bbox(kpl_core::BBox::default()),
         ValueType::Duration => Value::Duration(0),
         ValueType::List(_) => Value::List(Arc::from(Vec::new())),
         ValueType::Record(_) => Value::Record(Arc::new(Record::default())),

@@ -65,4 +65,7 @@ pub enum EvalError {
     Function { func: String, message: String },
     #[error("time {time} is not after the previous state's time {previous}")]
     TimeNotIncreasing { time: Time, previous: Time },
+    /// A [`crate::ProgressorGroup`] was asked to step an instance it no longer holds.
+    #[error("this instance was removed from its group")]
+    NoInstance,
 }

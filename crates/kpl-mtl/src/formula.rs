@@ -2,9 +2,12 @@
 //! [`Formula`], its compiled form in negation normal form that progressors share.
 //!
 //! Compiling pushes every `not` down to the atoms (`not eventually φ` = `always not φ`,
-//! `not (φ until ψ)` = `(not φ) release (not ψ)`) and turns `a -> b` into `not a or b`, so the
-//! progressor only ever sees `and`, `or`, four temporal operators and atoms.
+//! `not (φ until ψ)` = `(not φ) release (not ψ)`), turns `a -> b` into `not a or b`, folds
+//! constants (`always[2, 4] true` is `true`, so its verdict comes at the first state), and numbers
+//! the distinct atoms so that each is read once per state. The progressor only ever sees `and`,
+//! `or`, four temporal operators, quantifiers and atoms.
 
+use std::collections::HashMap;
 use std::fmt;
 use std::sync::Arc;
 
@@ -93,6 +96,8 @@ impl Mtl {
 
 /// A node of a compiled formula.
 pub(crate) type TplId = u32;
+/// An atom of a compiled formula: an index into [`Formula::atoms`].
+pub(crate) type AtomId = u32;
 
 /// The four temporal operators of negation normal form.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -105,14 +110,27 @@ pub(crate) enum TemporalOp {
     Release,
 }
 
-/// Upper bounds use `INF` for `inf`; shifting keeps it.
-pub(crate) const INF: Time = Time::MAX;
+impl TemporalOp {
+    /// `eventually` and `until` are satisfied by one state; `always` and `release` need all.
+    pub(crate) fn is_existential(self) -> bool {
+        matches!(self, TemporalOp::Eventually | TemporalOp::Until)
+    }
+}
+
+/// Window ends inside the engine are offsets from a state's time: non-negative, so they are kept
+/// as `u64`, and `INF` (above every finite bound, which is at most `i64::MAX`) is `inf`. A finite
+/// bound of `i64::MAX` stays finite.
+pub(crate) const INF: u64 = u64::MAX;
+
+/// Atoms with an index below this are read into one machine word per state, and residuals that
+/// read only such atoms can use the transition cache.
+pub(crate) const WORD_ATOMS: u32 = 64;
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum TNode {
     Const(bool),
     Atom {
-        term: u32,
+        atom: AtomId,
         negated: bool,
     },
     And(Vec<TplId>),
@@ -120,8 +138,8 @@ pub(crate) enum TNode {
     /// For `Eventually`/`Always` only `rhs` is used.
     Temporal {
         op: TemporalOp,
-        lo: Time,
-        hi: Time,
+        lo: u64,
+        hi: u64,
         lhs: TplId,
         rhs: TplId,
     },
@@ -132,11 +150,33 @@ pub(crate) enum TNode {
     },
 }
 
+/// What the progression needs to know about a compiled node without walking it.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct TplInfo {
+    /// The atoms (below [`WORD_ATOMS`]) that instantiating this node may read, as a bit set.
+    pub reads: u64,
+    /// No quantifier below and every atom below [`WORD_ATOMS`]: what instantiating it gives
+    /// depends only on the values of the atoms in `reads`, so transitions can be cached.
+    pub cacheable: bool,
+    /// For an `and`/`or` of atoms only: its literals as bit masks (see [`Literals`]).
+    pub literals: Option<Literals>,
+}
+
+/// An `and` (or `or`) of atoms and negated atoms, decided with bit operations on the atom
+/// values of a state: `mask` holds its atoms, `negated` those that appear negated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Literals {
+    pub mask: u64,
+    pub negated: u64,
+}
+
 /// A compiled formula: immutable, shared by any number of progressors (`Arc<Formula>`).
 #[derive(Debug, Clone)]
 pub struct Formula {
     pub(crate) nodes: Vec<TNode>,
-    pub(crate) terms: Vec<Term>,
+    pub(crate) info: Vec<TplInfo>,
+    /// The distinct atoms, each read at most once per state.
+    pub(crate) atoms: Vec<Term>,
     pub(crate) root: TplId,
     pub(crate) functions: Arc<[Function]>,
     pub(crate) slot_names: Arc<[Arc<str>]>,
@@ -148,12 +188,19 @@ impl Formula {
     /// Compiles a formula against the context that assigned its slots, domains and functions.
     pub fn new(mtl: &Mtl, context: &Context) -> Result<Formula, FormulaError> {
         let functions: Arc<[Function]> = context.functions().to_vec().into();
-        let mut compiler = Compiler { nodes: Vec::new(), terms: Vec::new(), functions: &functions };
+        let mut compiler = Compiler {
+            nodes: Vec::new(),
+            atoms: Vec::new(),
+            atom_index: HashMap::new(),
+            functions: &functions,
+        };
         let root = compiler.compile(mtl, false, 0)?;
-        let Compiler { nodes, terms, .. } = compiler;
+        let Compiler { nodes, atoms, .. } = compiler;
+        let info = template_info(&nodes);
         Ok(Formula {
             nodes,
-            terms,
+            info,
+            atoms,
             root,
             functions: functions.clone(),
             slot_names: context.slot_names().into(),
@@ -167,9 +214,14 @@ impl Formula {
         &self.source
     }
 
-    /// Number of nodes of the compiled (negation normal form) formula.
+    /// Number of nodes of the compiled (negation normal form, constants folded) formula.
     pub fn size(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// Number of distinct atoms (conditions read from a state).
+    pub fn atom_count(&self) -> usize {
+        self.atoms.len()
     }
 
     /// The names of the slots, by slot index.
@@ -177,13 +229,21 @@ impl Formula {
         &self.slot_names
     }
 
+    /// The compiled formula's verdict if it does not depend on any state (`always[0, 5] true`).
+    pub fn constant(&self) -> Option<bool> {
+        match self.nodes[self.root as usize] {
+            TNode::Const(b) => Some(b),
+            _ => None,
+        }
+    }
+
     /// The largest time, relative to the state a verdict is for, that the verdict can depend on
     /// (`None`: unbounded). `eventually[0, 5] always[0, 2] p` has horizon 7.
     pub fn horizon(&self) -> Option<Time> {
-        self.horizon_of(self.root)
+        self.horizon_of(self.root).and_then(|h| Time::try_from(h).ok())
     }
 
-    fn horizon_of(&self, id: TplId) -> Option<Time> {
+    fn horizon_of(&self, id: TplId) -> Option<u64> {
         match &self.nodes[id as usize] {
             TNode::Const(_) | TNode::Atom { .. } => Some(0),
             TNode::And(ks) | TNode::Or(ks) => {
@@ -199,21 +259,26 @@ impl Formula {
                     }
                     _ => self.horizon_of(*rhs)?,
                 };
-                hi.checked_add(body)
+                hi.checked_add(body).filter(|h| *h <= i64::MAX as u64)
             }
             TNode::Quant { body, .. } => self.horizon_of(*body),
         }
+    }
+
+    /// Writes a window as text (`[0, 5]`, `[2, inf]`).
+    pub(crate) fn write_window(f: &mut impl fmt::Write, lo: u64, hi: u64) -> fmt::Result {
+        if hi == INF { write!(f, "[{lo}, inf]") } else { write!(f, "[{lo}, {hi}]") }
     }
 
     /// Writes a compiled node as text (used to show residuals).
     pub(crate) fn write_node(&self, f: &mut impl fmt::Write, id: TplId) -> fmt::Result {
         match &self.nodes[id as usize] {
             TNode::Const(b) => write!(f, "{b}"),
-            TNode::Atom { term, negated } => {
+            TNode::Atom { atom, negated } => {
                 if *negated {
                     f.write_str("not ")?;
                 }
-                self.write_term(f, &self.terms[*term as usize])
+                self.write_term(f, &self.atoms[*atom as usize])
             }
             TNode::And(ks) | TNode::Or(ks) => {
                 let sep = if matches!(self.nodes[id as usize], TNode::And(_)) { " and " } else { " or " };
@@ -226,24 +291,23 @@ impl Formula {
                 }
                 f.write_char(')')
             }
-            TNode::Temporal { op, lo, hi, lhs, rhs } => {
-                let window = Window::new(*lo, (*hi != INF).then_some(*hi));
-                match op {
-                    TemporalOp::Eventually | TemporalOp::Always => {
-                        let kw = if *op == TemporalOp::Eventually { "eventually" } else { "always" };
-                        write!(f, "{kw}{window} ")?;
-                        self.write_node(f, *rhs)
-                    }
-                    TemporalOp::Until | TemporalOp::Release => {
-                        let kw = if *op == TemporalOp::Until { "until" } else { "release" };
-                        f.write_char('(')?;
-                        self.write_node(f, *lhs)?;
-                        write!(f, " {kw}{window} ")?;
-                        self.write_node(f, *rhs)?;
-                        f.write_char(')')
-                    }
+            TNode::Temporal { op, lo, hi, lhs, rhs } => match op {
+                TemporalOp::Eventually | TemporalOp::Always => {
+                    f.write_str(if *op == TemporalOp::Eventually { "eventually" } else { "always" })?;
+                    Formula::write_window(f, *lo, *hi)?;
+                    f.write_char(' ')?;
+                    self.write_node(f, *rhs)
                 }
-            }
+                TemporalOp::Until | TemporalOp::Release => {
+                    f.write_char('(')?;
+                    self.write_node(f, *lhs)?;
+                    f.write_str(if *op == TemporalOp::Until { " until" } else { " release" })?;
+                    Formula::write_window(f, *lo, *hi)?;
+                    f.write_char(' ')?;
+                    self.write_node(f, *rhs)?;
+                    f.write_char(')')
+                }
+            },
             TNode::Quant { forall, domain, body } => {
                 let name = self.domain_names.get(*domain as usize).map_or("?", |n| n);
                 write!(f, "({} {name} . ", if *forall { "forall" } else { "exists" })?;
@@ -298,9 +362,57 @@ impl fmt::Display for Formula {
     }
 }
 
+/// The [`TplInfo`] of every node; children come before their parents in `nodes`.
+fn template_info(nodes: &[TNode]) -> Vec<TplInfo> {
+    let mut info: Vec<TplInfo> = Vec::with_capacity(nodes.len());
+    for node in nodes {
+        let of = |k: &TplId| info[*k as usize];
+        let item = match node {
+            TNode::Const(_) => TplInfo { reads: 0, cacheable: true, literals: None },
+            TNode::Atom { atom, .. } => {
+                let word = *atom < WORD_ATOMS;
+                TplInfo { reads: if word { 1 << atom } else { 0 }, cacheable: word, literals: None }
+            }
+            TNode::And(ks) | TNode::Or(ks) => {
+                let reads = ks.iter().fold(0, |acc, k| acc | of(k).reads);
+                let cacheable = ks.iter().all(|k| of(k).cacheable);
+                let mut literals = Some(Literals { mask: 0, negated: 0 });
+                for k in ks {
+                    match (&nodes[*k as usize], literals.as_mut()) {
+                        (TNode::Atom { atom, negated }, Some(l)) if *atom < WORD_ATOMS => {
+                            let bit = 1u64 << atom;
+                            // `p and not p`: the bit sets cannot say it; evaluate it one by one.
+                            if l.mask & bit != 0 && (l.negated & bit != 0) != *negated {
+                                literals = None;
+                                continue;
+                            }
+                            l.mask |= bit;
+                            if *negated {
+                                l.negated |= bit;
+                            }
+                        }
+                        _ => literals = None,
+                    }
+                }
+                TplInfo { reads, cacheable, literals }
+            }
+            TNode::Temporal { lhs, rhs, .. } => TplInfo {
+                reads: of(lhs).reads | of(rhs).reads,
+                cacheable: of(lhs).cacheable && of(rhs).cacheable,
+                literals: None,
+            },
+            TNode::Quant { body, .. } => TplInfo { reads: of(body).reads, cacheable: false, literals: None },
+        };
+        info.push(item);
+    }
+    info
+}
+
 struct Compiler<'a> {
     nodes: Vec<TNode>,
-    terms: Vec<Term>,
+    atoms: Vec<Term>,
+    /// Atoms by their text (`Term` has floats, so no `Hash`; its debug text is exact).
+    atom_index: HashMap<String, AtomId>,
     functions: &'a [Function],
 }
 
@@ -310,16 +422,23 @@ impl Compiler<'_> {
         (self.nodes.len() - 1) as TplId
     }
 
-    fn window(&self, w: &Window) -> Result<(Time, Time), FormulaError> {
+    fn constant(&self, id: TplId) -> Option<bool> {
+        match self.nodes[id as usize] {
+            TNode::Const(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    fn window(&self, w: &Window) -> Result<(u64, u64), FormulaError> {
         if w.lo < 0 {
             return Err(FormulaError::NegativeBound(w.lo));
         }
         match w.hi {
             Some(hi) if hi < 0 => Err(FormulaError::NegativeBound(hi)),
             Some(hi) if hi < w.lo => Err(FormulaError::EmptyInterval { lo: w.lo, hi }),
-            // `Time::MAX` itself is the marker for `inf`; a finite bound that large is the same.
-            Some(hi) => Ok((w.lo, hi)),
-            None => Ok((w.lo, INF)),
+            // Both are non-negative here, so they fit; a finite `i64::MAX` stays below `INF`.
+            Some(hi) => Ok((w.lo as u64, hi as u64)),
+            None => Ok((w.lo as u64, INF)),
         }
     }
 
@@ -350,6 +469,17 @@ impl Compiler<'_> {
         }
     }
 
+    fn atom(&mut self, term: Term) -> AtomId {
+        let key = format!("{term:?}");
+        if let Some(id) = self.atom_index.get(&key) {
+            return *id;
+        }
+        let id = self.atoms.len() as AtomId;
+        self.atoms.push(term);
+        self.atom_index.insert(key, id);
+        id
+    }
+
     /// Compiles `mtl`, negated when `negate` is set, with `depth` enclosing quantifiers.
     fn compile(&mut self, mtl: &Mtl, negate: bool, depth: u32) -> Result<TplId, FormulaError> {
         Ok(match mtl {
@@ -362,56 +492,87 @@ impl Compiler<'_> {
                     Term::Not(inner) => ((**inner).clone(), !negate),
                     t => (t.clone(), negate),
                 };
-                self.terms.push(term);
-                self.push(TNode::Atom { term: (self.terms.len() - 1) as u32, negated })
+                let atom = self.atom(term);
+                self.push(TNode::Atom { atom, negated })
             }
             Mtl::Not(f) => self.compile(f, !negate, depth)?,
             Mtl::And(fs) | Mtl::Or(fs) => {
                 let is_and = matches!(mtl, Mtl::And(_)) != negate;
-                if fs.is_empty() {
-                    return Ok(self.push(TNode::Const(is_and)));
-                }
                 let mut kids = Vec::with_capacity(fs.len());
                 for f in fs {
                     kids.push(self.compile(f, negate, depth)?);
                 }
-                if kids.len() == 1 {
-                    kids[0]
-                } else if is_and {
-                    self.push(TNode::And(kids))
-                } else {
-                    self.push(TNode::Or(kids))
-                }
+                self.junction(is_and, kids)
             }
             Mtl::Implies(a, b) => {
                 // a -> b = not a or b;  not (a -> b) = a and not b
                 let lhs = self.compile(a, !negate, depth)?;
                 let rhs = self.compile(b, negate, depth)?;
-                if negate {
-                    self.push(TNode::And(vec![lhs, rhs]))
-                } else {
-                    self.push(TNode::Or(vec![lhs, rhs]))
-                }
+                self.junction(negate, vec![lhs, rhs])
             }
             Mtl::Eventually(w, f) | Mtl::Always(w, f) => {
                 let (lo, hi) = self.window(w)?;
                 let body = self.compile(f, negate, depth)?;
                 let eventually = matches!(mtl, Mtl::Eventually(..)) != negate;
                 let op = if eventually { TemporalOp::Eventually } else { TemporalOp::Always };
-                self.push(TNode::Temporal { op, lo, hi, lhs: body, rhs: body })
+                self.temporal(op, lo, hi, body, body)
             }
             Mtl::Until(w, a, b) => {
                 let (lo, hi) = self.window(w)?;
                 let lhs = self.compile(a, negate, depth)?;
                 let rhs = self.compile(b, negate, depth)?;
                 let op = if negate { TemporalOp::Release } else { TemporalOp::Until };
-                self.push(TNode::Temporal { op, lo, hi, lhs, rhs })
+                self.temporal(op, lo, hi, lhs, rhs)
             }
             Mtl::Forall(domain, f) | Mtl::Exists(domain, f) => {
                 let body = self.compile(f, negate, depth + 1)?;
                 let forall = matches!(mtl, Mtl::Forall(..)) != negate;
-                self.push(TNode::Quant { forall, domain: *domain, body })
+                // Whatever the objects: `forall c . true` holds and `exists c . false` fails.
+                match self.constant(body) {
+                    Some(b) if b == forall => return Ok(body),
+                    _ => self.push(TNode::Quant { forall, domain: *domain, body }),
+                }
             }
         })
+    }
+
+    /// An `and` (or `or`) with constants folded: `false and x` is `false`, `true and x` is `x`.
+    fn junction(&mut self, is_and: bool, kids: Vec<TplId>) -> TplId {
+        let mut kept = Vec::with_capacity(kids.len());
+        for k in kids {
+            match self.constant(k) {
+                Some(b) if b == is_and => {}
+                Some(b) => return self.push(TNode::Const(b)),
+                None => kept.push(k),
+            }
+        }
+        match kept.len() {
+            0 => self.push(TNode::Const(is_and)),
+            1 => kept[0],
+            _ if is_and => self.push(TNode::And(kept)),
+            _ => self.push(TNode::Or(kept)),
+        }
+    }
+
+    /// A temporal node with constant bodies folded, so that their verdicts come at once:
+    /// `always[a, b] true` and `φ release[a, b] true` hold, `eventually[a, b] false` and
+    /// `φ until[a, b] false` fail, whatever the states; with a lower bound 0 the current state is
+    /// in the window, so `eventually[0, b] true` holds and `always[0, b] false` fails (and the
+    /// same for until and release). `true until ψ` is `eventually ψ`, `false release ψ` is
+    /// `always ψ`.
+    fn temporal(&mut self, op: TemporalOp, lo: u64, hi: u64, lhs: TplId, rhs: TplId) -> TplId {
+        let existential = op.is_existential();
+        match self.constant(rhs) {
+            Some(b) if b != existential => return rhs,
+            Some(_) if lo == 0 => return rhs,
+            _ => {}
+        }
+        let op = match (op, self.constant(lhs)) {
+            (TemporalOp::Until, Some(true)) => TemporalOp::Eventually,
+            (TemporalOp::Release, Some(false)) => TemporalOp::Always,
+            (op, _) => op,
+        };
+        let lhs = if matches!(op, TemporalOp::Eventually | TemporalOp::Always) { rhs } else { lhs };
+        self.push(TNode::Temporal { op, lo, hi, lhs, rhs })
     }
 }

@@ -1,10 +1,11 @@
 //! Metric temporal logic for KPL: formulas, their progression through timed states, verdicts.
 //!
 //! A formula is compiled once against a [`Context`] (which names, object types and functions
-//! exist; the time unit of time stamps and of bare interval bounds) into a [`Formula`], then any
-//! number of cheap [`Progressor`]s progress it, each through its own stream of states: a link
-//! process keeps one per object or pair of objects, a monitor one per formula. An
-//! [`EveryMonitor`] gives the verdict from every state of one stream.
+//! exist; the time unit of time stamps and of bare interval bounds) into a [`Formula`], then
+//! progressed through streams of states: a [`Progressor`] for one stream (a monitor's formula),
+//! a [`ProgressorGroup`] for many instances of one formula that share their work (a link
+//! process's condition for each of its objects or pairs), an [`EveryMonitor`] for the verdict
+//! from every state of one stream.
 //!
 //! The crate is pure and synchronous: no clock, no I/O, no tasks. Time is an argument of
 //! [`Progressor::step`] (integers, strictly increasing, in the context's time unit; microseconds
@@ -32,18 +33,24 @@
 //! assert_eq!(progressor.decided_at(), Some(11));
 //! ```
 
+mod atoms;
 mod context;
+mod engine;
 mod error;
 mod formula;
+mod group;
 mod lower;
 mod progress;
+mod residual;
 mod state;
 mod term;
 pub mod timescales;
 
 pub use context::Context;
+pub use engine::{EngineConfig, EngineStats};
 pub use error::{CompileError, EvalError, FormulaError};
 pub use formula::{Formula, Mtl, Window};
+pub use group::{InstanceId, ProgressorGroup};
 pub use lower::{bound_in_unit, lower};
 pub use progress::{EveryMonitor, Progressor, StartVerdict};
 pub use state::{SlotState, State};

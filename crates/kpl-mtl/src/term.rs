@@ -5,6 +5,7 @@
 //! error), `/` always gives a `float`, and anything mixed with a `float` is a `float`. A result
 //! that is not finite (division by zero) is an [`EvalError::Arithmetic`], never a NaN.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::sync::Arc;
 
@@ -230,7 +231,7 @@ pub struct Binding {
     pub id: Arc<str>,
 }
 
-impl<S: State + ?Sized> TermEnv<'_, S> {
+impl<'a, S: State + ?Sized> TermEnv<'a, S> {
     fn slot_name(&self, slot: SlotId) -> String {
         name_of(self.slot_names, slot)
     }
@@ -248,8 +249,8 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
                 }),
                 None => Err(EvalError::Missing { name: self.slot_name(*slot) }),
             },
-            _ => match self.eval(term)? {
-                Value::Bool(b) => Ok(b),
+            _ => match &*self.eval_ref(term).map_err(|e| *e)? {
+                Value::Bool(b) => Ok(*b),
                 other => Err(EvalError::Type {
                     context: "a condition".into(),
                     expected: "bool".into(),
@@ -259,82 +260,104 @@ impl<S: State + ?Sized> TermEnv<'_, S> {
         }
     }
 
-    pub fn eval(&self, term: &Term) -> Result<Value, EvalError> {
-        match term {
-            Term::Const(v) => Ok(v.clone()),
-            Term::Slot(slot) => self
-                .state
-                .value(*slot)
-                .cloned()
-                .ok_or_else(|| EvalError::Missing { name: self.slot_name(*slot) }),
+    /// Evaluates a term, borrowing what the state or the term holds instead of copying it (a
+    /// record's attribute, a constant), so that `xydist(from.pos, to.pos) < 10` copies no record.
+    fn eval_ref<'t>(&self, term: &'t Term) -> Result<Cow<'t, Value>, Box<EvalError>>
+    where
+        'a: 't,
+    {
+        let state: &'a S = self.state;
+        Ok(match term {
+            Term::Const(v) => Cow::Borrowed(v),
+            Term::Slot(slot) => Cow::Borrowed(
+                state
+                    .value(*slot)
+                    .ok_or_else(|| Box::new(EvalError::Missing { name: self.slot_name(*slot) }))?,
+            ),
             Term::Var(var) => {
-                let binding = self
-                    .bindings
-                    .get(*var as usize)
-                    .ok_or_else(|| EvalError::Missing { name: format!("quantified variable #{var}") })?;
-                self.state.object(binding.domain, &binding.id).cloned().ok_or_else(|| {
-                    EvalError::MissingObject {
+                let binding = self.bindings.get(*var as usize).ok_or_else(|| {
+                    Box::new(EvalError::Missing { name: format!("quantified variable #{var}") })
+                })?;
+                Cow::Borrowed(state.object(binding.domain, &binding.id).ok_or_else(|| {
+                    Box::new(EvalError::MissingObject {
                         domain: name_of(self.domain_names, binding.domain),
                         id: binding.id.to_string(),
-                    }
-                })
+                    })
+                })?)
             }
             Term::Field(base, field) => {
-                let value = self.eval(base)?;
-                value.field(field).ok_or_else(|| EvalError::NoField {
-                    path: describe(base, self.slot_names),
-                    field: field.to_string(),
-                })
+                let no_field = || {
+                    Box::new(EvalError::NoField {
+                        path: describe(base, self.slot_names),
+                        field: field.to_string(),
+                    })
+                };
+                match self.eval_ref(base)? {
+                    // An attribute of a record the state holds is borrowed (`id` is computed).
+                    Cow::Borrowed(Value::Record(r)) if &**field != "id" => {
+                        Cow::Borrowed(r.get(field).ok_or_else(no_field)?)
+                    }
+                    value => Cow::Owned(value.field(field).ok_or_else(no_field)?),
+                }
             }
-            Term::Neg(inner) => match self.eval(inner)? {
+            Term::Neg(inner) => Cow::Owned(match &*self.eval_ref(inner)? {
                 Value::Int(i) => i
                     .checked_neg()
                     .map(Value::Int)
-                    .ok_or_else(|| EvalError::Arithmetic("integer overflow".into())),
-                Value::Float(x) => Ok(Value::Float(-x)),
-                Value::Vec2([x, y]) => Ok(Value::Vec2([-x, -y])),
-                other => Err(type_error("`-`", "a number or vec2", &other)),
-            },
-            Term::Not(inner) => match self.eval(inner)? {
-                Value::Bool(b) => Ok(Value::Bool(!b)),
-                other => Err(type_error("`not`", "bool", &other)),
+                    .ok_or_else(|| Box::new(EvalError::Arithmetic("integer overflow".into())))?,
+                Value::Float(x) => Value::Float(-x),
+                Value::Vec2([x, y]) => Value::Vec2([-x, -y]),
+                other => return Err(Box::new(type_error("`-`", "a number or vec2", other))),
+            }),
+            Term::Not(inner) => match &*self.eval_ref(inner)? {
+                Value::Bool(b) => Cow::Owned(Value::Bool(!b)),
+                other => return Err(Box::new(type_error("`not`", "bool", other))),
             },
             Term::Binary(op, lhs, rhs) => {
                 // `and`/`or` inside a term short-circuit like the connectives of formulas.
                 if matches!(op, BinOp::And | BinOp::Or) {
-                    let l = self.eval(lhs)?;
-                    let Value::Bool(l) = l else { return Err(type_error(op.symbol(), "bool", &l)) };
+                    let l = match &*self.eval_ref(lhs)? {
+                        Value::Bool(l) => *l,
+                        other => return Err(Box::new(type_error(op.symbol(), "bool", other))),
+                    };
                     if (*op == BinOp::And && !l) || (*op == BinOp::Or && l) {
-                        return Ok(Value::Bool(l));
+                        return Ok(Cow::Owned(Value::Bool(l)));
                     }
-                    let r = self.eval(rhs)?;
-                    return match r {
-                        Value::Bool(r) => Ok(Value::Bool(r)),
-                        other => Err(type_error(op.symbol(), "bool", &other)),
+                    return match &*self.eval_ref(rhs)? {
+                        Value::Bool(r) => Ok(Cow::Owned(Value::Bool(*r))),
+                        other => Err(Box::new(type_error(op.symbol(), "bool", other))),
                     };
                 }
-                let l = self.eval(lhs)?;
-                let r = self.eval(rhs)?;
-                binary(*op, &l, &r)
+                let l = self.eval_ref(lhs)?;
+                let r = self.eval_ref(rhs)?;
+                Cow::Owned(binary(*op, &l, &r).map_err(Box::new)?)
             }
-            Term::Call(func, args) => {
-                let function = self.functions.get(*func as usize).ok_or_else(|| EvalError::Function {
-                    func: format!("#{func}"),
-                    message: "no such function".into(),
-                })?;
-                let mut values = Vec::with_capacity(args.len());
-                for arg in args {
-                    values.push(self.eval(arg)?);
-                }
-                match (function.body)(&values) {
-                    Ok(Value::Float(x)) if !x.is_finite() => Err(EvalError::Function {
-                        func: function.name.to_string(),
-                        message: "returned a non-finite number".into(),
-                    }),
-                    Ok(v) => Ok(v),
-                    Err(message) => Err(EvalError::Function { func: function.name.to_string(), message }),
-                }
+            Term::Call(func, args) => Cow::Owned(self.call(*func, args)?),
+        })
+    }
+
+    /// Calls a function with its arguments evaluated (on the stack for up to three).
+    fn call(&self, func: FuncId, args: &[Term]) -> Result<Value, Box<EvalError>> {
+        let function = self.functions.get(func as usize).ok_or_else(|| {
+            Box::new(EvalError::Function { func: format!("#{func}"), message: "no such function".into() })
+        })?;
+        let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
+        let result = match args.len() {
+            1 => (function.body)(&[arg(0)?]),
+            2 => (function.body)(&[arg(0)?, arg(1)?]),
+            3 => (function.body)(&[arg(0)?, arg(1)?, arg(2)?]),
+            n => {
+                let values = (0..n).map(arg).collect::<Result<Vec<Value>, Box<EvalError>>>()?;
+                (function.body)(&values)
             }
+        };
+        match result {
+            Ok(Value::Float(x)) if !x.is_finite() => Err(Box::new(EvalError::Function {
+                func: function.name.to_string(),
+                message: "returned a non-finite number".into(),
+            })),
+            Ok(v) => Ok(v),
+            Err(message) => Err(Box::new(EvalError::Function { func: function.name.to_string(), message })),
         }
     }
 }
@@ -377,6 +400,19 @@ fn float_result(x: f64, op: BinOp) -> Result<Value, EvalError> {
 /// Applies an arithmetic or comparison operator to two values.
 pub(crate) fn binary(op: BinOp, l: &Value, r: &Value) -> Result<Value, EvalError> {
     use BinOp::*;
+    // The commonest atom compares two floats (`xydist(from.pos, to.pos) < 10.0`).
+    if let (Value::Float(a), Value::Float(b)) = (l, r)
+        && !a.is_nan()
+        && !b.is_nan()
+    {
+        match op {
+            Lt => return Ok(Value::Bool(a < b)),
+            Le => return Ok(Value::Bool(a <= b)),
+            Gt => return Ok(Value::Bool(a > b)),
+            Ge => return Ok(Value::Bool(a >= b)),
+            _ => {}
+        }
+    }
     match op {
         Eq | Ne => {
             let equal = match (l, r) {

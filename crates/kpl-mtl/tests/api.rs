@@ -154,3 +154,131 @@ fn malformed_windows_are_refused() {
     assert!(Formula::new(&Mtl::eventually(Window::bounded(-1, 2), p.clone()), &ctx).is_err());
     assert!(Formula::new(&Mtl::atom(Term::Var(0)), &ctx).is_err());
 }
+
+#[test]
+fn a_bound_of_i64_max_is_finite_not_inf() {
+    let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Us);
+    let p = Mtl::atom(Term::slot(ctx.declare_value("p")));
+    let finite =
+        Arc::new(Formula::new(&Mtl::eventually(Window::bounded(0, i64::MAX), p.clone()), &ctx).unwrap());
+    let infinite = Arc::new(Formula::new(&Mtl::eventually(Window::UNBOUNDED, p), &ctx).unwrap());
+    assert_eq!(finite.horizon(), Some(i64::MAX));
+    assert_eq!(infinite.horizon(), None);
+    let mut progressor = Progressor::new(finite.clone());
+    progressor.step(-10, &bools(false)).unwrap();
+    assert_eq!(progressor.residual(), format!("eventually[0, {}] p", i64::MAX));
+    // i64::MAX + 9 after the first state: past the finite window, inside `inf`.
+    assert_eq!(progressor.step(i64::MAX - 1, &bools(true)).unwrap(), Some(false));
+    let mut progressor = Progressor::new(infinite);
+    progressor.step(-10, &bools(false)).unwrap();
+    assert_eq!(progressor.step(i64::MAX - 1, &bools(true)).unwrap(), Some(true));
+    // Within the finite window, the same as inf.
+    let mut progressor = Progressor::new(finite);
+    progressor.step(0, &bools(false)).unwrap();
+    assert_eq!(progressor.step(i64::MAX, &bools(true)).unwrap(), Some(true));
+}
+
+#[test]
+fn constant_bodies_are_decided_at_the_first_state() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let p = Mtl::atom(Term::slot(ctx.declare_value("p")));
+    let cases = [
+        (Mtl::always(Window::bounded(0, 5), Mtl::Const(true)), true),
+        (Mtl::eventually(Window::bounded(2, 4), Mtl::Const(false)), false),
+        (Mtl::always(Window::bounded(0, 5), Mtl::Const(false)), false),
+        (Mtl::eventually(Window::bounded(0, 4), Mtl::or(vec![p.clone(), Mtl::Const(true)])), true),
+        (Mtl::until(Window::bounded(1, 4), p.clone(), Mtl::Const(false)), false),
+        (
+            Mtl::not(Mtl::eventually(Window::bounded(3, 9), Mtl::and(vec![p.clone(), Mtl::Const(false)]))),
+            true,
+        ),
+    ];
+    for (f, verdict) in cases {
+        let formula = Arc::new(Formula::new(&f, &ctx).unwrap());
+        assert_eq!(formula.constant(), Some(verdict), "{f:?}");
+        let mut progressor = Progressor::new(formula);
+        // Decided before reading anything: a missing `p` is no error.
+        assert_eq!(progressor.step(0, &SlotState::new(vec![None])).unwrap(), Some(verdict), "{f:?}");
+        assert_eq!(progressor.decided_at(), Some(0));
+    }
+    // A window that starts later with a body that can hold is not constant: it needs a state there.
+    let f = Formula::new(&Mtl::eventually(Window::bounded(2, 4), Mtl::Const(true)), &ctx).unwrap();
+    assert_eq!(f.constant(), None);
+}
+
+#[test]
+fn group_instances_are_independent_and_removed_ids_are_refused() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let p = ctx.declare_value("p");
+    let f = Mtl::always(Window::bounded(0, 10), Mtl::atom(Term::slot(p)));
+    let mut group = kpl_mtl::ProgressorGroup::new(Arc::new(Formula::new(&f, &ctx).unwrap()));
+    let a = group.start();
+    let b = group.start();
+    assert_eq!(group.len(), 2);
+    assert_eq!(group.step(a, 0, &bools(true)).unwrap(), None);
+    // Each instance has its own clock: b starts later, and its errors leave a alone.
+    assert!(group.step(b, 5, &SlotState::new(vec![None])).is_err());
+    assert_eq!(group.last_time(b), None);
+    assert_eq!(group.step(b, 5, &bools(true)).unwrap(), None);
+    assert_eq!(group.step(a, 3, &bools(false)).unwrap(), Some(false));
+    assert_eq!(group.decided_at(a), Some(3));
+    assert_eq!(group.verdict(b), None);
+    assert_eq!(group.residual(b), "always[0, 10] p");
+    assert_eq!(group.finish(b), Some(true));
+    // Restarted, a is a fresh instance.
+    group.restart(a);
+    assert_eq!(group.verdict(a), None);
+    assert_eq!(group.step(a, 1, &bools(true)).unwrap(), None);
+    group.remove(a);
+    assert_eq!(group.len(), 1);
+    assert_eq!(group.step(a, 2, &bools(true)), Err(EvalError::NoInstance));
+    // Its slot is reused, but the old id stays refused.
+    let c = group.start();
+    assert_ne!(c, a);
+    assert_eq!(group.step(a, 2, &bools(true)), Err(EvalError::NoInstance));
+    assert_eq!(group.verdict(a), None);
+    assert_eq!(group.step(c, 0, &bools(true)).unwrap(), None);
+}
+
+#[test]
+fn quantified_objects_share_their_residual_and_its_transitions() {
+    let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let car = ctx.declare_object_type("Car");
+    // forall c: Car . always (c.braking -> eventually[0, 20] c.stopped)
+    let attr = |name: &str| Mtl::atom(Term::Var(0).field(name));
+    let f = Mtl::Forall(
+        car,
+        Box::new(Mtl::always(
+            Window::UNBOUNDED,
+            Mtl::implies(attr("braking"), Mtl::eventually(Window::bounded(0, 20), attr("stopped"))),
+        )),
+    );
+    let mut progressor = Progressor::new(Arc::new(Formula::new(&f, &ctx).unwrap()));
+    // 1,000 cars; car i brakes at state i % 10 and stops 5 states later.
+    let state = |step: usize| SlotState {
+        values: vec![],
+        objects: vec![
+            (0..1000)
+                .map(|i| {
+                    let phase = (step + i) % 10;
+                    Value::Record(Arc::new(Record {
+                        id: Some(Arc::from(format!("car{i}"))),
+                        fields: vec![
+                            (Arc::from("braking"), Value::Bool(phase == 0)),
+                            (Arc::from("stopped"), Value::Bool(phase == 5)),
+                        ],
+                    }))
+                })
+                .collect(),
+        ],
+    };
+    for step in 0..50 {
+        assert_eq!(progressor.step(step as i64, &state(step)).unwrap(), None);
+    }
+    // The cars are in 10 situations: their residuals are 10 distinct nodes (plus the bindings),
+    // and after the first round every car's step is a cached transition.
+    let stats = progressor.stats();
+    assert!(stats.cache_hits >= 40 * 1000, "{stats:?}");
+    assert!(stats.cache_misses <= 20 * 10 + 50, "{stats:?}");
+    assert!(progressor.residual_size() <= 1 + 2 * 1000 + 20, "{}", progressor.residual_size());
+}

@@ -3,10 +3,15 @@
 //! The evaluator here knows nothing of progression: it quantifies over trace positions as the
 //! definitions do. The final verdict uses the finite-trace semantics; the time a verdict became
 //! certain uses the three-valued (Kleene) semantics over each prefix, where a window not yet
-//! closed by the last state's time is unknown. Thousands of random formulas (nesting depth up to
+//! closed by the last state's time is unknown, and where a subformula that has one value on every
+//! trace by the constant rules of `docs/mtl.md` (`always[2, 4] true`, `eventually[1, 3] false`)
+//! has it at once. Thousands of random formulas (nesting depth up to
 //! 4, every operator, bounded and unbounded windows, quantifiers) over random traces with uneven
 //! time steps must give the same verdicts, the same `decided_at`, and the same verdicts from every
-//! state (`--every`), as the engine.
+//! state (`--every`), as the engine: in its default configuration, without the transition cache,
+//! collecting its arena after nearly every step, and with instances of one formula on different
+//! traces stepped in turn in one `ProgressorGroup` (so that they share residuals and cached
+//! transitions).
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // a test reports and fails loudly
 
@@ -14,7 +19,7 @@ mod common;
 
 use common::{F, Gen, TraceState, compile, show, slot_state};
 use kpl_core::Time;
-use kpl_mtl::{EveryMonitor, Progressor, StartVerdict};
+use kpl_mtl::{EngineConfig, EveryMonitor, Progressor, ProgressorGroup, StartVerdict};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -69,11 +74,56 @@ fn closed(trace: &[TraceState], i: usize, k: usize, hi: Option<Time>) -> bool {
     hi.is_some_and(|h| trace[i].time + h <= trace[k].time)
 }
 
+/// The value of `f` on every trace, if the constant rules of `docs/mtl.md` give one: `true` and
+/// `false`, the connectives over constants, `always[a, b] true` and `eventually[a, b] false`
+/// (and `always[0, b] false`, `eventually[0, b] true`: the window holds the current state), the
+/// same for until's right side, `forall` of `true` and `exists` of `false`.
+fn constant(f: &F) -> Option<bool> {
+    let all = |gs: &[F], of: bool| {
+        let values: Vec<Option<bool>> = gs.iter().map(constant).collect();
+        if values.contains(&Some(!of)) {
+            Some(!of)
+        } else if values.iter().all(|v| *v == Some(of)) {
+            Some(of)
+        } else {
+            None
+        }
+    };
+    match f {
+        F::True => Some(true),
+        F::False => Some(false),
+        F::Not(g) => constant(g).map(|b| !b),
+        F::And(gs) => all(gs, true),
+        F::Or(gs) => all(gs, false),
+        F::Implies(a, b) => match (constant(a), constant(b)) {
+            (Some(false), _) | (_, Some(true)) => Some(true),
+            (Some(true), Some(false)) => Some(false),
+            _ => None,
+        },
+        F::Ev(lo, _, g) | F::Until(lo, _, _, g) => match constant(g) {
+            Some(false) => Some(false),
+            Some(true) if *lo == 0 => Some(true),
+            _ => None,
+        },
+        F::Al(lo, _, g) => match constant(g) {
+            Some(true) => Some(true),
+            Some(false) if *lo == 0 => Some(false),
+            _ => None,
+        },
+        F::Forall(g) => constant(g).filter(|b| *b),
+        F::Exists(g) => constant(g).filter(|b| !*b),
+        F::Prop(_) | F::Cmp { .. } | F::ObjCmp { .. } => None,
+    }
+}
+
 /// The three-valued value of `f` at every position `0..=k` of the prefix `trace[..=k]`. With
 /// `end` set, the prefix is the whole trace and no state follows: every window is closed, which
 /// is the finite-trace semantics (and then no value is unknown).
 fn eval(f: &F, trace: &[TraceState], k: usize, end: bool, env: &Env) -> Vec<Option<bool>> {
     let positions = 0..=k;
+    if let Some(v) = constant(f) {
+        return positions.map(|_| Some(v)).collect();
+    }
     let is_closed = |i: usize, hi: Option<Time>| end || closed(trace, i, k, hi);
     match f {
         F::Not(g) => eval(g, trace, k, end, env).into_iter().map(|v| v.map(|b| !b)).collect(),
@@ -176,8 +226,16 @@ fn naive(f: &F, trace: &[TraceState]) -> Vec<(bool, Option<Time>)> {
     finals.into_iter().zip(decided).collect()
 }
 
-fn engine_single(f: &F, trace: &[TraceState]) -> (bool, Option<Time>, usize) {
-    let mut progressor = Progressor::new(compile(f));
+/// The configurations every case runs in: the default, no transition cache, and collecting
+/// the arena after nearly every step.
+const CONFIGS: [EngineConfig; 3] = [
+    EngineConfig { transition_cache: true, collect_slack: 4096 },
+    EngineConfig { transition_cache: false, collect_slack: 4096 },
+    EngineConfig { transition_cache: true, collect_slack: 1 },
+];
+
+fn engine_single(f: &F, trace: &[TraceState], config: EngineConfig) -> (bool, Option<Time>, usize) {
+    let mut progressor = Progressor::with_config(compile(f), config);
     let mut largest = 0;
     for s in trace {
         progressor.step(s.time, &slot_state(s)).expect("test states have every value");
@@ -187,8 +245,23 @@ fn engine_single(f: &F, trace: &[TraceState]) -> (bool, Option<Time>, usize) {
     (verdict, progressor.decided_at(), largest)
 }
 
-fn engine_every(f: &F, trace: &[TraceState]) -> Vec<(bool, Option<Time>)> {
-    let mut monitor = EveryMonitor::new(compile(f));
+/// Each trace run by its own instance of one group, the instances stepped in turn.
+fn engine_group(f: &F, traces: &[Vec<TraceState>], config: EngineConfig) -> Vec<(bool, Option<Time>)> {
+    let mut group = ProgressorGroup::with_config(compile(f), config);
+    let ids: Vec<_> = traces.iter().map(|_| group.start()).collect();
+    let longest = traces.iter().map(Vec::len).max().unwrap_or(0);
+    for i in 0..longest {
+        for (id, trace) in ids.iter().zip(traces) {
+            if let Some(s) = trace.get(i) {
+                group.step(*id, s.time, &slot_state(s)).expect("test states have every value");
+            }
+        }
+    }
+    ids.iter().map(|id| (group.finish(*id).expect("not empty"), group.decided_at(*id))).collect()
+}
+
+fn engine_every(f: &F, trace: &[TraceState], config: EngineConfig) -> Vec<(bool, Option<Time>)> {
+    let mut monitor = EveryMonitor::with_config(compile(f), config);
     let mut out: Vec<StartVerdict> = Vec::new();
     for s in trace {
         monitor.step(s.time, &slot_state(s), &mut out).expect("test states have every value");
@@ -229,27 +302,51 @@ fn check(seed: u64, cases: usize, quantifiers: bool) {
         let len = rand::Rng::random_range(&mut generator.rng, 1..=30);
         let trace = generator.trace(len, false);
         let expected = naive(&f, &trace);
-        let (verdict, decided_at, largest) = engine_single(&f, &trace);
+        let config = CONFIGS[case % CONFIGS.len()];
+        let (verdict, decided_at, largest) = engine_single(&f, &trace, config);
         largest_residual = largest_residual.max(largest);
         assert_eq!(
             (verdict, decided_at),
             expected[0],
-            "case {case}: formula {}\ntimes {:?}\ntrace {:?}",
+            "case {case} ({config:?}): formula {}\ntimes {:?}\ntrace {:?}",
             show(&f),
             times(&trace),
             trace
         );
+        if case % 4 == 0 {
+            // Two more traces of the same formula, all three in one group.
+            let others: Vec<Vec<TraceState>> = (0..2)
+                .map(|_| {
+                    let len = rand::Rng::random_range(&mut generator.rng, 1..=30);
+                    let even = rand::Rng::random_bool(&mut generator.rng, 0.5);
+                    generator.trace(len, even)
+                })
+                .collect();
+            let mut traces = vec![trace.clone()];
+            traces.extend(others);
+            let got = engine_group(&f, &traces, config);
+            for (n, (t, got)) in traces.iter().zip(got).enumerate() {
+                assert_eq!(
+                    got,
+                    naive(&f, t)[0],
+                    "case {case}, instance {n} of a group ({config:?}): formula {}\ntimes {:?}\ntrace {:?}",
+                    show(&f),
+                    times(t),
+                    t
+                );
+            }
+        }
         match decided_at {
             Some(t) if t == trace[0].time => at_first += 1,
             Some(_) => later += 1,
             None => at_end += 1,
         }
-        let every = engine_every(&f, &trace);
+        let every = engine_every(&f, &trace, config);
         for (i, (got, want)) in every.iter().zip(expected.iter()).enumerate() {
             assert_eq!(
                 got,
                 want,
-                "case {case}, start {i}: formula {}\ntimes {:?}\ntrace {:?}",
+                "case {case}, start {i} ({config:?}): formula {}\ntimes {:?}\ntrace {:?}",
                 show(&f),
                 times(&trace),
                 trace

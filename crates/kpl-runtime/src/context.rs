@@ -232,6 +232,14 @@ impl SourceContext {
         Ok(())
     }
 
+    /// Warns about something that is probably not what the spec meant, in the run's summary
+    /// (and in the log at once).
+    pub fn warn(&self, warning: impl Into<String>) {
+        let warning = warning.into();
+        tracing::debug!(process = %self.name, "warning: {warning}");
+        self.stats.warn(warning);
+    }
+
     /// Whether every consumer of this source has stopped.
     pub fn unconsumed(&self) -> bool {
         self.outputs.is_empty()

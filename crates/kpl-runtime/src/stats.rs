@@ -98,6 +98,9 @@ pub struct ProcessStats {
     /// Process instances created and removed at run time (link processes: one per object).
     pub instances_created: AtomicU64,
     pub instances_removed: AtomicU64,
+    /// Things the process could do but that are probably not what the spec meant (a replay
+    /// filter that matched nothing), each said once.
+    pub warnings: Mutex<Vec<String>>,
     /// What the process achieved, in its own words and counts (`new Car objects (establish)`:
     /// 4), in the order first reported; `kpl run` prints them as the run's result.
     pub results: Mutex<Vec<Outcome>>,
@@ -128,6 +131,16 @@ impl ProcessStats {
 
     pub fn error(&self, error: String) {
         count(&self.errors, &self.error_examples, error);
+    }
+
+    /// Keeps a warning for the end-of-run summary (at most [`ProcessStats::KEEP`]).
+    pub fn warn(&self, warning: String) {
+        if let Ok(mut warnings) = self.warnings.lock()
+            && warnings.len() < ProcessStats::KEEP
+            && !warnings.contains(&warning)
+        {
+            warnings.push(warning);
+        }
     }
 }
 
@@ -229,9 +242,14 @@ impl RunStats {
                         error_examples: snapshot(&s.error_examples),
                         instances_created: s.instances_created.load(Ordering::Relaxed),
                         instances_removed: s.instances_removed.load(Ordering::Relaxed),
+                        warnings: snapshot(&s.warnings),
                         results: snapshot(&s.results),
                     })
-                    .filter(|p| p.malformed + p.errors + p.instances_created > 0 || !p.results.is_empty())
+                    .filter(|p| {
+                        p.malformed + p.errors + p.instances_created > 0
+                            || !p.warnings.is_empty()
+                            || !p.results.is_empty()
+                    })
                     .collect()
             })
             .unwrap_or_default();
@@ -264,6 +282,8 @@ pub struct ProcessSummary {
     pub error_examples: Vec<String>,
     pub instances_created: u64,
     pub instances_removed: u64,
+    /// What the process warned about (`kpl run` prints them even with `--quiet`).
+    pub warnings: Vec<String>,
     pub results: Vec<Outcome>,
 }
 

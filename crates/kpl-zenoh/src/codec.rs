@@ -7,7 +7,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..3 | magic `KPL` |
-//! | 3 | format version, 1 |
+//! | 3 | format version: 2 (1 is read too: it has no packed float lists) |
 //! | 4 | kind: `S` (0x53) a sample, `E` (0x45) the end of the stream |
 //!
 //! A sample (`S`) goes on with its valid time (i64, bytes 5..13), its available time (i64, bytes
@@ -27,6 +27,7 @@
 //! | `v` | vec2 | 2 f64: x, y |
 //! | `b` | box | 4 f64: x1, y1, x2, y2 |
 //! | `l` | list | u32 count, the values |
+//! | `F` | list of floats, packed (written for a non-empty list whose items are all floats) | u32 count, the f64s |
 //! | `o` | record (object) | u32 count, then per attribute its name (u32 length, UTF-8) and value; an object's identity is the attribute `id`, a string, first |
 //!
 //! Numbers travel as their bits, so a float arrives exactly as it left and costs no printing or
@@ -44,8 +45,11 @@ use kpl_runtime::Sample;
 
 /// The first bytes of every message.
 pub const MAGIC: &[u8; 3] = b"KPL";
-/// The format version this crate writes and reads.
-pub const VERSION: u8 = 1;
+/// The format version this crate writes. Version 2 added packed float lists (tag `F`); version 1
+/// messages (without them) are still read.
+pub const VERSION: u8 = 2;
+/// The oldest format version this crate reads.
+pub const OLDEST_VERSION: u8 = 1;
 /// The kind byte of a sample.
 pub const KIND_SAMPLE: u8 = b'S';
 /// The kind byte of an end of stream.
@@ -74,7 +78,7 @@ pub enum DecodeError {
     TooShort(usize),
     #[error("not a KPL message (it starts with {0:02x?}, not \"KPL\")")]
     Magic([u8; 3]),
-    #[error("format version {0} is not one this kpl reads (version {VERSION})")]
+    #[error("format version {0} is not one this kpl reads (versions {OLDEST_VERSION} to {VERSION})")]
     Version(u8),
     #[error("unknown message kind 0x{0:02x}")]
     Kind(u8),
@@ -124,7 +128,7 @@ pub fn decode(bytes: &[u8], ty: &ValueType) -> Result<Message, DecodeError> {
     if &bytes[..3] != MAGIC {
         return Err(DecodeError::Magic([bytes[0], bytes[1], bytes[2]]));
     }
-    if bytes[3] != VERSION {
+    if !(OLDEST_VERSION..=VERSION).contains(&bytes[3]) {
         return Err(DecodeError::Version(bytes[3]));
     }
     match bytes[4] {
@@ -190,6 +194,17 @@ fn write_value(value: &Value, out: &mut Vec<u8>) -> Result<(), EncodeError> {
             out.push(b'b');
             for z in [b.x1, b.y1, b.x2, b.y2] {
                 out.extend_from_slice(&z.to_le_bytes());
+            }
+        }
+        Value::List(items) if !items.is_empty() && items.iter().all(|x| matches!(x, Value::Float(_))) => {
+            // Packed: numbers dominate KPL's streams, and a list of them decodes in one pass.
+            out.push(b'F');
+            write_count(items.len(), out)?;
+            out.reserve(8 * items.len());
+            for item in items.iter() {
+                if let Value::Float(x) = item {
+                    out.extend_from_slice(&x.to_le_bytes());
+                }
             }
         }
         Value::List(items) => {
@@ -258,6 +273,23 @@ impl<'a> Reader<'a> {
         if x.is_finite() { Ok(x) } else { Err(format!("has a float that is not finite ({x}) at byte {at}")) }
     }
 
+    /// A packed list of floats: the count, then the numbers. Checked first, then built in one
+    /// allocation of exactly its size.
+    fn floats(&mut self) -> Result<Value, String> {
+        let n = self.count()?;
+        let at = self.at;
+        let bytes = self.take(n.checked_mul(8).ok_or_else(|| format!("has {n} floats at byte {at}"))?)?;
+        let words = bytes.chunks_exact(8).map(|c| {
+            let mut word = [0u8; 8];
+            word.copy_from_slice(c);
+            f64::from_le_bytes(word)
+        });
+        if let Some(i) = words.clone().position(|x| !x.is_finite()) {
+            return Err(format!("has a float that is not finite at byte {}", at + 8 * i));
+        }
+        Ok(Value::List(words.map(Value::Float).collect()))
+    }
+
     fn count(&mut self) -> Result<usize, String> {
         let mut word = [0u8; 4];
         word.copy_from_slice(self.take(4)?);
@@ -284,13 +316,14 @@ impl<'a> Reader<'a> {
             b'r' => Value::Float(self.float()?),
             b's' => Value::str(self.text()?),
             b'v' => Value::Vec2([self.float()?, self.float()?]),
-            b'b' => Value::BBox(BBox::new(self.float()?, self.float()?, self.float()?, self.float()?)),
+            b'b' => Value::bbox(BBox::new(self.float()?, self.float()?, self.float()?, self.float()?)),
+            b'F' => self.floats()?,
             b'l' => {
                 let n = self.count()?;
                 // Every item takes at least a byte: a count cannot make us reserve more than that.
                 let mut items = Vec::with_capacity(n.min(self.bytes.len() - self.at));
                 for _ in 0..n {
-                    // Lists of numbers are the common case: read floats without recursing.
+                    // Lists of numbers are common: read floats without recursing.
                     if self.bytes.get(self.at) == Some(&b'r') {
                         self.at += 1;
                         items.push(Value::Float(self.float()?));
@@ -399,6 +432,10 @@ fn fits(value: &Value, ty: &ValueType) -> bool {
         | (ValueType::Str, Value::Str(_))
         | (ValueType::Vec2, Value::Vec2(_))
         | (ValueType::BBox, Value::BBox(_)) => true,
+        // Lists of floats are the bulk of numeric streams: a tight loop instead of a call each.
+        (ValueType::List(item), Value::List(items)) if **item == ValueType::Float => {
+            items.iter().all(|x| matches!(x, Value::Float(_)))
+        }
         (ValueType::List(item), Value::List(items)) => items.iter().all(|x| fits(x, item)),
         (ValueType::Record(record), Value::Record(value)) => {
             value.fields.len() == record.fields.len()
@@ -428,7 +465,7 @@ fn conform(value: Value, ty: &ValueType) -> Result<Value, Mismatch> {
         (ValueType::Vec2, value) => Value::Vec2(numbers::<2>(&value, "[x, y]")?),
         (ValueType::BBox, value) => {
             let [x1, y1, x2, y2] = numbers::<4>(&value, "[x1, y1, x2, y2]")?;
-            Value::BBox(BBox { x1, y1, x2, y2 })
+            Value::bbox(BBox { x1, y1, x2, y2 })
         }
         (ValueType::List(item), value) => {
             let items: Vec<Value> = match value {
@@ -511,7 +548,7 @@ mod tests {
     #[test]
     fn the_documented_layout() {
         let bytes = encode(&Sample::new(100, -7, Value::vec2(1.5, -2.0)));
-        assert_eq!(&bytes[..5], b"KPL\x01S");
+        assert_eq!(&bytes[..5], b"KPL\x02S");
         assert_eq!(&bytes[5..13], &100i64.to_le_bytes());
         assert_eq!(&bytes[13..21], &(-7i64).to_le_bytes());
         assert_eq!(bytes[21], b'v');
@@ -526,8 +563,45 @@ mod tests {
         expected.extend_from_slice(&3i64.to_le_bytes());
         expected.extend_from_slice(b"s\x02\0\0\0\xc3\xa9");
         assert_eq!(&bytes[21..], &expected[..]);
-        assert_eq!(encode_end(3), b"KPL\x01E\x03\0\0\0\0\0\0\0");
+        assert_eq!(encode_end(3), b"KPL\x02E\x03\0\0\0\0\0\0\0");
         assert_eq!(decode(&encode_end(3), &ValueType::Any), Ok(Message::End { published: 3 }));
+    }
+
+    #[test]
+    fn float_lists_are_packed_and_version_1_lists_still_read() {
+        let floats = Value::List(vec![Value::Float(1.5), Value::Float(-2.0)].into());
+        let bytes = encode(&Sample::new(0, 0, floats.clone()));
+        let mut expected = b"F\x02\0\0\0".to_vec();
+        expected.extend_from_slice(&1.5f64.to_le_bytes());
+        expected.extend_from_slice(&(-2.0f64).to_le_bytes());
+        assert_eq!(&bytes[21..], &expected[..]);
+        assert_eq!(decode(&bytes, &ValueType::Any), Ok(Message::Sample(Sample::new(0, 0, floats.clone()))));
+        // Mixed or empty lists are not packed.
+        let mixed = encode(&Sample::new(0, 0, Value::List(vec![Value::Float(1.0), Value::Int(2)].into())));
+        assert_eq!(mixed[21], b'l');
+        assert_eq!(encode(&Sample::new(0, 0, Value::List(Vec::new().into())))[21..], *b"l\0\0\0\0");
+        // A version 1 message (what tests/zenoh_client.py's encoder sends) lists each float.
+        let mut v1 = b"KPL\x01S".to_vec();
+        v1.extend_from_slice(&[0; 16]);
+        v1.extend_from_slice(b"l\x02\0\0\0r");
+        v1.extend_from_slice(&1.5f64.to_le_bytes());
+        v1.push(b'r');
+        v1.extend_from_slice(&(-2.0f64).to_le_bytes());
+        assert_eq!(
+            decode(&v1, &ValueType::List(Box::new(ValueType::Float))),
+            Ok(Message::Sample(Sample::new(0, 0, floats)))
+        );
+        // A NaN among packed floats, or a count past the end, is an error.
+        let mut nan = bytes.clone();
+        nan[34..42].copy_from_slice(&f64::NAN.to_le_bytes());
+        assert!(
+            matches!(decode(&nan, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("not finite at byte 34"))
+        );
+        let mut huge = bytes[..22].to_vec();
+        huge.extend_from_slice(&u32::MAX.to_le_bytes());
+        assert!(
+            matches!(decode(&huge, &ValueType::Any), Err(DecodeError::Value(e)) if e.contains("cut short"))
+        );
     }
 
     #[test]
@@ -537,7 +611,8 @@ mod tests {
             (vec![], DecodeError::TooShort(0)),
             (b"KPL\x01".to_vec(), DecodeError::TooShort(4)),
             (b"{\"valid\": 1}".to_vec(), DecodeError::Magic(*b"{\"v")),
-            (b"KPL\x02S".to_vec(), DecodeError::Version(2)),
+            (b"KPL\x03S".to_vec(), DecodeError::Version(3)),
+            (b"KPL\x00S".to_vec(), DecodeError::Version(0)),
             (b"KPL\x01X".to_vec(), DecodeError::Kind(b'X')),
             (good[..20].to_vec(), DecodeError::TooShort(20)),
             (b"KPL\x01E\x01".to_vec(), DecodeError::EndLength(6)),
@@ -622,7 +697,7 @@ mod tests {
             prop::collection::vec(any::<char>(), 0..12)
                 .prop_map(|c| Value::str(&c.into_iter().collect::<String>())),
             (-1e6f64..1e6, -1e6f64..1e6).prop_map(|(x, y)| Value::vec2(x, y)),
-            (-1e6f64..1e6, -1e6f64..1e6).prop_map(|(x, y)| Value::BBox(BBox::new(x, y, x + 1.0, y + 2.0))),
+            (-1e6f64..1e6, -1e6f64..1e6).prop_map(|(x, y)| Value::bbox(BBox::new(x, y, x + 1.0, y + 2.0))),
             any::<i64>().prop_map(Value::Duration),
         ];
         leaf.prop_recursive(3, 24, 4, |inner| {
@@ -693,7 +768,7 @@ mod tests {
         #[test]
         fn arbitrary_bytes_never_panic(mut bytes in prop::collection::vec(any::<u8>(), 0..64), header in any::<bool>()) {
             if header && bytes.len() >= 21 {
-                bytes[..5].copy_from_slice(b"KPL\x01S");
+                bytes[..5].copy_from_slice(b"KPL\x02S");
             }
             let _ = decode(&bytes, &ValueType::Any);
         }

@@ -7,6 +7,7 @@ pub mod bench_runtime;
 pub mod bench_situations;
 pub mod cater;
 pub mod check;
+pub mod convert;
 pub mod explain;
 pub mod fmt;
 pub mod graph;

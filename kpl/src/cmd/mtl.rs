@@ -1,19 +1,23 @@
 //! `kpl mtl eval`: evaluates an MTL formula over a JSON-lines trace; and `kpl bench mtl`, the
 //! Timescales benchmark of the engine against R2U2.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, VecDeque};
 use std::fmt::Write as _;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::Instant;
 
 use clap::{Args, Subcommand};
 use kpl_core::{Time, TimeUnit, Value};
 use kpl_mtl::timescales::{PROPOSITIONS, Property, TimescalesState};
-use kpl_mtl::{CompileError, Context, EveryMonitor, Formula, Progressor, SlotState, StartVerdict, State};
+use kpl_mtl::{
+    CompileError, Context, EngineConfig, EveryMonitor, Formula, InstanceId, Progressor, ProgressorGroup,
+    SlotState, StartVerdict, State,
+};
 use serde_json::json;
+
+use crate::cmd::bench::CpuClock;
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -35,20 +39,32 @@ Example:
   {\"decided_at\":2,\"verdict\":true}
   $ kpl mtl eval --formula 'eventually[0, 1] q' --trace trace.jsonl --every
   {\"t\":0,\"verdict\":false}
-  {\"t\":2,\"verdict\":true}";
+  {\"t\":2,\"verdict\":true}
+  $ cat condition.mtl
+  always[0, 3] (p -> eventually[0, 5] q)
+  $ kpl mtl eval --formula-file condition.mtl --trace trace.jsonl
+  {\"decided_at\":null,\"verdict\":true}
+
+Exit status: 0 with a verdict; 1 when the formula or the trace is wrong (the message names the
+line); 2 when a file cannot be read or the arguments are wrong.";
 
 #[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("formula_source").required(true).args(["formula", "formula_file"]))]
 pub struct EvalArgs {
     /// The formula, in KPL syntax (`always (p -> eventually[0, 5] q)`).
     #[arg(long)]
-    formula: String,
+    formula: Option<String>,
+    /// Read the formula from this file instead (for formulas too long for the command line).
+    #[arg(long, value_name = "FILE")]
+    formula_file: Option<PathBuf>,
     /// The trace: a JSON-lines file of states.
     #[arg(long)]
     trace: PathBuf,
     /// The unit of `t` and of bare integer interval bounds (us, ms, s, min, h).
     #[arg(long, default_value = "ms", value_parser = parse_time_unit)]
     time_unit: TimeUnit,
-    /// Print the verdict of the formula evaluated from every state, one line per state.
+    /// Print the verdict of the formula evaluated from every state, one line per state, each as
+    /// soon as it and every earlier one are known.
     #[arg(long)]
     every: bool,
 }
@@ -83,71 +99,134 @@ fn eval(args: EvalArgs) -> ExitCode {
     }
 }
 
+/// Longest formula file and longest trace line read (a file without line breaks, such as
+/// `/dev/zero`, is refused instead of filling the memory).
+const MAX_FORMULA_BYTES: u64 = 64 << 20;
+const MAX_LINE_BYTES: usize = 64 << 20;
+
+/// The formula's text and the name its errors are shown under.
+fn formula_source(args: &EvalArgs) -> Result<(String, String), Failure> {
+    let Some(path) = &args.formula_file else {
+        return Ok((args.formula.clone().unwrap_or_default(), "<formula>".to_string()));
+    };
+    let name = path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|e| Failure::Io(format!("cannot read {name}: {e}")))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_FORMULA_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| Failure::Io(format!("cannot read {name}: {e}")))?;
+    if bytes.len() as u64 > MAX_FORMULA_BYTES {
+        return Err(Failure::Input(format!("error: {name}: the formula file is larger than 64 MiB\n")));
+    }
+    let bytes = bytes.strip_prefix(UTF8_BOM).unwrap_or(&bytes);
+    let text = String::from_utf8(bytes.to_vec()).map_err(|e| {
+        let line = bytes[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
+        Failure::Input(format!("error: {name}:{line}: the formula is not valid UTF-8\n"))
+    })?;
+    Ok((text, name))
+}
+
 fn eval_inner(args: &EvalArgs) -> Result<(), Failure> {
     let mut context = Context::open(args.time_unit, args.time_unit);
-    let formula = compile(&args.formula, &mut context)?;
+    let (source, source_name) = formula_source(args)?;
+    let formula = compile(&source, &source_name, &mut context)?;
     let file = std::fs::File::open(&args.trace)
         .map_err(|e| Failure::Io(format!("cannot read {}: {e}", args.trace.display())))?;
     let trace_name = args.trace.display().to_string();
     let mut reader = TraceReader::new(BufReader::new(file), &context, &trace_name);
-    let mut stdout = std::io::stdout().lock();
-    let write_error = |e: std::io::Error| Failure::Io(format!("cannot write the output: {e}"));
-
+    let mut stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let no_states = || Failure::Input(format!("error: {trace_name}: the trace has no states\n"));
     if args.every {
+        let mut printer = EveryPrinter::default();
         let mut monitor = EveryMonitor::new(formula);
         let mut verdicts: Vec<StartVerdict> = Vec::new();
-        let mut times: Vec<Time> = Vec::new();
         while let Some((line, time, state)) = reader.next_state()? {
             monitor.step(time, &state, &mut verdicts).map_err(|e| reader.error(line, &e.to_string()))?;
-            times.push(time);
+            printer.state(time);
+            printer.decided(&mut verdicts, &mut stdout)?;
+            // Before waiting for more input (a pipe), what is known goes out.
+            if reader.input_drained() {
+                stdout.flush().map_err(write_error)?;
+            }
         }
-        if times.is_empty() {
-            return Err(Failure::Input(format!("error: {trace_name}: the trace has no states\n")));
+        if printer.states == 0 {
+            return Err(no_states());
         }
         monitor.finish(&mut verdicts);
-        let mut by_start: Vec<Option<bool>> = vec![None; times.len()];
-        for v in verdicts {
-            by_start[v.start] = Some(v.verdict);
-        }
-        for (time, verdict) in times.iter().zip(by_start) {
-            let line = json!({ "t": time, "verdict": verdict });
-            writeln!(stdout, "{line}").map_err(write_error)?;
-        }
+        printer.decided(&mut verdicts, &mut stdout)?;
     } else {
         let mut progressor = Progressor::new(formula);
         let mut any = false;
         while let Some((line, time, state)) = reader.next_state()? {
             any = true;
-            if progressor.step(time, &state).map_err(|e| reader.error(line, &e.to_string()))?.is_some() {
-                // Decided: the rest of the trace is still read, so that a malformed line is
-                // reported rather than silently ignored.
-                continue;
-            }
+            // Once decided, the rest of the trace is still read, so that a malformed line is
+            // reported rather than silently ignored.
+            progressor.step(time, &state).map_err(|e| reader.error(line, &e.to_string()))?;
         }
-        let Some(verdict) = progressor.finish().filter(|_| any) else {
-            return Err(Failure::Input(format!("error: {trace_name}: the trace has no states\n")));
-        };
+        let Some(verdict) = progressor.finish().filter(|_| any) else { return Err(no_states()) };
         let line = json!({ "verdict": verdict, "decided_at": progressor.decided_at() });
         writeln!(stdout, "{line}").map_err(write_error)?;
     }
-    Ok(())
+    stdout.flush().map_err(write_error)
+}
+
+fn write_error(e: std::io::Error) -> Failure {
+    Failure::Io(format!("cannot write the output: {e}"))
+}
+
+/// Prints `--every` verdicts in the order of their states as soon as a state's verdict and
+/// every earlier one are known, keeping only the states from the earliest undecided one on.
+#[derive(Default)]
+struct EveryPrinter {
+    /// Index of the first state not printed yet.
+    first: usize,
+    /// From `first` on: each state's time and verdict, once known.
+    waiting: VecDeque<(Time, Option<bool>)>,
+    states: usize,
+}
+
+impl EveryPrinter {
+    fn state(&mut self, time: Time) {
+        self.waiting.push_back((time, None));
+        self.states += 1;
+    }
+
+    fn decided(&mut self, verdicts: &mut Vec<StartVerdict>, out: &mut impl Write) -> Result<(), Failure> {
+        for v in verdicts.drain(..) {
+            if let Some(slot) = v.start.checked_sub(self.first).and_then(|i| self.waiting.get_mut(i)) {
+                slot.1 = Some(v.verdict);
+            }
+        }
+        while let Some((time, Some(verdict))) = self.waiting.front().copied() {
+            let line = json!({ "t": time, "verdict": verdict });
+            writeln!(out, "{line}").map_err(write_error)?;
+            self.waiting.pop_front();
+            self.first += 1;
+        }
+        Ok(())
+    }
 }
 
 /// Parses and compiles the formula; errors are rendered against the formula text.
-fn compile(source: &str, context: &mut Context) -> Result<Arc<Formula>, Failure> {
+fn compile(source: &str, name: &str, context: &mut Context) -> Result<Arc<Formula>, Failure> {
     let index = kpl_syntax::LineIndex::new(source);
     let expr = kpl_syntax::parse_formula(source).map_err(|diagnostics| {
-        Failure::Input(diagnostics.iter().map(|d| d.render("<formula>", source, &index)).collect())
+        Failure::Input(diagnostics.iter().map(|d| d.render(name, source, &index)).collect())
     })?;
     let formula = Formula::from_ast(&expr, context).map_err(|errors| {
-        Failure::Input(errors.iter().map(|e| render_compile_error(e, source, &index)).collect())
+        Failure::Input(errors.iter().map(|e| render_compile_error(e, name, source, &index)).collect())
     })?;
     Ok(Arc::new(formula))
 }
 
 /// Renders a compile error like the syntax diagnostics: message, location, the formula with the
 /// span marked, and the hint.
-fn render_compile_error(error: &CompileError, source: &str, index: &kpl_syntax::LineIndex) -> String {
+fn render_compile_error(
+    error: &CompileError,
+    name: &str,
+    source: &str,
+    index: &kpl_syntax::LineIndex,
+) -> String {
     let mut out = String::new();
     let (line_no, column) = index.line_col(source, error.span.start);
     let (end_line, end_column) = index.line_col(source, error.span.end.max(error.span.start));
@@ -156,7 +235,7 @@ fn render_compile_error(error: &CompileError, source: &str, index: &kpl_syntax::
     let end_column = if end_line == line_no { end_column } else { text.chars().count() + 1 };
     let width = end_column.saturating_sub(column).max(1);
     let _ = writeln!(out, "error: {}", error.message);
-    let _ = writeln!(out, " --> <formula>:{line_no}:{column}");
+    let _ = writeln!(out, " --> {name}:{line_no}:{column}");
     let _ = writeln!(out, "  |");
     let _ = writeln!(out, "{line_no} | {text}");
     let _ = writeln!(out, "  | {}{}", " ".repeat(column - 1), "^".repeat(width));
@@ -166,43 +245,70 @@ fn render_compile_error(error: &CompileError, source: &str, index: &kpl_syntax::
     out
 }
 
+const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// Reads states from a JSON-lines trace, checking each line against the names the formula uses.
 struct TraceReader<'a, R> {
-    reader: R,
+    reader: BufReader<R>,
     context: &'a Context,
     name: &'a str,
     line: usize,
     previous: Option<Time>,
-    buffer: String,
+    buffer: Vec<u8>,
 }
 
-impl<'a, R: BufRead> TraceReader<'a, R> {
-    fn new(reader: R, context: &'a Context, name: &'a str) -> Self {
-        TraceReader { reader, context, name, line: 0, previous: None, buffer: String::new() }
+impl<'a, R: Read> TraceReader<'a, R> {
+    fn new(reader: BufReader<R>, context: &'a Context, name: &'a str) -> Self {
+        TraceReader { reader, context, name, line: 0, previous: None, buffer: Vec::new() }
+    }
+
+    /// Whether everything read from the file so far was used: the next line needs a read that
+    /// may wait (on a pipe).
+    fn input_drained(&self) -> bool {
+        self.reader.buffer().is_empty()
     }
 
     fn error(&self, line: usize, message: &str) -> Failure {
         Failure::Input(format!("error: {}:{line}: {message}\n", self.name))
     }
 
+    /// The next line's text (without its line break); `None` at the end of the file.
+    fn next_line(&mut self) -> Result<Option<&str>, Failure> {
+        self.buffer.clear();
+        let limit = MAX_LINE_BYTES as u64 + 1;
+        let n = (&mut self.reader)
+            .take(limit)
+            .read_until(b'\n', &mut self.buffer)
+            .map_err(|e| Failure::Io(format!("cannot read {}: {e}", self.name)))?;
+        if n == 0 {
+            return Ok(None);
+        }
+        self.line += 1;
+        let line = self.line;
+        if self.buffer.len() > MAX_LINE_BYTES {
+            return Err(self.error(line, "the line is longer than 64 MiB"));
+        }
+        // A byte-order mark (as some editors write) is not part of the first state.
+        let start = if line == 1 && self.buffer.starts_with(UTF8_BOM) { UTF8_BOM.len() } else { 0 };
+        match std::str::from_utf8(&self.buffer[start..]) {
+            Ok(text) => Ok(Some(text)),
+            Err(e) => {
+                let column = e.valid_up_to() + 1;
+                Err(self.error(line, &format!("the line is not valid UTF-8 (at byte {column})")))
+            }
+        }
+    }
+
     /// The next state with its line number and time; `None` at the end of the file.
     fn next_state(&mut self) -> Result<Option<(usize, Time, SlotState)>, Failure> {
         loop {
-            self.buffer.clear();
-            let n = self
-                .reader
-                .read_line(&mut self.buffer)
-                .map_err(|e| Failure::Io(format!("cannot read {}: {e}", self.name)))?;
-            if n == 0 {
-                return Ok(None);
-            }
-            self.line += 1;
-            if self.buffer.trim().is_empty() {
+            let Some(text) = self.next_line()? else { return Ok(None) };
+            if text.trim().is_empty() {
                 continue;
             }
+            let parsed = serde_json::from_str::<serde_json::Value>(text);
             let line = self.line;
-            let json: serde_json::Value = serde_json::from_str(&self.buffer)
-                .map_err(|e| self.error(line, &format!("not a JSON object: {e}")))?;
+            let json = parsed.map_err(|e| self.error(line, &format!("not a JSON object: {e}")))?;
             let serde_json::Value::Object(fields) = json else {
                 return Err(self.error(line, "expected a JSON object such as {\"t\": 0, \"p\": true}"));
             };
@@ -282,7 +388,9 @@ impl<'a, R: BufRead> TraceReader<'a, R> {
 }
 
 #[derive(Debug, Args)]
-#[command(after_help = "Examples:\n  kpl bench mtl\n  kpl bench mtl --states 100000 --bounds 10,1000")]
+#[command(
+    after_help = "Examples:\n  kpl bench mtl\n  kpl bench mtl --states 100000 --bounds 10,1000\n  kpl bench mtl --r2u2-cli /tmp/r2u2/bin/r2u2_cli --properties RecurGLB,AbsentBR"
+)]
 pub struct BenchArgs {
     /// States per trace.
     #[arg(long, default_value_t = 1_000_000)]
@@ -293,8 +401,8 @@ pub struct BenchArgs {
     /// Properties to run (default: all ten).
     #[arg(long, value_delimiter = ',')]
     properties: Vec<String>,
-    /// Timed runs per case; the fastest counts.
-    #[arg(long, default_value_t = 3)]
+    /// Timed pairs per case: the engine and R2U2 run one after the other this many times.
+    #[arg(long, default_value_t = 5)]
     repeat: usize,
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -302,8 +410,8 @@ pub struct BenchArgs {
     /// columns are left empty.
     #[arg(long)]
     r2u2_cli: Option<PathBuf>,
-    /// Object pairs for the link-condition table (one progressor per pair and condition, as a link
-    /// process keeps them); 0 skips it.
+    /// Object pairs for the link-condition table (each condition progressed for every pair, once
+    /// by independent progressors and once by one group); 0 skips it.
     #[arg(long, default_value_t = 10_000)]
     links: usize,
 }
@@ -319,36 +427,39 @@ impl State for Row<'_> {
     }
 }
 
-struct EngineRun {
-    seconds: f64,
-    verdict: Option<bool>,
-    largest_residual: usize,
-}
-
-fn run_engine(formula: &Arc<Formula>, trace: &[TimescalesState], repeat: usize) -> EngineRun {
-    let mut best = f64::INFINITY;
-    let mut verdict = None;
-    for _ in 0..repeat.max(1) {
-        let mut progressor = Progressor::new(formula.clone());
-        let start = Instant::now();
-        for (t, row) in trace.iter().enumerate() {
-            if progressor.step(t as Time, &Row(row)).is_err() {
-                break;
-            }
-        }
-        verdict = progressor.finish();
-        best = best.min(start.elapsed().as_secs_f64());
-    }
-    // Residual sizes are measured in a separate, untimed run.
-    let mut progressor = Progressor::new(formula.clone());
-    let mut largest_residual = 0;
+/// One timed run of a `Progressor` over the trace: seconds and verdict.
+fn time_engine(
+    formula: &Arc<Formula>,
+    trace: &[TimescalesState],
+    config: EngineConfig,
+) -> (f64, Option<bool>) {
+    let mut progressor = Progressor::with_config(formula.clone(), config);
+    let clock = CpuClock::start();
     for (t, row) in trace.iter().enumerate() {
         if progressor.step(t as Time, &Row(row)).is_err() {
             break;
         }
-        largest_residual = largest_residual.max(progressor.residual_size());
     }
-    EngineRun { seconds: best, verdict, largest_residual }
+    let verdict = progressor.finish();
+    (clock.seconds(), verdict)
+}
+
+/// The residual's mean and largest size and the share of steps the transition cache answered,
+/// from an untimed run.
+fn residual_profile(formula: &Arc<Formula>, trace: &[TimescalesState]) -> (f64, usize, f64) {
+    let mut progressor = Progressor::new(formula.clone());
+    let (mut sum, mut largest) = (0usize, 0usize);
+    for (t, row) in trace.iter().enumerate() {
+        if progressor.step(t as Time, &Row(row)).is_err() {
+            break;
+        }
+        let size = progressor.residual_size();
+        sum += size;
+        largest = largest.max(size);
+    }
+    let stats = progressor.stats();
+    let lookups = (stats.cache_hits + stats.cache_misses).max(1);
+    (sum as f64 / trace.len().max(1) as f64, largest, stats.cache_hits as f64 / lookups as f64)
 }
 
 /// The property in R2U2's bounded MLTL (C2PO syntax), if it can be written there. R2U2 gives a
@@ -367,12 +478,6 @@ fn r2u2_spec(property: Property, b: Time) -> Option<String> {
         _ => return None,
     };
     Some(format!("INPUT\n    p, q, r, s: bool;\n\nFTSPEC\n    {formula};\n"))
-}
-
-struct R2u2Run {
-    seconds: f64,
-    violations: usize,
-    overflow: bool,
 }
 
 /// Compiles a spec with C2PO through `r2u2_cli compile` and returns the binary specification.
@@ -404,12 +509,33 @@ fn r2u2_compile(cli: &Path, spec: &str, dir: &Path) -> Result<Vec<u8>, String> {
     std::fs::read(&bin_path).map_err(|e| format!("C2PO wrote no {}: {e}", bin_path.display()))
 }
 
-/// Runs R2U2, which panics (index out of bounds) when a specification needs more queue slots
-/// than it was built with (`R2U2_MAX_QUEUE_SLOTS`, 2048 unless set when r2u2_core is compiled).
-fn run_r2u2_guarded(spec: &[u8], trace: &[TimescalesState], repeat: usize) -> Result<R2u2Run, String> {
+struct R2u2Run {
+    seconds: f64,
+    violations: usize,
+    overflow: bool,
+}
+
+/// One timed run of R2U2, which panics (index out of bounds) when a specification needs more
+/// queue slots than it was built with (`R2U2_MAX_QUEUE_SLOTS`, 2048 unless set when r2u2_core is
+/// compiled): the panic is caught and reported.
+fn time_r2u2(spec: &[u8], trace: &[TimescalesState]) -> Result<R2u2Run, String> {
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
-    let result = std::panic::catch_unwind(|| run_r2u2(spec, trace, repeat));
+    let result = std::panic::catch_unwind(|| {
+        let mut monitor = r2u2_core::get_monitor(spec);
+        let (mut violations, mut overflow) = (0, false);
+        let clock = CpuClock::start();
+        for row in trace {
+            for (i, v) in row.iter().enumerate() {
+                r2u2_core::load_bool_signal(&mut monitor, i, *v);
+            }
+            if !r2u2_core::monitor_step(&mut monitor) {
+                overflow = true;
+            }
+            violations += r2u2_core::get_output_buffer(&monitor).iter().filter(|o| !o.verdict.truth).count();
+        }
+        R2u2Run { seconds: clock.seconds(), violations, overflow }
+    });
     std::panic::set_hook(hook);
     result.map_err(|panic| {
         let message = panic
@@ -424,26 +550,99 @@ fn run_r2u2_guarded(spec: &[u8], trace: &[TimescalesState], repeat: usize) -> Re
     })
 }
 
-fn run_r2u2(spec: &[u8], trace: &[TimescalesState], repeat: usize) -> R2u2Run {
-    let mut best = f64::INFINITY;
-    let mut violations = 0;
-    let mut overflow = false;
-    for _ in 0..repeat.max(1) {
-        let mut monitor = r2u2_core::get_monitor(spec);
-        violations = 0;
-        let start = Instant::now();
-        for row in trace {
-            for (i, v) in row.iter().enumerate() {
-                r2u2_core::load_bool_signal(&mut monitor, i, *v);
-            }
-            if !r2u2_core::monitor_step(&mut monitor) {
-                overflow = true;
-            }
-            violations += r2u2_core::get_output_buffer(&monitor).iter().filter(|o| !o.verdict.truth).count();
-        }
-        best = best.min(start.elapsed().as_secs_f64());
+/// Median and range of some ratios.
+fn spread(values: &mut [f64]) -> (f64, f64, f64) {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        return (f64::NAN, f64::NAN, f64::NAN);
     }
-    R2u2Run { seconds: best, violations, overflow }
+    let median = if n % 2 == 1 { values[n / 2] } else { (values[n / 2 - 1] + values[n / 2]) / 2.0 };
+    (median, values[0], values[n - 1])
+}
+
+fn min(values: &[f64]) -> f64 {
+    values.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+/// One row of the Timescales table.
+struct Case {
+    property: Property,
+    bound: Time,
+    states: usize,
+    /// Best of the runs, ns per state, with and without the transition cache.
+    kpl_ns: f64,
+    no_cache_ns: f64,
+    mean_residual: f64,
+    largest_residual: usize,
+    hit_rate: f64,
+    verdict: Option<bool>,
+    /// R2U2's best ns per state, the per-pair ratios (KPL throughput over R2U2's), or why not.
+    r2u2: Result<(f64, Vec<f64>, String), String>,
+}
+
+fn run_case(args: &BenchArgs, property: Property, b: Time, scratch: &Path) -> Result<Case, String> {
+    let trace = property.trace(b, args.states, args.seed, false);
+    let mut context = Context::new(TimeUnit::Ms, TimeUnit::Ms);
+    let mtl = property.formula(b, &mut context);
+    let formula = Arc::new(Formula::new(&mtl, &context).map_err(|e| e.to_string())?);
+    let spec = match (&args.r2u2_cli, r2u2_spec(property, b)) {
+        (Some(cli), Some(spec)) => {
+            r2u2_compile(cli, &spec, &scratch.join(format!("{}-{b}", property.name()))).map(Some)
+        }
+        (None, Some(_)) => Err("not run".to_string()),
+        (_, None) => Err("not expressible".to_string()),
+    };
+    let n = trace.len() as f64;
+    let (mut kpl, mut r2u2, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let mut verdict = None;
+    let mut r2u2_note = String::new();
+    let mut r2u2_error = None;
+    // Paired runs: the engine, then R2U2 on the same trace, `repeat` times.
+    for _ in 0..args.repeat.max(1) {
+        let (seconds, v) = time_engine(&formula, &trace, EngineConfig::default());
+        verdict = v;
+        kpl.push(seconds);
+        if let Ok(Some(spec)) = &spec {
+            match time_r2u2(spec, &trace) {
+                Ok(run) => {
+                    ratios.push(run.seconds / seconds);
+                    r2u2.push(run.seconds);
+                    r2u2_note = if run.overflow {
+                        " (queue overflow)".to_string()
+                    } else if run.violations > 0 {
+                        format!(" ({} false verdicts)", run.violations)
+                    } else {
+                        String::new()
+                    };
+                }
+                Err(e) => r2u2_error = Some(e),
+            }
+        }
+    }
+    let (no_cache, _) =
+        time_engine(&formula, &trace, EngineConfig { transition_cache: false, ..Default::default() });
+    let (mean_residual, largest_residual, hit_rate) = residual_profile(&formula, &trace);
+    let r2u2 = match (spec, r2u2_error) {
+        (Err(why), _) => Err(why),
+        (_, Some(e)) => {
+            eprintln!("warning: R2U2 {} bound {b}: {e}", property.name());
+            Err("queue too small".to_string())
+        }
+        (Ok(_), None) => Ok((min(&r2u2) * 1e9 / n, ratios, r2u2_note)),
+    };
+    Ok(Case {
+        property,
+        bound: b,
+        states: trace.len(),
+        kpl_ns: min(&kpl) * 1e9 / n,
+        no_cache_ns: no_cache * 1e9 / n,
+        mean_residual,
+        largest_residual,
+        hit_rate,
+        verdict,
+        r2u2,
+    })
 }
 
 pub fn bench(args: BenchArgs) -> ExitCode {
@@ -467,70 +666,63 @@ pub fn bench(args: BenchArgs) -> ExitCode {
     let mut stdout = std::io::stdout().lock();
     let _ = writeln!(
         stdout,
-        "| property | bound | states | kpl states/s | kpl ns/state | largest residual | verdict | R2U2 states/s | kpl / R2U2 |"
+        "Timescales properties, {} states per trace, {} pairs of runs; times are {}.\n",
+        args.states,
+        args.repeat.max(1),
+        CpuClock::name()
     );
-    let _ = writeln!(stdout, "|---|---:|---:|---:|---:|---:|---|---:|---:|");
+    let _ = writeln!(
+        stdout,
+        "| property | bound | states | kpl ns/state | without cache | residual nodes (mean / largest) | ns per state per node | cached steps | verdict | R2U2 ns/state | kpl / R2U2 (median [range]) |"
+    );
+    let _ = writeln!(stdout, "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|");
     let mut flatness: Vec<(Property, f64, f64)> = Vec::new();
+    let mut worst_ratio: Option<(f64, String)> = None;
+    let mut worst_per_node: Option<(f64, String)> = None;
     for property in &properties {
         let mut first_ns = None;
         let mut last_ns = None;
         for &b in &args.bounds {
-            let trace = property.trace(b, args.states, args.seed, false);
-            let mut context = Context::new(TimeUnit::Ms, TimeUnit::Ms);
-            let mtl = property.formula(b, &mut context);
-            let formula = match Formula::new(&mtl, &context) {
-                Ok(f) => Arc::new(f),
+            let case = match run_case(&args, *property, b, &scratch) {
+                Ok(case) => case,
                 Err(e) => {
-                    eprintln!("error: {}: {e}", property.name());
+                    eprintln!("error: {} bound {b}: {e}", property.name());
                     return ExitCode::from(1);
                 }
             };
-            let run = run_engine(&formula, &trace, args.repeat);
-            let rate = trace.len() as f64 / run.seconds;
-            let ns = run.seconds * 1e9 / trace.len() as f64;
-            first_ns.get_or_insert(ns);
-            last_ns = Some(ns);
-            let verdict = match run.verdict {
-                Some(true) => "holds".to_string(),
-                Some(false) => "VIOLATED".to_string(),
-                None => "error".to_string(),
+            first_ns.get_or_insert(case.kpl_ns);
+            last_ns = Some(case.kpl_ns);
+            let verdict = match case.verdict {
+                Some(true) => "holds",
+                Some(false) => "VIOLATED",
+                None => "error",
             };
-            let (r2u2_rate, ratio) = match (&args.r2u2_cli, r2u2_spec(*property, b)) {
-                (Some(cli), Some(spec)) => {
-                    match r2u2_compile(cli, &spec, &scratch.join(format!("{}-{b}", property.name()))) {
-                        Ok(bin) => match run_r2u2_guarded(&bin, &trace, args.repeat) {
-                            Ok(r) => {
-                                let r_rate = trace.len() as f64 / r.seconds;
-                                let note = if r.overflow {
-                                    " (queue overflow)".to_string()
-                                } else if r.violations > 0 {
-                                    format!(" ({} false verdicts)", r.violations)
-                                } else {
-                                    String::new()
-                                };
-                                (format!("{}{note}", si(r_rate)), format!("{:.2}", rate / r_rate))
-                            }
-                            Err(e) => {
-                                eprintln!("warning: R2U2 {} bound {b}: {e}", property.name());
-                                ("queue too small".to_string(), "-".to_string())
-                            }
-                        },
-                        Err(e) => {
-                            eprintln!("warning: R2U2 {} bound {b}: {e}", property.name());
-                            ("failed".to_string(), "-".to_string())
-                        }
+            let name = format!("{} {}", case.property.name(), case.bound);
+            let per_node = case.kpl_ns / case.mean_residual.max(1.0);
+            if worst_per_node.as_ref().is_none_or(|(w, _)| per_node > *w) {
+                worst_per_node = Some((per_node, name.clone()));
+            }
+            let (r2u2_ns, ratio) = match case.r2u2 {
+                Ok((ns, mut ratios, note)) => {
+                    let (median, lo, hi) = spread(&mut ratios);
+                    if worst_ratio.as_ref().is_none_or(|(w, _)| median < *w) {
+                        worst_ratio = Some((median, name));
                     }
+                    (format!("{ns:.1}{note}"), format!("{median:.2} [{lo:.2} - {hi:.2}]"))
                 }
-                (None, Some(_)) => ("not run".to_string(), "-".to_string()),
-                (_, None) => ("not expressible".to_string(), "-".to_string()),
+                Err(why) => (why, "-".to_string()),
             };
             let _ = writeln!(
                 stdout,
-                "| {} | {b} | {} | {} | {ns:.0} | {} | {verdict} | {r2u2_rate} | {ratio} |",
-                property.name(),
-                trace.len(),
-                si(rate),
-                run.largest_residual,
+                "| {} | {} | {} | {:.1} | {:.1} | {:.1} / {} | {per_node:.1} | {:.1} % | {verdict} | {r2u2_ns} | {ratio} |",
+                case.property.name(),
+                case.bound,
+                case.states,
+                case.kpl_ns,
+                case.no_cache_ns,
+                case.mean_residual,
+                case.largest_residual,
+                case.hit_rate * 100.0,
             );
             let _ = stdout.flush();
         }
@@ -539,8 +731,15 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         }
     }
     let _ = std::fs::remove_dir_all(&scratch);
-    if args.links > 0 {
-        bench_links(args.links, &mut stdout);
+    if let Some((ratio, case)) = worst_ratio {
+        let _ = writeln!(
+            stdout,
+            "\nLowest KPL / R2U2 (median of the pairs): {ratio:.2} ({case}; target: at least 1.5)."
+        );
+    }
+    if let Some((ns, case)) = worst_per_node {
+        let _ =
+            writeln!(stdout, "Highest ns per state per residual node: {ns:.1} ({case}; target: at most 15).");
     }
     if let (Some(lo), Some(hi)) = (args.bounds.first(), args.bounds.last()) {
         let _ =
@@ -549,15 +748,13 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         let _ = writeln!(stdout, "|---|---:|---:|---:|");
         for (property, first, last) in flatness {
             let _ =
-                writeln!(stdout, "| {} | {first:.0} | {last:.0} | {:.2} |", property.name(), last / first);
+                writeln!(stdout, "| {} | {first:.1} | {last:.1} | {:.2} |", property.name(), last / first);
         }
     }
+    if args.links > 0 {
+        bench_links(args.links, args.repeat, &mut stdout);
+    }
     ExitCode::SUCCESS
-}
-
-/// `1234567.0` as `1.23 M`.
-fn si(x: f64) -> String {
-    if x >= 1e6 { format!("{:.2} M", x / 1e6) } else { format!("{:.0} k", x / 1e3) }
 }
 
 /// The state of one link instance: the two objects bound to `from` and `to`.
@@ -576,92 +773,160 @@ impl State for PairState<'_> {
     }
 }
 
+/// The objects of the link benchmark at one step: object i moves along x at 10 m/s; its
+/// partner is 4 m (even i) or 30 m away; it leaves the road (|y| >= 5) for 0.3 s every 1.7 s,
+/// shifted by i.
+fn link_objects(links: usize, step: usize, partner: bool) -> Vec<Value> {
+    (0..links)
+        .map(|i| {
+            let offset = if !partner {
+                0.0
+            } else if i % 2 == 0 {
+                4.0
+            } else {
+                30.0
+            };
+            let x = i as f64 * 50.0 + step as f64 + offset;
+            let off_road = (step + i) % 17 < 3;
+            let y = if off_road { 8.0 } else { 1.0 };
+            let fields = vec![(Arc::from("pos"), Value::vec2(x, y))];
+            Value::Record(Arc::new(kpl_core::Record { id: None, fields }))
+        })
+        .collect()
+}
+
+fn link_formula(text: &str) -> Result<Arc<Formula>, String> {
+    let mut context = Context::new(TimeUnit::Us, TimeUnit::Ms);
+    context.declare_value("from");
+    context.declare_value("to");
+    context.register_function(kpl_mtl::Function::new("on_road", (1, Some(1)), |args| match &args[0] {
+        Value::Vec2([_, y]) => Ok(Value::Bool(y.abs() < 5.0)),
+        other => Err(format!("expected a position, found {}", other.kind())),
+    }));
+    let expr = kpl_syntax::parse_formula(text).map_err(|_| format!("`{text}` does not parse"))?;
+    Formula::from_ast(&expr, &mut context).map(Arc::new).map_err(|e| format!("{e:?}"))
+}
+
+/// What one way of progressing the link conditions did: seconds, decisions, and residual nodes
+/// held at the end (distinct nodes: shared ones count once).
+struct LinkRun {
+    seconds: f64,
+    decisions: usize,
+    nodes: usize,
+}
+
+const LINK_STEPS: usize = 100;
+const LINK_DT: Time = 100_000;
+
+/// One progressor per pair.
+fn links_independent(
+    formula: &Arc<Formula>,
+    from: &[Vec<Value>],
+    to: &[Vec<Value>],
+) -> Result<LinkRun, String> {
+    let links = from[0].len();
+    let mut progressors: Vec<Progressor> = (0..links).map(|_| Progressor::new(formula.clone())).collect();
+    let mut decisions = 0;
+    let clock = CpuClock::start();
+    for step in 0..LINK_STEPS {
+        let time = step as Time * LINK_DT;
+        for (i, progressor) in progressors.iter_mut().enumerate() {
+            let state = PairState { from: &from[step][i], to: &to[step][i] };
+            // A decided condition is started again, as a link process does when it goes back to
+            // unlinked, so every instance works at every state.
+            if progressor.step(time, &state).map_err(|e| e.to_string())?.is_some() {
+                decisions += 1;
+                progressor.reset();
+            }
+        }
+    }
+    let seconds = clock.seconds();
+    let nodes = progressors.iter().map(Progressor::residual_size).sum();
+    Ok(LinkRun { seconds, decisions, nodes })
+}
+
+/// One group for all pairs.
+fn links_shared(formula: &Arc<Formula>, from: &[Vec<Value>], to: &[Vec<Value>]) -> Result<LinkRun, String> {
+    let links = from[0].len();
+    let mut group = ProgressorGroup::new(formula.clone());
+    let ids: Vec<InstanceId> = (0..links).map(|_| group.start()).collect();
+    let mut decisions = 0;
+    let clock = CpuClock::start();
+    for step in 0..LINK_STEPS {
+        let time = step as Time * LINK_DT;
+        for (i, id) in ids.iter().enumerate() {
+            let state = PairState { from: &from[step][i], to: &to[step][i] };
+            if group.step(*id, time, &state).map_err(|e| e.to_string())?.is_some() {
+                decisions += 1;
+                group.restart(*id);
+            }
+        }
+    }
+    Ok(LinkRun { seconds: clock.seconds(), decisions, nodes: group.total_residual_size() })
+}
+
 /// DyKnow's link conditions (paper, section V) for `links` object pairs at 10 Hz for 10 s, in
-/// microseconds with millisecond bounds, as the runtime will run them: one progressor per pair.
-fn bench_links(links: usize, out: &mut impl Write) {
-    const STEPS: usize = 100;
-    const DT: Time = 100_000;
+/// microseconds with millisecond bounds, as the runtime runs them: one progressor per pair
+/// (independent), against one group holding every pair's instance (shared), paired runs.
+fn bench_links(links: usize, repeat: usize, out: &mut impl Write) {
     let conditions = [
         ("reestablish", "eventually[0, 1000] xydist(from.pos, to.pos) < 10.0"),
         ("establish", "eventually[1000, inf] always[0, 1000] on_road(from.pos)"),
         ("maintain", "always eventually[0, 10000] always[0, 1000] on_road(from.pos)"),
     ];
-    // Object i moves along x at 10 m/s; its partner is 4 m (pairs of even i) or 30 m away; it
-    // leaves the road (|y| >= 5) for 0.3 s every 1.7 s, shifted by i.
-    let objects = |step: usize, offset: f64| -> Vec<Value> {
-        (0..links)
-            .map(|i| {
-                let x = i as f64 * 50.0 + step as f64 + offset * if i % 2 == 0 { 4.0 } else { 30.0 };
-                let off_road = (step + i) % 17 < 3;
-                let y = if off_road { 8.0 } else { 1.0 };
-                let fields = vec![(Arc::from("pos"), Value::vec2(x, y))];
-                Value::Record(Arc::new(kpl_core::Record { id: None, fields }))
-            })
-            .collect()
-    };
-    let from: Vec<Vec<Value>> = (0..STEPS).map(|k| objects(k, 0.0)).collect();
-    let to: Vec<Vec<Value>> = (0..STEPS).map(|k| objects(k, 1.0)).collect();
+    let from: Vec<Vec<Value>> = (0..LINK_STEPS).map(|k| link_objects(links, k, false)).collect();
+    let to: Vec<Vec<Value>> = (0..LINK_STEPS).map(|k| link_objects(links, k, true)).collect();
     let _ = writeln!(
         out,
-        "\nLink conditions: {links} object pairs, one progressor each, {STEPS} states 100 ms apart:\n"
+        "\nLink conditions: {links} object pairs, {LINK_STEPS} states 100 ms apart, {} pairs of runs ({}):\n",
+        repeat.max(1),
+        CpuClock::name()
     );
     let _ = writeln!(
         out,
-        "| condition | formula | instance-steps/s | ns per instance-step | largest residual | decisions |"
+        "| condition | formula | independent ns per instance-step | shared ns per instance-step | shared / independent rate (median [range]) | residual nodes independent / shared | decisions |"
     );
-    let _ = writeln!(out, "|---|---|---:|---:|---:|---:|");
+    let _ = writeln!(out, "|---|---|---:|---:|---:|---:|---:|");
     for (name, text) in conditions {
-        let mut context = Context::new(TimeUnit::Us, TimeUnit::Ms);
-        context.declare_value("from");
-        context.declare_value("to");
-        context.register_function(kpl_mtl::Function::new("on_road", (1, Some(1)), |args| match &args[0] {
-            Value::Vec2([_, y]) => Ok(Value::Bool(y.abs() < 5.0)),
-            other => Err(format!("expected a position, found {}", other.kind())),
-        }));
-        let formula = match kpl_syntax::parse_formula(text)
-            .map_err(|_| "syntax".to_string())
-            .and_then(|e| Formula::from_ast(&e, &mut context).map_err(|e| format!("{e:?}")))
-        {
-            Ok(f) => Arc::new(f),
+        let formula = match link_formula(text) {
+            Ok(f) => f,
             Err(e) => {
                 eprintln!("error: {name}: {e}");
                 return;
             }
         };
-        let mut progressors: Vec<Progressor> = (0..links).map(|_| Progressor::new(formula.clone())).collect();
-        let start = Instant::now();
-        let mut largest = 0;
-        let mut decisions = 0usize;
-        for step in 0..STEPS {
-            let time = step as Time * DT;
-            for (i, progressor) in progressors.iter_mut().enumerate() {
-                let state = PairState { from: &from[step][i], to: &to[step][i] };
-                match progressor.step(time, &state) {
-                    // A decided condition is started again, as a link process does when it goes
-                    // back to unlinked, so every instance works at every state.
-                    Ok(Some(_)) => {
-                        decisions += 1;
-                        progressor.reset();
-                    }
-                    Ok(None) => {}
-                    Err(e) => {
-                        eprintln!("error: {name}: {e}");
-                        return;
-                    }
+        let (mut alone, mut shared, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+        let mut last = None;
+        for _ in 0..repeat.max(1) {
+            let runs = links_independent(&formula, &from, &to)
+                .and_then(|a| Ok((a, links_shared(&formula, &from, &to)?)));
+            let (a, s) = match runs {
+                Ok(runs) => runs,
+                Err(e) => {
+                    eprintln!("error: {name}: {e}");
+                    return;
                 }
+            };
+            if a.decisions != s.decisions {
+                eprintln!("error: {name}: {} decisions independently, {} shared", a.decisions, s.decisions);
+                return;
             }
-            // Sizes are sampled every second so the timing stays about stepping.
-            if step % 10 == 9 {
-                largest = largest.max(progressors.iter().map(Progressor::residual_size).max().unwrap_or(0));
-            }
+            ratios.push(a.seconds / s.seconds);
+            alone.push(a.seconds);
+            shared.push(s.seconds);
+            last = Some((a, s));
         }
-        let seconds = start.elapsed().as_secs_f64();
-        let steps = (links * STEPS) as f64;
+        let Some((a, s)) = last else { return };
+        let steps = (links * LINK_STEPS) as f64;
+        let (median, lo, hi) = spread(&mut ratios);
         let _ = writeln!(
             out,
-            "| {name} | `{text}` | {} | {:.0} | {largest} | {decisions} |",
-            si(steps / seconds),
-            seconds * 1e9 / steps
+            "| {name} | `{text}` | {:.0} | {:.0} | {median:.1} [{lo:.1} - {hi:.1}] | {} / {} | {} |",
+            min(&alone) * 1e9 / steps,
+            min(&shared) * 1e9 / steps,
+            a.nodes,
+            s.nodes,
+            a.decisions,
         );
     }
 }

@@ -160,6 +160,13 @@ pub fn run(args: Args) -> ExitCode {
             eprintln!("incomplete: {incomplete}");
         }
     }
+    // Warnings are printed even with --quiet: each says why a run may not have done what the spec
+    // meant (a replay filter matching nothing gives an empty source).
+    for p in &report.summary.processes {
+        for warning in &p.warnings {
+            eprintln!("warning: {}: {warning}", p.process);
+        }
+    }
     exit_code(&report)
 }
 

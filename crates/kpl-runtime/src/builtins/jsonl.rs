@@ -27,6 +27,7 @@ use kpl_core::{Time, Value, ValueType};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 use serde::{Deserialize, Serialize};
 
+use super::replay::{ReplayTimes, StreamFilter};
 use crate::clock::ClockKind;
 use crate::context::SourceContext;
 use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
@@ -56,9 +57,18 @@ pub fn encode_line(stream: &str, sample: &Sample) -> String {
 /// Decodes one line: the stream name and the sample, or what is wrong with it (in words that
 /// point at the line's shape, not at the JSON parser's internals).
 pub fn decode_line(line: &str, ty: &ValueType) -> Result<(String, Sample), String> {
+    let line = read_line(line)?;
+    let value = Value::from_json(&line.value, ty).map_err(|e| format!("value {e}"))?;
+    Ok((line.stream, Sample::new(line.valid, line.available, value)))
+}
+
+/// Reads one line's envelope (stream, times) and its value as plain JSON, not yet decoded with a
+/// type: a replay keeps only the lines of one stream, and the other streams' values need not fit
+/// its type. The stream is `""` when the line names none; `available` defaults to `valid`.
+pub fn read_line(line: &str) -> Result<SampleLine, String> {
     use serde_json::Value as J;
     let json: J = serde_json::from_str(line).map_err(|e| not_json(&e))?;
-    let J::Object(fields) = json else {
+    let J::Object(mut fields) = json else {
         return Err(format!("the line is not a JSON object; {SAMPLE_LINE}"));
     };
     let time = |name: &str| match fields.get(name) {
@@ -67,14 +77,13 @@ pub fn decode_line(line: &str, ty: &ValueType) -> Result<(String, Sample), Strin
     };
     let valid = time("valid")?.ok_or_else(|| format!("the line has no `valid` time; {SAMPLE_LINE}"))?;
     let available = time("available")?.unwrap_or(valid);
-    let stream = match fields.get("stream") {
+    let stream = match fields.remove("stream") {
         None | Some(J::Null) => String::new(),
-        Some(J::String(name)) => name.clone(),
+        Some(J::String(name)) => name,
         Some(other) => return Err(format!("`stream` is {other}, not a stream name")),
     };
-    let raw = fields.get("value").ok_or_else(|| format!("the line has no `value`; {SAMPLE_LINE}"))?;
-    let value = Value::from_json(raw, ty).map_err(|e| format!("value {e}"))?;
-    Ok((stream, Sample::new(valid, available, value)))
+    let value = fields.remove("value").ok_or_else(|| format!("the line has no `value`; {SAMPLE_LINE}"))?;
+    Ok(SampleLine { stream, valid, available, value })
 }
 
 /// The shape of a sample line, for messages about lines that do not have it.
@@ -96,7 +105,7 @@ fn not_json(error: &serde_json::Error) -> String {
 struct Replay {
     path: PathBuf,
     reader: Option<BufReader<File>>,
-    stream: String,
+    filter: StreamFilter,
     ty: ValueType,
     clock: ClockKind,
 }
@@ -156,8 +165,7 @@ impl Source for Replay {
             let Some(reader) = self.reader.take() else { return Ok(()) };
             let mut lines = LineReader::new(reader, MAX_LINE);
             let display = self.path.display().to_string();
-            let mut shift: Option<Time> = None;
-            let mut last_available: Option<Time> = None;
+            let mut times = ReplayTimes::new(self.clock);
             let mut number = 0usize;
             let mut since_yield = 0usize;
             loop {
@@ -192,44 +200,23 @@ impl Source for Replay {
                 if line.trim().is_empty() {
                     continue;
                 }
-                let (stream, mut sample) = match decode_line(line, &self.ty) {
-                    Ok(decoded) => decoded,
+                // The stream first: other streams' values need not fit this source's type.
+                let line = match read_line(line) {
+                    Ok(line) if self.filter.keep(&line.stream) => line,
+                    Ok(_) => continue,
                     Err(error) => {
                         ctx.malformed(&location, error)?;
                         continue;
                     }
                 };
-                if !self.stream.is_empty() && stream != self.stream {
-                    continue;
-                }
-                if let Some(last) = last_available
-                    && sample.available < last
-                {
-                    ctx.malformed(
-                        &location,
-                        format!("time stamp goes backwards: available {} after {last}", sample.available),
-                    )?;
-                    continue;
-                }
-                let shift = *shift.get_or_insert_with(|| match self.clock {
-                    ClockKind::Sim => 0,
-                    ClockKind::Wall => ctx.clock.start().saturating_sub(sample.available),
-                });
-                let (Some(valid), Some(available)) =
-                    (sample.valid.checked_add(shift), sample.available.checked_add(shift))
-                else {
-                    ctx.malformed(
-                        &location,
-                        format!(
-                            "valid {} / available {} cannot be moved to the wall clock (by {shift} us): \
-                             past the range of 64-bit microseconds",
-                            sample.valid, sample.available
-                        ),
-                    )?;
-                    continue;
+                let sample = match Value::from_json(&line.value, &self.ty) {
+                    Ok(value) => Sample::new(line.valid, line.available, value),
+                    Err(error) => {
+                        ctx.malformed(&location, format!("value {error}"))?;
+                        continue;
+                    }
                 };
-                last_available = Some(sample.available);
-                (sample.valid, sample.available) = (valid, available);
+                let Some(sample) = times.admit(ctx, &location, sample)? else { continue };
                 since_yield = 0;
                 if !ctx.wait_until(sample.available).await {
                     break;
@@ -238,6 +225,9 @@ impl Source for Replay {
                 if ctx.unconsumed() {
                     break;
                 }
+            }
+            if let Some(warning) = self.filter.warning(&display) {
+                ctx.warn(warning);
             }
             Ok(())
         })
@@ -317,7 +307,7 @@ pub(super) fn register(registry: &mut Registry) {
             Ok(Box::new(Replay {
                 path,
                 reader: Some(BufReader::new(file)),
-                stream: ctx.param("stream").and_then(Value::as_str).unwrap_or("").to_string(),
+                filter: StreamFilter::new(ctx.param("stream").and_then(Value::as_str).unwrap_or("")),
                 ty: ctx.process.output.clone().unwrap_or(ValueType::Any),
                 clock: ctx.clock,
             }))

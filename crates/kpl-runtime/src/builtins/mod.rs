@@ -6,6 +6,7 @@ mod console;
 mod functions;
 mod jsonl;
 mod merge;
+mod replay;
 mod timer;
 
 use crate::registry::Registry;
@@ -18,4 +19,5 @@ pub(crate) fn register(registry: &mut Registry) {
     functions::register(registry);
 }
 
-pub use jsonl::{SampleLine, decode_line, encode_line};
+pub use jsonl::{SampleLine, decode_line, encode_line, read_line};
+pub use replay::{ReplayTimes, StreamFilter};

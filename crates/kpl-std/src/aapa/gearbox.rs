@@ -37,7 +37,7 @@ fn truth_value(cycle: &Cycle) -> Value {
             record(vec![
                 ("name", Value::str(&t.name)),
                 ("type", Value::str(&t.object_type)),
-                ("box", Value::BBox(t.bbox)),
+                ("box", Value::bbox(t.bbox)),
                 ("detected", Value::Bool(t.detected)),
             ])
         })

@@ -104,7 +104,7 @@ fn as_record<'a>(value: &'a Value, what: &str) -> Result<&'a Record, String> {
 /// A box: a `box` value, or (from an untyped stream) a list of four numbers.
 fn bbox(value: &Value, what: &str) -> Result<BBox, String> {
     match value {
-        Value::BBox(b) => Ok(*b),
+        Value::BBox(b) => Ok(**b),
         Value::List(items) if items.len() == 4 => {
             let n = |i: usize| number(&items[i], what);
             Ok(BBox::new(n(0)?, n(1)?, n(2)?, n(3)?))
@@ -163,7 +163,7 @@ pub(crate) fn percept_value(p: &Percept) -> Value {
     let mut fields = vec![
         ("label", Value::Str(p.label.clone())),
         ("type", Value::Str(p.object_type.clone())),
-        ("box", Value::BBox(p.bbox)),
+        ("box", Value::bbox(p.bbox)),
     ];
     if let Some(rgb) = p.colour {
         fields.push(("colour", Value::List(rgb.iter().map(|c| Value::Float(*c)).collect())));
@@ -313,7 +313,7 @@ fn anchor_value(a: &Anchor) -> Value {
     let mut fields = vec![
         (n.symbol.clone(), Value::Str(symbol.clone())),
         (n.object_type.clone(), Value::Str(object_type.clone())),
-        (n.bbox.clone(), Value::BBox(*bbox)),
+        (n.bbox.clone(), Value::bbox(*bbox)),
         (n.confidence.clone(), Value::Float(*confidence)),
         (n.status.clone(), Value::str(status_name(*status))),
         (n.for_inference.clone(), Value::Bool(*for_inference)),
@@ -473,7 +473,7 @@ mod tests {
             vec![rec(vec![
                 ("label", Value::str("gear0")),
                 ("type", Value::str("gear")),
-                ("box", Value::BBox(BBox::new(1.0, 2.0, 3.0, 4.0))),
+                ("box", Value::bbox(BBox::new(1.0, 2.0, 3.0, 4.0))),
                 ("colour", Value::str("#ff8000")),
             ])]
             .into(),

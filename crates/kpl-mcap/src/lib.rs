@@ -1,0 +1,55 @@
+//! MCAP recordings of KPL streams (docs/streams.md, "MCAP files"): what robotics tools (Foxglove,
+//! the `mcap` command-line tool, the `mcap` Python package) open.
+//!
+//! - [`schema`]: the JSON schema of a KPL type, and of a sample of it.
+//! - [`write::Recorder`]: one channel per stream, JSON messages `{"valid", "available",
+//!   "value"}` described by their schema, the MCAP log time the available time and the publish
+//!   time the valid time.
+//! - [`read::Reader`]: the messages of a file in file order, filtered by stream before they are
+//!   decoded, typed like a JSON-lines replay.
+//! - [`builtins`]: the `file.mcap` sink and replay source.
+//!
+//! A recording converts to JSON lines and back without losing anything: the stream's name is the
+//! channel's topic and the sample is the line's `valid`, `available` and `value`.
+//!
+//! ```
+//! use kpl_core::{Value, ValueType};
+//! use kpl_mcap::read::{Event, Reader};
+//! use kpl_mcap::write::{Compression, Recorder};
+//! use kpl_runtime::Sample;
+//! use kpl_runtime::builtins::StreamFilter;
+//!
+//! let path = std::env::temp_dir().join(format!("kpl-mcap-doc-{}.mcap", std::process::id()));
+//! let mut recorder = Recorder::create(&path, Compression::Zstd)?;
+//! let speed = recorder.add_stream("speed", &ValueType::Float)?;
+//! recorder.write(speed, &Sample::new(1_000, 1_200, Value::Float(12.5)))?;
+//! recorder.finish()?;
+//!
+//! let mut reader = Reader::open(&path)?;
+//! let mut filter = StreamFilter::new("speed");
+//! match reader.next_event(&mut filter, &ValueType::Float) {
+//!     Some(Event::Sample { stream, sample, .. }) => {
+//!         assert_eq!(&*stream, "speed");
+//!         assert_eq!(sample, Sample::new(1_000, 1_200, Value::Float(12.5)));
+//!     }
+//!     other => panic!("{other:?}"),
+//! }
+//! assert!(reader.next_event(&mut filter, &ValueType::Float).is_none());
+//! # std::fs::remove_file(&path).ok();
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod builtins;
+pub mod read;
+pub mod schema;
+pub mod write;
+
+pub use builtins::register;
+
+/// Channel metadata key that marks a channel written by KPL: its messages are sample envelopes
+/// (`{"valid", "available", "value"}`); the value is the envelope format's version.
+pub const SAMPLE_KEY: &str = "kpl.sample";
+/// The envelope format version written in [`SAMPLE_KEY`].
+pub const SAMPLE_VERSION: &str = "1";
+/// Channel metadata key holding the stream's KPL type (`list<VisionPercept>`).
+pub const TYPE_KEY: &str = "kpl.type";

@@ -1,0 +1,241 @@
+//! Reading samples from an MCAP file, message by message in file order, without loading it whole.
+//!
+//! A message's channel says what it is: a channel written by KPL (metadata [`crate::SAMPLE_KEY`])
+//! carries sample envelopes `{"valid", "available", "value"}`; another channel with JSON messages
+//! (`message_encoding` `json`, written by any tool) carries values, whose valid time is the
+//! message's publish time and available time its log time (nanoseconds, truncated to
+//! microseconds). Messages are filtered by their channel's topic before they are decoded, then
+//! decoded with the replaying source's type as a JSON-lines replay decodes a line. A message that
+//! does not decode is malformed (counted, the replay goes on); a file that stops being MCAP (cut
+//! short, not MCAP at all, a record over [`RECORD_LIMIT`]) ends the replay after what came before.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+use std::sync::Arc;
+
+use kpl_core::{Time, Value, ValueType};
+use kpl_runtime::Sample;
+use kpl_runtime::builtins::StreamFilter;
+use mcap::records::{MessageHeader, Record, op};
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use serde::Deserialize;
+
+use crate::SAMPLE_KEY;
+
+/// The largest record (or chunk) a reader accepts, so a hostile file cannot make it allocate
+/// without bound.
+pub const RECORD_LIMIT: usize = 256 << 20;
+
+/// What a channel's messages are.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Encoding {
+    /// KPL sample envelopes.
+    Sample,
+    /// JSON values of another writer.
+    Json,
+    /// An encoding this reader does not decode (`cdr`, `protobuf`, ...).
+    Other(String),
+}
+
+#[derive(Debug)]
+struct Channel {
+    topic: Arc<str>,
+    encoding: Encoding,
+}
+
+/// A message as JSON, before its value is typed.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RawEvent {
+    /// A message of stream `stream` with its times and value; `location` is where it is.
+    Message { stream: Arc<str>, valid: Time, available: Time, value: serde_json::Value, location: String },
+    /// Something that is not a message: what is wrong, and where.
+    Malformed { location: String, error: String },
+}
+
+/// The next thing a replay gets from a file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A sample of stream `stream`; `location` is where it is (`f.mcap: message 17`).
+    Sample { stream: Arc<str>, sample: Sample, location: String },
+    /// Something that is not a sample: what is wrong, and where.
+    Malformed { location: String, error: String },
+}
+
+/// An MCAP file being read.
+pub struct Reader {
+    display: String,
+    file: File,
+    reader: LinearReader,
+    channels: HashMap<u16, Channel>,
+    /// Messages read so far (kept or not), for locations.
+    messages: u64,
+    done: bool,
+}
+
+impl std::fmt::Debug for Reader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Reader").field("path", &self.display).field("messages", &self.messages).finish()
+    }
+}
+
+#[derive(Deserialize)]
+struct Envelope {
+    valid: Time,
+    available: Time,
+    value: serde_json::Value,
+}
+
+/// Microseconds from MCAP's nanoseconds.
+pub fn kpl_time(ns: u64) -> Time {
+    Time::try_from(ns / 1000).unwrap_or(Time::MAX)
+}
+
+impl Reader {
+    /// Opens a file; nothing is read yet.
+    pub fn open(path: &Path) -> std::io::Result<Reader> {
+        let file = File::open(path)?;
+        let options = LinearReaderOptions::default()
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(RECORD_LIMIT);
+        Ok(Reader {
+            display: path.display().to_string(),
+            file,
+            reader: LinearReader::new_with_options(options),
+            channels: HashMap::new(),
+            messages: 0,
+            done: false,
+        })
+    }
+
+    fn location(&self) -> String {
+        format!("{}: message {}", self.display, self.messages)
+    }
+
+    /// The next sample of a stream `filter` keeps, decoded with `ty`, or what was wrong; `None` at
+    /// the end of the file (or after it stopped being MCAP, which was the last event).
+    pub fn next_event(&mut self, filter: &mut StreamFilter, ty: &ValueType) -> Option<Event> {
+        Some(match self.next_raw(filter)? {
+            RawEvent::Message { stream, valid, available, value, location } => {
+                match Value::from_json(&value, ty) {
+                    Ok(value) => {
+                        Event::Sample { stream, sample: Sample::new(valid, available, value), location }
+                    }
+                    Err(e) => Event::Malformed { location, error: format!("value {e}") },
+                }
+            }
+            RawEvent::Malformed { location, error } => Event::Malformed { location, error },
+        })
+    }
+
+    /// The next message of a stream `filter` keeps, its value as JSON (what `kpl convert`
+    /// copies), or what was wrong; `None` at the end of the file.
+    pub fn next_raw(&mut self, filter: &mut StreamFilter) -> Option<RawEvent> {
+        while !self.done {
+            let event = match self.reader.next_event() {
+                None => {
+                    self.done = true;
+                    return None;
+                }
+                Some(Err(e)) => {
+                    self.done = true;
+                    let location = format!("{}: after message {}", self.display, self.messages);
+                    return Some(RawEvent::Malformed {
+                        location,
+                        error: format!("not readable as MCAP: {e}"),
+                    });
+                }
+                Some(Ok(event)) => event,
+            };
+            match event {
+                LinearReadEvent::ReadRequest(need) => match self.file.read(self.reader.insert(need)) {
+                    Ok(read) => self.reader.notify_read(read),
+                    Err(e) => {
+                        self.done = true;
+                        let location = format!("{}: after message {}", self.display, self.messages);
+                        return Some(RawEvent::Malformed {
+                            location,
+                            error: format!("cannot read the file: {e}"),
+                        });
+                    }
+                },
+                LinearReadEvent::Record { opcode: op::CHANNEL, data } => {
+                    match mcap::parse_record(op::CHANNEL, data) {
+                        Ok(Record::Channel(channel)) => {
+                            let encoding = if channel.metadata.contains_key(SAMPLE_KEY) {
+                                Encoding::Sample
+                            } else if channel.message_encoding == "json" {
+                                Encoding::Json
+                            } else {
+                                Encoding::Other(channel.message_encoding.clone())
+                            };
+                            self.channels
+                                .insert(channel.id, Channel { topic: channel.topic.into(), encoding });
+                        }
+                        Ok(_) | Err(_) => {
+                            let location = format!("{}: after message {}", self.display, self.messages);
+                            return Some(RawEvent::Malformed {
+                                location,
+                                error: "a channel record does not parse".into(),
+                            });
+                        }
+                    }
+                }
+                LinearReadEvent::Record { opcode: op::MESSAGE, data } => {
+                    self.messages += 1;
+                    let (header, data) = match mcap::parse_record(op::MESSAGE, data) {
+                        Ok(Record::Message { header, data }) => (header, data),
+                        Ok(_) | Err(_) => {
+                            let error = "the message record does not parse".to_string();
+                            return Some(RawEvent::Malformed { location: self.location(), error });
+                        }
+                    };
+                    let Some(channel) = self.channels.get(&header.channel_id) else {
+                        let error = format!(
+                            "the message is on channel {}, which the file does not declare before it",
+                            header.channel_id
+                        );
+                        return Some(RawEvent::Malformed { location: self.location(), error });
+                    };
+                    if !filter.keep(&channel.topic) {
+                        continue;
+                    }
+                    let stream = channel.topic.clone();
+                    return Some(match decode(&channel.encoding, &stream, &header, &data) {
+                        Ok((valid, available, value)) => {
+                            RawEvent::Message { stream, valid, available, value, location: self.location() }
+                        }
+                        Err(error) => RawEvent::Malformed { location: self.location(), error },
+                    });
+                }
+                LinearReadEvent::Record { .. } => {}
+            }
+        }
+        None
+    }
+}
+
+/// A message's valid and available times and its value.
+fn decode(
+    encoding: &Encoding,
+    topic: &str,
+    header: &MessageHeader,
+    data: &[u8],
+) -> Result<(Time, Time, serde_json::Value), String> {
+    match encoding {
+        Encoding::Sample => {
+            let envelope: Envelope =
+                serde_json::from_slice(data).map_err(|e| format!("not a KPL sample message: {e}"))?;
+            Ok((envelope.valid, envelope.available, envelope.value))
+        }
+        Encoding::Json => {
+            let json: serde_json::Value =
+                serde_json::from_slice(data).map_err(|e| format!("not a JSON message: {e}"))?;
+            Ok((kpl_time(header.publish_time), kpl_time(header.log_time), json))
+        }
+        Encoding::Other(name) => Err(format!(
+            "channel `{topic}` has message encoding `{name}`; file.mcap reads JSON messages (docs/streams.md)"
+        )),
+    }
+}

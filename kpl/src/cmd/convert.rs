@@ -1,0 +1,161 @@
+//! `kpl convert`: a recording from JSON lines to MCAP and back, losing nothing (docs/streams.md,
+//! "MCAP files"). The stream of a line is the topic of a channel and the line's `valid`,
+//! `available` and `value` are the message, copied as JSON; order is kept.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::Args as ClapArgs;
+use kpl_core::ValueType;
+use kpl_mcap::read::{RawEvent, Reader};
+use kpl_mcap::write::{Compression, Recorder, StreamId};
+use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
+
+#[derive(Debug, ClapArgs)]
+#[command(
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out /tmp/rec\n  kpl convert /tmp/rec/percepts.jsonl /tmp/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert /tmp/rec/percepts.mcap /tmp/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+)]
+pub struct Args {
+    /// The recording to read (.jsonl or .mcap).
+    pub input: PathBuf,
+    /// The file to write (.mcap or .jsonl).
+    pub output: PathBuf,
+    /// The spec that made the recording: gives each stream's type for the MCAP schemas (without
+    /// it, a stream's schema accepts any value).
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    /// How the MCAP chunks are compressed.
+    #[arg(long, default_value = "zstd", value_parser = clap::builder::PossibleValuesParser::new(Compression::NAMES))]
+    pub compression: String,
+}
+
+fn extension(path: &Path) -> &str {
+    path.extension().and_then(|e| e.to_str()).unwrap_or("")
+}
+
+pub fn run(args: Args) -> ExitCode {
+    let result = match (extension(&args.input), extension(&args.output)) {
+        ("jsonl", "mcap") => {
+            let types = match &args.spec {
+                Some(spec) => match super::check::load_checked(spec) {
+                    Ok(spec) => stream_types(&spec),
+                    Err(code) => return code,
+                },
+                None => BTreeMap::new(),
+            };
+            let compression = Compression::from_name(&args.compression).unwrap_or(Compression::Zstd);
+            to_mcap(&args.input, &args.output, &types, compression)
+        }
+        ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
+        (from, to) => {
+            eprintln!(
+                "error: kpl convert goes from .jsonl to .mcap or from .mcap to .jsonl, not from `.{from}` to `.{to}`"
+            );
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(Converted { samples, skipped }) => {
+            eprintln!(
+                "{}: {samples} sample(s){}",
+                args.output.display(),
+                if skipped > 0 { format!(", {skipped} skipped") } else { String::new() }
+            );
+            if skipped > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS }
+        }
+        Err(error) => {
+            eprintln!("error: {error}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// The type of every stream a process of the spec consumes, by the name a recording gives it.
+fn stream_types(spec: &kpl_semantic::hir::Spec) -> BTreeMap<String, ValueType> {
+    let mut types = BTreeMap::new();
+    for process in &spec.processes {
+        for input in &process.inputs {
+            types.entry(input.stream.name.clone()).or_insert_with(|| input.stream.ty.clone());
+        }
+    }
+    types
+}
+
+struct Converted {
+    samples: u64,
+    skipped: u64,
+}
+
+fn skip(location: &str, error: &str) {
+    eprintln!("skipped {location}: {error}");
+}
+
+fn to_mcap(
+    input: &Path,
+    output: &Path,
+    types: &BTreeMap<String, ValueType>,
+    compression: Compression,
+) -> Result<Converted, String> {
+    let file = File::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
+    let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
+    let mut streams: BTreeMap<String, StreamId> = BTreeMap::new();
+    let mut converted = Converted { samples: 0, skipped: 0 };
+    for (index, line) in BufReader::new(file).lines().enumerate() {
+        let location = format!("{}:{}", input.display(), index + 1);
+        let line = line.map_err(|e| format!("cannot read {location}: {e}"))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let line = match read_line(&line) {
+            Ok(line) => line,
+            Err(error) => {
+                skip(&location, &error);
+                converted.skipped += 1;
+                continue;
+            }
+        };
+        let id = match streams.get(&line.stream) {
+            Some(id) => *id,
+            None => {
+                let ty = types.get(&line.stream).unwrap_or(&ValueType::Any);
+                let id = recorder.add_stream(&line.stream, ty).map_err(|e| e.to_string())?;
+                streams.insert(line.stream, id);
+                id
+            }
+        };
+        recorder.write_json(id, line.valid, line.available, line.value).map_err(|e| e.to_string())?;
+        converted.samples += 1;
+    }
+    recorder.finish().map_err(|e| e.to_string())?;
+    Ok(converted)
+}
+
+fn to_jsonl(input: &Path, output: &Path) -> Result<Converted, String> {
+    let mut reader = Reader::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    }
+    let write_error = |e: std::io::Error| format!("cannot write {}: {e}", output.display());
+    let mut out = BufWriter::new(File::create(output).map_err(write_error)?);
+    let mut filter = StreamFilter::new("");
+    let mut converted = Converted { samples: 0, skipped: 0 };
+    while let Some(event) = reader.next_raw(&mut filter) {
+        match event {
+            RawEvent::Message { stream, valid, available, value, .. } => {
+                let line = SampleLine { stream: stream.to_string(), valid, available, value };
+                let text = serde_json::to_string(&line).map_err(|e| e.to_string())?;
+                writeln!(out, "{text}").map_err(write_error)?;
+                converted.samples += 1;
+            }
+            RawEvent::Malformed { location, error } => {
+                skip(&location, &error);
+                converted.skipped += 1;
+            }
+        }
+    }
+    out.flush().map_err(write_error)?;
+    Ok(converted)
+}
