@@ -4,7 +4,8 @@ benchmark), with SUMO from the `eclipse-sumo` Python package (requirements-test.
 into .venv; no other SUMO is needed).
 
 Each scenario is a folder with the network (net.xml.gz), the recorded traffic as SUMO's floating
-car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type, speed and lane,
+car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type, speed, lane and
+position along the lane,
 every 0.5 s) and, where the traffic uses vehicle types of its own, their definitions (vtypes.xml).
 Everything is seeded, so the same SUMO release makes the same traffic (only the files' "generated
 on" comments differ).
@@ -19,6 +20,10 @@ Scenarios:
             random trips.
   highway   a straight 2 km road, two lanes each way at 120 km/h, with fast cars (up to 36 m/s)
             and slow trucks (up to 22 m/s): the cars overtake the trucks.
+  overtake  a straight 1.5 km road, two lanes one way at 90 km/h, with cars at the limit, a few
+            speeders (about 34 m/s), slow trucks (17 m/s) and a car that breaks down for 30 s: overtakes,
+            speeding and a stopped vehicle, with lane and
+            position along the lane in the floating car data (the truth of kpl score situations).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -75,7 +80,7 @@ class Sumo:
         cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
                "--step-length", str(STEP_LENGTH_S), "--seed", "42", "--no-step-log", "--no-warnings",
                "--fcd-output", fcd, "--device.fcd.period", str(FCD_PERIOD_S),
-               "--fcd-output.attributes", "x,y,angle,type,speed,lane"]
+               "--fcd-output.attributes", "x,y,angle,type,speed,lane,pos"]
         if additional:
             cmd += ["--additional-files", additional]
         run(cmd, self.work)
@@ -136,14 +141,47 @@ def highway(s, duration):
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
 
+OVERTAKE_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.04" lcSpeedGain="2"/>
+    <vType id="speeder" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.36" speedDev="0.02" lcSpeedGain="4"/>
+    <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="17" speedFactor="1.0" speedDev="0.03"/>
+</additional>
+"""
+
+
+def overtake(s, duration):
+    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
+        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
+    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
+        f.write('<edges>\n'
+                '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
+                '</edges>\n')
+    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
+        f.write(OVERTAKE_VTYPES)
+    s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+    flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="500" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="speeders" type="speeder" route="r" begin="0" end="%d" vehsPerHour="150" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="trucks" type="truck" route="r" begin="0" end="%d" vehsPerHour="150" '
+             'departLane="0" departSpeed="max"/>' % duration,
+             # A car that breaks down on the right lane for 30 s: a stopped vehicle outside a queue.
+             '    <vehicle id="breakdown" type="car" route="r" depart="60" departLane="0" departSpeed="max">'
+             '<stop lane="eastbound_0" endPos="900" duration="30"/></vehicle>']
+    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
+        f.write('<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
 def town400(s, duration):
     s.netgenerate("net.net.xml", "--grid", "--grid.number", "20", "--grid.length", "100",
                   "--default-junction-type", "traffic_light", "--tls.default-type", "static")
     return ["net.net.xml"], None
 
 
-SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "town400": town400}
-DURATION_S = {"grid": 300, "random": 300, "highway": 240, "town400": 0}
+SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake, "town400": town400}
+DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "town400": 0}
 
 
 def main():

@@ -532,6 +532,36 @@ fn recorded_traffic_ends_the_run_with_its_recording() {
     assert!((239_000_000..=240_000_000).contains(&last), "{last}");
 }
 
+#[test]
+fn a_pair_monitor_reports_an_overtake_as_one_episode_gated_or_not() {
+    let out = out_dir("pairs");
+    let result = run("specs/run/pairs.kpl", &out, &[]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let records = lines(&out.join("pairs.jsonl"));
+    let situations = |stream: &str| -> Vec<(String, String, i64, i64)> {
+        records
+            .iter()
+            .filter(|r| r["stream"] == stream && r["value"]["verdict"] == true)
+            .map(|r| {
+                let v = &r["value"];
+                let s = |k: &str| v[k].as_str().unwrap().to_string();
+                (s("a"), s("b"), v["start"].as_i64().unwrap(), v["end"].as_i64().unwrap())
+            })
+            .collect()
+    };
+    // car1 is behind from 0 s, beside at 4 s, in front at 5 s: one overtake from 0 s to 5 s.
+    let expected = vec![("car1".to_string(), "car2".to_string(), 0, 5_000_000)];
+    assert_eq!(situations("gated"), expected);
+    assert_eq!(situations("ungated"), expected);
+    // Ungated, pairs far apart are progressed too: their `false` verdicts are reported (gated,
+    // they are not progressed at all).
+    let count = |stream: &str| records.iter().filter(|r| r["stream"] == stream).count();
+    assert!(count("ungated") >= count("gated"), "{} < {}", count("ungated"), count("gated"));
+    for r in &records {
+        assert!(r["value"]["start"].as_i64().unwrap() <= r["value"]["end"].as_i64().unwrap(), "{r}");
+    }
+}
+
 /// A reader that stops early (`kpl graph ... | head`) ends the command quietly, as it ends `cat`:
 /// killed by SIGPIPE (or done, if it wrote everything before the pipe closed), never a panic.
 #[test]

@@ -61,6 +61,8 @@ enum Command {
     Score(cmd::score::Args),
     /// Draw a recorded run as SVG: roads, percepts, anchored objects, ground truth, situations.
     Plot(cmd::plot::Args),
+    /// Score recognised traffic situations against the true ones of the recorded traffic: precision and recall per kind.
+    Situations(cmd::situations::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
@@ -126,6 +128,7 @@ pub fn main() -> ExitCode {
         Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),
         Command::Plot(args) => cmd::plot::run(args),
+        Command::Situations(args) => cmd::situations::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
         Command::Bench(command) => cmd::bench::run(command),

@@ -57,6 +57,7 @@
 //! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
 //! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
 
+pub mod attributes;
 pub mod branches;
 pub mod change;
 pub mod conditions;
@@ -71,6 +72,7 @@ pub mod networks;
 pub mod predict;
 pub mod records;
 pub mod registry;
+pub mod relations;
 pub mod runtime;
 pub mod scale;
 pub mod stateful;

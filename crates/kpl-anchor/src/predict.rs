@@ -14,6 +14,7 @@ use std::sync::Arc;
 use kpl_core::{Record, Time, Value};
 use kpl_roads::{LanePosition, RoadNetwork, geom};
 
+use crate::attributes::{OnLane, set_road_attributes};
 use crate::records::{position, velocity, with_fields};
 use crate::units::{MIN_HEADING_SPEED_MPS, heading_of_velocity};
 
@@ -188,30 +189,23 @@ impl PredictionModel for AlongRoads {
         hypotheses.sort_by(|a, b| turn(a).total_cmp(&turn(b)));
         for h in &hypotheses {
             let direction = geom::unit(h.position.heading);
-            let road = h.position.road().map_or(-1, |r| i64::from(r.0));
             let vel = geom::scale(direction, speed);
             let mut record = with_fields(
                 &start.state,
                 &[("pos", Value::Vec2(h.position.point)), ("vel", Value::Vec2(vel))],
             );
-            set_lane_fields(&mut record, &self.network, road, h.position.lane);
+            let on = OnLane {
+                network: &self.network,
+                at: &h.position,
+                vel: Some(vel),
+                min_heading_speed_mps: self.min_heading_speed_mps,
+                lane_heading: None,
+            };
+            set_road_attributes(&mut record, &on);
             out.push(record);
         }
         if out.is_empty() {
             out.push((*start.state).clone());
-        }
-    }
-}
-
-/// Sets a record's `road` (int: the road's index) and `lane` (string: the lane's name; int: its
-/// index) attributes, where it has them.
-pub fn set_lane_fields(record: &mut Record, network: &RoadNetwork, road: i64, lane: kpl_roads::LaneId) {
-    for (name, value) in &mut record.fields {
-        match (&**name, &*value) {
-            ("road", Value::Int(_)) => *value = Value::Int(road),
-            ("lane", Value::Str(_)) => *value = Value::str(&network.lane(lane).name),
-            ("lane", Value::Int(_)) => *value = Value::Int(i64::from(lane.0)),
-            _ => {}
         }
     }
 }

@@ -69,6 +69,14 @@ pub fn on_road_signature() -> Function {
     )
 }
 
+/// What `anchor.snap_to_lane` sets: the position, velocity, offset from the lane centre and the
+/// road attributes ([`crate::attributes::ROAD_ATTRIBUTES`]).
+fn snap_computes() -> Vec<&'static str> {
+    let mut names = vec!["pos", "vel", "lane_offset"];
+    names.extend(crate::attributes::road_attribute_names());
+    names
+}
+
 /// The link units and prediction models of [`crate::Implementations::default`].
 pub fn entries() -> Vec<Entry> {
     use ValueType::{Float, Int, Vec2};
@@ -89,7 +97,7 @@ pub fn entries() -> Vec<Entry> {
             "Snaps a world object to the centre of the nearest lane of the road network.",
         ))
         .output(fields(&[("pos", Vec2), ("vel", Vec2), ("road", Int), ("lane_offset", Float)]))
-        .computes(&["pos", "vel", "road", "lane", "lane_offset"], true)
+        .computes(&snap_computes(), true)
         .provides(on_road_signature()),
         kalman_params(Entry::new(
             EntryKind::Link,

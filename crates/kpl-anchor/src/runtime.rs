@@ -38,6 +38,12 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
     for entry in crate::registry::entries() {
         registry.add_signature(entry);
     }
+    let relations = crate::relations::functions();
+    for signature in crate::relations::signatures() {
+        if let Some(function) = relations.iter().find(|f| *f.name == *signature.name) {
+            registry.add_function(signature, function.clone());
+        }
+    }
     registry.add_unit(world_model_entry(), build_world_model);
     registry.add_unit(identify_entry(), build_identify);
     registry.set_link_processes(build_link);

@@ -16,7 +16,8 @@ use kpl_mtl::Function;
 use kpl_roads::geom;
 use kpl_roads::{RoadNetwork, SnapHint};
 
-use crate::predict::{previous_lane, set_lane_fields};
+use crate::attributes::{OnLane, set_off_road_attributes, set_road_attributes, wants_lane_heading};
+use crate::predict::previous_lane;
 use crate::records::{fill, position, velocity};
 use crate::stateful::UnitCall;
 
@@ -103,8 +104,10 @@ pub const MIN_HEADING_SPEED_MPS: f64 = 2.0;
 /// along that lane, `road` the road's index (-1 inside a junction or off the network), `lane`
 /// (string) the lane's name, `lane_offset` the signed distance of the unsnapped position from the
 /// lane centre (positive to the left). Off the network (no lane within the network's snap radius)
-/// the position and velocity are copied, `road` is -1 and `lane_offset` 0. Provides
-/// `on_road(pos)`.
+/// the position and velocity are copied, `road` is -1 and `lane_offset` 0. The other road
+/// attributes the type declares (`lane_pos`, `speed`, `heading`, `speed_limit`, `in_junction`,
+/// ...: [`crate::attributes::ROAD_ATTRIBUTES`]) are set from the lane and the measured velocity.
+/// Provides `on_road(pos)`.
 #[derive(Debug, Clone)]
 pub struct SnapToLane {
     network: Arc<RoadNetwork>,
@@ -140,6 +143,7 @@ impl LinkUnit for SnapToLane {
         let Some(pos) = position(from) else {
             return Err("snapping to a lane needs a `pos` (vec2)".to_string());
         };
+        let measured = pos;
         let vel = velocity(from);
         let previous_lane = previous.and_then(|p| previous_lane(&self.network, p));
         let hint = SnapHint {
@@ -162,14 +166,13 @@ impl LinkUnit for SnapToLane {
             at.lateral_m = projection.lateral;
             at
         });
-        let (pos, vel, road, lane_offset) = match &snapped {
+        let (pos, vel, lane_offset) = match &snapped {
             Some(lane) => {
                 let along = geom::unit(lane.heading);
                 let vel = vel.map(|v| geom::scale(along, geom::dot(v, along)));
-                let road = lane.road().map_or(-1, |r| i64::from(r.0));
-                (lane.point, vel, road, lane.lateral_m)
+                (lane.point, vel, lane.lateral_m)
             }
-            None => (pos, vel, -1, 0.0),
+            None => (pos, vel, 0.0),
         };
         for (name, value) in &mut record.fields {
             match &**name {
@@ -180,20 +183,28 @@ impl LinkUnit for SnapToLane {
                     }
                 }
                 "lane_offset" if matches!(value, Value::Float(_)) => *value = Value::Float(lane_offset),
-                "lane" if snapped.is_none() && matches!(value, Value::Str(_)) => *value = Value::str(""),
-                "lane" if snapped.is_none() && matches!(value, Value::Int(_)) => *value = Value::Int(-1),
                 _ => {}
             }
         }
         match &snapped {
-            Some(lane) => set_lane_fields(&mut record, &self.network, road, lane.lane),
-            None => {
-                for (name, value) in &mut record.fields {
-                    if &**name == "road" && matches!(value, Value::Int(_)) {
-                        *value = Value::Int(-1);
-                    }
-                }
+            Some(lane) => {
+                // The lane the measured position lies on, whatever way the object moves (a car
+                // driving the wrong way is snapped to the lane of its direction of travel).
+                let lane_heading = wants_lane_heading(&record)
+                    .then(|| self.network.snap(measured, &SnapHint::default()).map(|l| l.heading))
+                    .flatten();
+                // The speed and heading of the measurement: a car driving against its lane moves
+                // against `vel` projected on it.
+                let on = OnLane {
+                    network: &self.network,
+                    at: lane,
+                    vel: velocity(from),
+                    min_heading_speed_mps: self.min_heading_speed_mps,
+                    lane_heading,
+                };
+                set_road_attributes(&mut record, &on);
             }
+            None => set_off_road_attributes(&mut record, vel),
         }
         Ok(record)
     }

@@ -39,6 +39,7 @@ pub mod recording;
 pub mod report;
 pub mod scores;
 pub mod sequence;
+pub mod situations;
 mod time;
 
 pub use align::{AlignOptions, Aligned, Alignment, BranchFilter, MeasuredFilter, Missing, align};

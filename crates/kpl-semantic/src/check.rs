@@ -312,10 +312,15 @@ impl<'a> Checker<'a> {
                     self.types.get(&l.to_type.name).map_or(ValueType::Any, |t| ValueType::Record(t.clone()));
                 (Some(ValueType::List(Box::new(to))), vec![("changes".to_string(), ValueType::Any)])
             }
-            Decl::Monitor(m) => match hir::monitor_binding(&m.formula) {
-                Some((var, ..)) => (Some(hir::binding_verdict_type(&m.name.name, var)), Vec::new()),
-                None => (Some(ValueType::Bool), Vec::new()),
-            },
+            Decl::Monitor(m) => {
+                let (vars, _) = hir::monitor_bindings(&m.formula);
+                if vars.is_empty() {
+                    (Some(ValueType::Bool), Vec::new())
+                } else {
+                    let names: Vec<&str> = vars.iter().map(|(var, _)| *var).collect();
+                    (Some(hir::binding_verdict_type(&m.name.name, &names)), Vec::new())
+                }
+            }
         }
     }
 

@@ -197,17 +197,40 @@ pub fn monitor_binding(formula: &ast::Expr) -> Option<(&str, &str, &ast::Expr)> 
     }
 }
 
-/// The type of a verdict of a monitor with a binding: `{ VAR: string, verdict: bool }`, the
-/// object's symbol and the verdict for it.
-pub fn binding_verdict_type(monitor: &str, var: &str) -> ValueType {
+/// The bindings of a monitor's formula: the variables and types of the `forall`s it starts with
+/// (`forall a: Car . forall b: Car . φ` gives `a` and `b`), at most [`MAX_BINDINGS`], and the body
+/// φ under them. Such a monitor keeps one progression of φ per tuple of objects.
+pub fn monitor_bindings(formula: &ast::Expr) -> (Vec<(&str, &str)>, &ast::Expr) {
+    let mut vars = Vec::new();
+    let mut body = formula;
+    while vars.len() < MAX_BINDINGS
+        && let Some((var, ty, inner)) = monitor_binding(body)
+        && !vars.iter().any(|(v, _)| *v == var)
+    {
+        vars.push((var, ty));
+        body = inner;
+    }
+    (vars, body)
+}
+
+/// The most `forall`s at the head of a monitor's formula that get a binding each (pairs of
+/// objects: overtakes, tailgating).
+pub const MAX_BINDINGS: usize = 2;
+
+/// The type of a verdict of a monitor with bindings: `{ VAR: string, ..., verdict: bool, start:
+/// int, end: int }`, the objects' symbols, the verdict for them, and the episode's first and last
+/// state (valid times in microseconds).
+pub fn binding_verdict_type(monitor: &str, vars: &[&str]) -> ValueType {
+    let field = |name: &str, ty: ValueType| kpl_core::FieldType { name: Arc::from(name), ty };
+    let mut fields: Vec<kpl_core::FieldType> = vars.iter().map(|var| field(var, ValueType::Str)).collect();
+    fields.push(field("verdict", ValueType::Bool));
+    fields.push(field("start", ValueType::Int));
+    fields.push(field("end", ValueType::Int));
     ValueType::Record(Arc::new(RecordType {
         name: Arc::from(format!("{monitor}.verdict")),
         parent: None,
         symbol: Arc::from(""),
-        fields: vec![
-            kpl_core::FieldType { name: Arc::from(var), ty: ValueType::Str },
-            kpl_core::FieldType { name: Arc::from("verdict"), ty: ValueType::Bool },
-        ],
+        fields,
     }))
 }
 

@@ -217,6 +217,8 @@ pub struct Observation {
     pub width_m: f64,
     /// The network lane the recording names (SUMO's `lane`).
     pub lane: Option<Arc<str>>,
+    /// The front bumper's distance along that lane from its start (SUMO's `pos`), metres.
+    pub lane_pos: Option<f64>,
 }
 
 /// Every vehicle at one recorded time.
@@ -315,6 +317,7 @@ impl FcdReader {
             length_m,
             width_m,
             lane: attributes.get("lane").map(|l| Arc::from(l.as_str())),
+            lane_pos: number("pos").flatten(),
         })
     }
 }
@@ -543,6 +546,7 @@ impl RowReader {
                 length_m: length.unwrap_or(DEFAULT_SIZE_M.0),
                 width_m: width.unwrap_or(DEFAULT_SIZE_M.1),
                 lane: None,
+                lane_pos: None,
             },
         })
     }
@@ -665,6 +669,19 @@ fn open_steps(path: &Path, types: VehicleTypes) -> Result<Box<dyn StepReader>, R
             });
         }
     })
+}
+
+/// Every recorded step of a file as it is written (no interpolation), with the problems found
+/// on the way: for tools that compute something from the whole recording (the true traffic
+/// situations of `kpl situations`).
+pub fn read_steps(path: &Path, types: VehicleTypes) -> Result<(Vec<Step>, Vec<Problem>), RecordingError> {
+    let mut steps = open_steps(path, types)?;
+    let mut problems = Vec::new();
+    let mut out = Vec::new();
+    while let Some(step) = steps.next_step(&mut problems) {
+        out.push(step);
+    }
+    Ok((out, problems))
 }
 
 /// A recording played back at given times: the vehicles present at each, interpolated between

@@ -15,6 +15,8 @@ pub enum Command {
     Anchor(crate::cmd::bench_anchor::Args),
     /// The in-process runtime against bare tokio channels, and its memory over a long run.
     Runtime(crate::cmd::bench_runtime::Args),
+    /// The situation monitors over 100 to 4,000 cars, with and without gating of pairs.
+    Situations(crate::cmd::bench_situations::Args),
     /// Streams between two processes over zenoh, against bare zenoh publisher/subscriber code.
     Zenoh(crate::transport::BenchArgs),
 }
@@ -63,6 +65,7 @@ pub fn run(command: Command) -> ExitCode {
         Command::Mtl(args) => mtl::bench(args),
         Command::Anchor(args) => crate::cmd::bench_anchor::run(args),
         Command::Runtime(args) => crate::cmd::bench_runtime::run(args),
+        Command::Situations(args) => crate::cmd::bench_situations::run(args),
         Command::Zenoh(args) => crate::transport::bench(args),
     }
 }

@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod bench_anchor;
 pub mod bench_runtime;
+pub mod bench_situations;
 pub mod cater;
 pub mod check;
 pub mod convert;
@@ -17,3 +18,4 @@ pub mod mtl;
 pub mod plot;
 pub mod run;
 pub mod score;
+pub mod situations;

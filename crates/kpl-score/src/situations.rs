@@ -1,0 +1,577 @@
+//! Traffic situations scored against ground truth: the true situations computed from true
+//! trajectories (each vehicle's lane, position along it and speed at each recorded time, as
+//! SUMO's floating car data gives them), the recognised ones read from a recording (the `true`
+//! episodes of situation monitors), and their matching through the anchoring's ground-truth
+//! [`Mapping`]: a recognised situation is correct if a true one of the same kind is about the
+//! true vehicles its symbols stood for, and their times overlap. Precision and recall per kind.
+//!
+//! The true situations follow the definitions of the monitors of `specs/traffic/`:
+//! - `speeding`: over the lane's limit by [`TruthParams::speeding_margin_mps`] for at least
+//!   [`TruthParams::speeding_min`];
+//! - `stopped`: under [`TruthParams::stop_speed_mps`] for at least [`TruthParams::stop_min`],
+//!   not in a junction, more than [`TruthParams::junction_margin_m`] before the lane's end, and
+//!   with no other standing vehicle in front within [`TruthParams::queue_gap_m`] on its lane;
+//! - `overtake` (a overtakes b): a behind b within [`TruthParams::overtake_close_m`] (or beside
+//!   it) on one road, then in front, within [`TruthParams::overtake_max`], on another lane at
+//!   some time in between; from the first time of that run to the first time in front;
+//! - `tailgating` (a follows b): on b's lane, behind it, with a gap under
+//!   [`TruthParams::tailgating_gap_s`] seconds at a's speed, for at least
+//!   [`TruthParams::tailgating_min`].
+//!
+//! Positions are the vehicles' centres along the lane (metres); "behind" means the centres are
+//! more than half the summed lengths apart, as [`kpl_anchor`'s relations] say.
+//!
+//! [`kpl_anchor`'s relations]: https://docs.rs/kpl-anchor
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::BufRead;
+use std::path::Path;
+
+use kpl_core::Time;
+use serde::Serialize;
+
+use crate::mapping::Mapping;
+
+/// A situation: its kind (the monitor's name), the objects it is about (in the order of the
+/// monitor's variables' names: `a` before `b`), and its first and last time (microseconds).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Situation {
+    pub kind: String,
+    pub objects: Vec<String>,
+    pub start: Time,
+    pub end: Time,
+}
+
+/// One vehicle at one time, as the ground truth gives it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrueVehicle {
+    pub id: String,
+    /// The road (SUMO edge) it is on; `None` inside a junction.
+    pub road: Option<String>,
+    pub lane: String,
+    /// Its centre's distance along the lane (m).
+    pub lane_pos: f64,
+    pub lane_length: f64,
+    pub speed: f64,
+    pub speed_limit: f64,
+    pub length: f64,
+}
+
+/// Every vehicle at one time (microseconds, on the run's clock).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrueStep {
+    pub time: Time,
+    pub vehicles: Vec<TrueVehicle>,
+}
+
+/// The thresholds of the true situations (module doc); the defaults are those of
+/// `specs/traffic/sumo_situations.kpl`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TruthParams {
+    pub speeding_margin_mps: f64,
+    pub speeding_min: Time,
+    pub stop_speed_mps: f64,
+    pub stop_min: Time,
+    pub junction_margin_m: f64,
+    pub queue_gap_m: f64,
+    pub overtake_close_m: f64,
+    pub overtake_max: Time,
+    pub tailgating_gap_s: f64,
+    pub tailgating_min: Time,
+    /// A true situation that ends sooner than this after one of its vehicles first appeared is
+    /// left out (reported apart): no tracker can anchor a vehicle the moment it enters, so such
+    /// a situation (a fast car passing another as both enter the road) is not observable.
+    pub settle: Time,
+}
+
+impl Default for TruthParams {
+    fn default() -> TruthParams {
+        TruthParams {
+            speeding_margin_mps: 3.0,
+            speeding_min: 2_000_000,
+            stop_speed_mps: 0.5,
+            stop_min: 5_000_000,
+            junction_margin_m: 30.0,
+            queue_gap_m: 15.0,
+            overtake_close_m: 50.0,
+            overtake_max: 60_000_000,
+            tailgating_gap_s: 1.0,
+            tailgating_min: 2_000_000,
+            settle: 3_000_000,
+        }
+    }
+}
+
+/// The kinds [`true_situations`] computes.
+pub const TRUE_KINDS: &[&str] = &["overtake", "speeding", "stopped", "tailgating"];
+
+/// Runs of a condition per key: from the first time it held to the last, kept when long enough.
+#[derive(Debug, Default)]
+struct Runs {
+    open: BTreeMap<Vec<String>, (Time, Time)>,
+}
+
+impl Runs {
+    /// Records the keys for which the condition holds at `time`; closes the runs of the others.
+    fn step(
+        &mut self,
+        time: Time,
+        holding: Vec<Vec<String>>,
+        min: Time,
+        kind: &str,
+        out: &mut Vec<Situation>,
+    ) {
+        let mut next = BTreeMap::new();
+        for key in holding {
+            let start = self.open.get(&key).map_or(time, |(start, _)| *start);
+            next.insert(key, (start, time));
+        }
+        let ended: Vec<(Vec<String>, (Time, Time))> =
+            self.open.iter().filter(|(k, _)| !next.contains_key(*k)).map(|(k, v)| (k.clone(), *v)).collect();
+        for (key, (start, end)) in ended {
+            if end - start >= min {
+                out.push(Situation { kind: kind.to_string(), objects: key, start, end });
+            }
+        }
+        self.open = next;
+    }
+
+    fn finish(&mut self, min: Time, kind: &str, out: &mut Vec<Situation>) {
+        for (key, (start, end)) in std::mem::take(&mut self.open) {
+            if end - start >= min {
+                out.push(Situation { kind: kind.to_string(), objects: key, start, end });
+            }
+        }
+    }
+}
+
+/// A pair on the way to an overtake: when its run began, and whether a was on another lane than
+/// b at some time of it.
+#[derive(Debug, Clone, Copy)]
+struct Passing {
+    start: Time,
+    other_lane: bool,
+}
+
+/// The true situations of a trajectory set, and those left out as unobservable.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct TrueSituations {
+    /// Ordered by kind, then start.
+    pub situations: Vec<Situation>,
+    /// Ending within [`TruthParams::settle`] of a vehicle's first appearance.
+    pub entering: Vec<Situation>,
+}
+
+/// The true situations of a trajectory set (module doc).
+pub fn true_situations(steps: &[TrueStep], params: &TruthParams) -> TrueSituations {
+    let mut first_seen: HashMap<&str, Time> = HashMap::new();
+    for step in steps {
+        for v in &step.vehicles {
+            first_seen.entry(v.id.as_str()).or_insert(step.time);
+        }
+    }
+    let all = all_true_situations(steps, params);
+    let (situations, entering) = all.into_iter().partition(|s: &Situation| {
+        s.objects.iter().all(|o| first_seen.get(o.as_str()).is_none_or(|&t| s.end - t >= params.settle))
+    });
+    TrueSituations { situations, entering }
+}
+
+fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situation> {
+    let mut out = Vec::new();
+    let (mut speeding, mut stopped, mut tailgating) = (Runs::default(), Runs::default(), Runs::default());
+    let mut passing: HashMap<(String, String), Passing> = HashMap::new();
+    for step in steps {
+        let v = &step.vehicles;
+        let over: Vec<Vec<String>> = v
+            .iter()
+            .filter(|x| x.speed > x.speed_limit + params.speeding_margin_mps)
+            .map(|x| vec![x.id.clone()])
+            .collect();
+        speeding.step(step.time, over, params.speeding_min, "speeding", &mut out);
+        let standing = |x: &TrueVehicle| x.speed < params.stop_speed_mps;
+        let queued = |x: &TrueVehicle| {
+            v.iter().any(|o| {
+                o.id != x.id && o.lane == x.lane && standing(o) && {
+                    let ahead = o.lane_pos - x.lane_pos;
+                    ahead > 0.0 && ahead <= params.queue_gap_m
+                }
+            })
+        };
+        let stops: Vec<Vec<String>> = v
+            .iter()
+            .filter(|x| {
+                standing(x)
+                    && x.road.is_some()
+                    && x.lane_length - x.lane_pos > params.junction_margin_m
+                    && !queued(x)
+            })
+            .map(|x| vec![x.id.clone()])
+            .collect();
+        stopped.step(step.time, stops, params.stop_min, "stopped", &mut out);
+        let mut follows = Vec::new();
+        let mut seen_pairs = Vec::new();
+        for a in v {
+            let Some(road) = &a.road else { continue };
+            for b in v {
+                if a.id == b.id || b.road.as_ref() != Some(road) {
+                    continue;
+                }
+                let ahead = b.lane_pos - a.lane_pos;
+                let overlap = (a.length + b.length) / 2.0;
+                if ahead.abs() > params.overtake_close_m + overlap {
+                    continue;
+                }
+                if a.lane == b.lane
+                    && ahead > overlap
+                    && a.speed > 0.1
+                    && (ahead - overlap) / a.speed < params.tailgating_gap_s
+                {
+                    follows.push(vec![a.id.clone(), b.id.clone()]);
+                }
+                let key = (a.id.clone(), b.id.clone());
+                seen_pairs.push(key.clone());
+                if ahead < -overlap {
+                    // In front: an overtake if a run was under way.
+                    if let Some(p) = passing.remove(&key)
+                        && p.other_lane
+                        && step.time - p.start <= params.overtake_max
+                    {
+                        out.push(Situation {
+                            kind: "overtake".to_string(),
+                            objects: vec![a.id.clone(), b.id.clone()],
+                            start: p.start,
+                            end: step.time,
+                        });
+                    }
+                } else if ahead <= params.overtake_close_m {
+                    let p = passing.entry(key).or_insert(Passing { start: step.time, other_lane: false });
+                    p.other_lane |= a.lane != b.lane;
+                } else {
+                    passing.remove(&key);
+                }
+            }
+        }
+        // A pair no longer on one road together, or apart, starts over.
+        passing.retain(|key, _| seen_pairs.contains(key));
+        tailgating.step(step.time, follows, params.tailgating_min, "tailgating", &mut out);
+    }
+    speeding.finish(params.speeding_min, "speeding", &mut out);
+    stopped.finish(params.stop_min, "stopped", &mut out);
+    tailgating.finish(params.tailgating_min, "tailgating", &mut out);
+    out.sort_by(|a, b| a.kind.cmp(&b.kind).then(a.start.cmp(&b.start)).then(a.objects.cmp(&b.objects)));
+    out
+}
+
+/// Reads the recognised situations of recorded JSON lines (`file.jsonl` sinks): every line whose
+/// value is a monitor's verdict record with `verdict: true`, `start` and `end`; its kind is the
+/// stream's name, its objects the record's string fields in the order of their names. Other
+/// lines are skipped; a line that is not JSON is counted in the second result.
+pub fn read_situations(reader: impl BufRead) -> std::io::Result<(Vec<Situation>, usize)> {
+    let mut out = Vec::new();
+    let mut bad = 0;
+    for line in reader.lines() {
+        let line = line?;
+        // Cheap test first: a recording's object streams are far larger than its situations.
+        if !line.contains("\"verdict\"") {
+            continue;
+        }
+        let Ok(json) = serde_json::from_str::<serde_json::Value>(&line) else {
+            bad += 1;
+            continue;
+        };
+        let (Some(kind), Some(value)) = (json.get("stream").and_then(|s| s.as_str()), json.get("value"))
+        else {
+            continue;
+        };
+        let Some(fields) = value.as_object() else { continue };
+        let (Some(true), Some(start), Some(end)) = (
+            fields.get("verdict").and_then(serde_json::Value::as_bool),
+            fields.get("start").and_then(serde_json::Value::as_i64),
+            fields.get("end").and_then(serde_json::Value::as_i64),
+        ) else {
+            continue;
+        };
+        let mut vars: Vec<(&String, &str)> =
+            fields.iter().filter_map(|(name, v)| v.as_str().map(|s| (name, s))).collect();
+        vars.sort();
+        out.push(Situation {
+            kind: kind.to_string(),
+            objects: vars.into_iter().map(|(_, s)| s.to_string()).collect(),
+            start,
+            end,
+        });
+    }
+    Ok((out, bad))
+}
+
+/// Reads [`read_situations`] from a file (gzipped or not is not detected: plain JSON lines).
+pub fn read_situations_file(path: &Path) -> std::io::Result<(Vec<Situation>, usize)> {
+    read_situations(std::io::BufReader::new(std::fs::File::open(path)?))
+}
+
+/// The scores of one kind of situation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct KindScore {
+    pub kind: String,
+    pub recognised: usize,
+    /// Recognised situations that match a true one.
+    pub correct: usize,
+    pub truth: usize,
+    /// True situations matched by a recognised one.
+    pub found: usize,
+    pub precision: Option<f64>,
+    pub recall: Option<f64>,
+    /// Recognised situations none of whose objects stood for a true vehicle then.
+    pub unmapped: usize,
+}
+
+/// What matching situations needs besides the two lists.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MatchOptions {
+    /// Times may miss each other by this much and still overlap (microseconds): the monitors
+    /// decide at frame times, and a situation's edges depend on thresholds over noisy values.
+    pub slack: Time,
+}
+
+impl Default for MatchOptions {
+    fn default() -> MatchOptions {
+        MatchOptions { slack: 2_000_000 }
+    }
+}
+
+/// The true vehicles a recognised situation's symbols stood for: at its end, else its start,
+/// else its middle (`None` for a symbol that stood for no true vehicle at any of them).
+fn truths_of(situation: &Situation, mapping: &Mapping) -> Vec<Option<String>> {
+    let probes = [situation.end, situation.start, situation.start + (situation.end - situation.start) / 2];
+    situation
+        .objects
+        .iter()
+        .map(|symbol| probes.iter().find_map(|&t| mapping.truth_of(symbol, t)).map(str::to_string))
+        .collect()
+}
+
+fn overlaps(a: &Situation, b: &Situation, slack: Time) -> bool {
+    a.start - slack <= b.end && b.start - slack <= a.end
+}
+
+/// A recognised situation as matched: the true vehicles its symbols stood for, and whether a
+/// true situation matched it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Recognised {
+    #[serde(flatten)]
+    pub situation: Situation,
+    pub truth_objects: Vec<Option<String>>,
+    pub correct: bool,
+}
+
+/// The result of [`match_situations`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Matched {
+    pub scores: Vec<KindScore>,
+    pub recognised: Vec<Recognised>,
+    /// Per true situation (in the order given): whether a recognised one matched it.
+    pub found: Vec<bool>,
+}
+
+/// Precision and recall per kind, for the kinds that have true situations or recognised ones;
+/// ordered by kind. `truth_kinds` are the kinds the truth covers: a recognised kind outside it is
+/// reported with no truth (recall and precision `None`).
+pub fn match_situations(
+    recognised: &[Situation],
+    truth: &[Situation],
+    truth_kinds: &[&str],
+    mapping: &Mapping,
+    options: &MatchOptions,
+) -> Matched {
+    let mut kinds: Vec<String> =
+        recognised.iter().map(|s| s.kind.clone()).chain(truth.iter().map(|s| s.kind.clone())).collect();
+    kinds.sort();
+    kinds.dedup();
+    let mut found = vec![false; truth.len()];
+    let mut scores = Vec::new();
+    let mut details: Vec<Option<Recognised>> = vec![None; recognised.len()];
+    for kind in kinds {
+        let covered = truth_kinds.contains(&kind.as_str());
+        let mut score = KindScore {
+            kind: kind.clone(),
+            recognised: 0,
+            correct: 0,
+            truth: truth.iter().filter(|t| t.kind == kind).count(),
+            found: 0,
+            precision: None,
+            recall: None,
+            unmapped: 0,
+        };
+        for (i, r) in recognised.iter().enumerate().filter(|(_, r)| r.kind == kind) {
+            score.recognised += 1;
+            let truths = truths_of(r, mapping);
+            if truths.iter().all(Option::is_none) {
+                score.unmapped += 1;
+            }
+            let mut correct = false;
+            for (k, t) in truth.iter().enumerate() {
+                let same_objects = t.kind == kind
+                    && t.objects.len() == truths.len()
+                    && t.objects.iter().zip(&truths).all(|(o, m)| m.as_deref() == Some(o.as_str()));
+                if same_objects && overlaps(r, t, options.slack) {
+                    found[k] = true;
+                    correct = true;
+                }
+            }
+            score.correct += usize::from(correct);
+            details[i] = Some(Recognised { situation: r.clone(), truth_objects: truths, correct });
+        }
+        score.found = truth.iter().zip(&found).filter(|(t, f)| t.kind == kind && **f).count();
+        if covered {
+            score.precision = (score.recognised > 0).then(|| score.correct as f64 / score.recognised as f64);
+            score.recall = (score.truth > 0).then(|| score.found as f64 / score.truth as f64);
+        }
+        scores.push(score);
+    }
+    Matched { scores, recognised: details.into_iter().flatten().collect(), found }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    fn vehicle(id: &str, lane: &str, lane_pos: f64, speed: f64) -> TrueVehicle {
+        TrueVehicle {
+            id: id.to_string(),
+            road: Some("e".to_string()),
+            lane: lane.to_string(),
+            lane_pos,
+            lane_length: 1000.0,
+            speed,
+            speed_limit: 25.0,
+            length: 5.0,
+        }
+    }
+
+    /// A fast car (30 m/s) passes a truck (15 m/s) on the other lane; 0.5 s steps.
+    fn passing() -> Vec<TrueStep> {
+        (0..60)
+            .map(|k| {
+                let t = k as f64 * 0.5;
+                let fast_lane = if (4.0..12.0).contains(&t) { "e_1" } else { "e_0" };
+                TrueStep {
+                    time: (t * 1e6) as Time,
+                    vehicles: vec![
+                        vehicle("car", fast_lane, 100.0 + 30.0 * t, 30.0),
+                        vehicle("truck", "e_0", 200.0 + 15.0 * t, 15.0),
+                    ],
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_pass_on_the_other_lane_is_an_overtake_and_the_fast_car_speeds() {
+        let truth = true_situations(&passing(), &TruthParams::default()).situations;
+        let overtakes: Vec<&Situation> = truth.iter().filter(|s| s.kind == "overtake").collect();
+        assert_eq!(overtakes.len(), 1, "{truth:?}");
+        assert_eq!(overtakes[0].objects, ["car", "truck"]);
+        // Within 50 m from t = 3.33 s (gap 100 - 15 t ≤ 50): the step at 3.5 s; in front (gap <
+        // -5 m) from 7 s on: the step at 7 s is the first with 100 - 15 t < -5.
+        assert_eq!((overtakes[0].start, overtakes[0].end), (3_500_000, 7_500_000));
+        let speeding: Vec<&Situation> = truth.iter().filter(|s| s.kind == "speeding").collect();
+        assert_eq!(speeding.len(), 1);
+        assert_eq!(
+            (speeding[0].objects[0].as_str(), speeding[0].start, speeding[0].end),
+            ("car", 0, 29_500_000)
+        );
+        // The car follows the truck closely only while it changes back in front: never behind
+        // it on one lane within a second, so no tailgating.
+        assert!(truth.iter().all(|s| s.kind != "tailgating"), "{truth:?}");
+    }
+
+    #[test]
+    fn situations_as_vehicles_enter_are_left_out() {
+        // The truck enters at 3 s: the pass ends at 7.5 s, 4.5 s later (kept with a 3 s settle
+        // time, left out with 5 s).
+        let mut steps = passing();
+        for s in &mut steps {
+            if s.time < 3_000_000 {
+                s.vehicles.retain(|v| v.id != "truck");
+            }
+        }
+        let kept = true_situations(&steps, &TruthParams::default());
+        assert!(kept.situations.iter().any(|s| s.kind == "overtake"));
+        let params = TruthParams { settle: 5_000_000, ..TruthParams::default() };
+        let left = true_situations(&steps, &params);
+        assert!(left.situations.iter().all(|s| s.kind != "overtake"));
+        assert_eq!(left.entering.len(), 1);
+    }
+
+    #[test]
+    fn a_pass_on_the_same_lane_is_not_an_overtake() {
+        let mut steps = passing();
+        for s in &mut steps {
+            for v in &mut s.vehicles {
+                v.lane = "e_0".to_string();
+            }
+        }
+        let truth = true_situations(&steps, &TruthParams::default()).situations;
+        assert!(truth.iter().all(|s| s.kind != "overtake"), "{truth:?}");
+    }
+
+    #[test]
+    fn a_standing_car_is_stopped_unless_queued_or_at_the_end() {
+        let steps: Vec<TrueStep> = (0..30)
+            .map(|k| TrueStep {
+                time: k * 500_000,
+                vehicles: vec![
+                    vehicle("broken", "e_0", 500.0, 0.0),
+                    vehicle("behind", "e_0", 490.0, 0.0),
+                    vehicle("at_light", "e_1", 990.0, 0.0),
+                ],
+            })
+            .collect();
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let truth = true_situations(&steps, &params).situations;
+        let stopped: Vec<&Situation> = truth.iter().filter(|s| s.kind == "stopped").collect();
+        assert_eq!(stopped.len(), 1, "{truth:?}");
+        assert_eq!(stopped[0].objects, ["broken"]);
+        assert_eq!((stopped[0].start, stopped[0].end), (0, 14_500_000));
+    }
+
+    #[test]
+    fn recognised_situations_are_read_and_matched_through_the_mapping() {
+        let text = r#"{"stream":"overtake","valid":3,"value":{"a":"co1","b":"co2","end":7400000,"start":3000000,"verdict":true}}
+{"stream":"overtake","valid":3,"value":{"a":"co2","b":"co1","end":7400000,"start":3000000,"verdict":false}}
+{"stream":"speeding","valid":3,"value":{"c":"co2","end":9000000,"start":1000000,"verdict":true}}
+{"stream":"tracks","valid":3,"value":[{"id":"co1","pos":[0,0]}]}
+not json "verdict"
+"#;
+        let (recognised, bad) = read_situations(text.as_bytes()).unwrap();
+        assert_eq!(bad, 1);
+        assert_eq!(recognised.len(), 2);
+        assert_eq!(recognised[0].objects, ["co1", "co2"]);
+        // co1 is the car, co2 the truck throughout.
+        let mut seq = crate::Sequence::new();
+        for k in 0..60 {
+            let t = k as f64 * 0.5;
+            let car = [100.0 + 30.0 * t, 0.0];
+            let truck = [200.0 + 15.0 * t, 0.0];
+            seq.push_frame(
+                (t * 1e6) as Time,
+                [("car", car), ("truck", truck)],
+                [("co1", car), ("co2", truck)],
+            )
+            .unwrap();
+        }
+        let mapping = crate::mapping(&seq, &crate::Config::new(2.0).unwrap());
+        let truth = true_situations(&passing(), &TruthParams::default()).situations;
+        let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
+        assert_eq!(matched.recognised.len(), 2);
+        assert!(matched.recognised[0].correct && !matched.recognised[1].correct);
+        let scores = matched.scores;
+        let overtake = scores.iter().find(|s| s.kind == "overtake").unwrap();
+        assert_eq!((overtake.recognised, overtake.correct, overtake.truth, overtake.found), (1, 1, 1, 1));
+        // co2 (the truck) was not speeding: a false recognition, and the car's speeding is missed.
+        let speeding = scores.iter().find(|s| s.kind == "speeding").unwrap();
+        assert_eq!((speeding.precision, speeding.recall), (Some(0.0), Some(0.0)));
+    }
+}

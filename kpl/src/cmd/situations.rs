@@ -1,0 +1,293 @@
+//! `kpl situations`: scores the traffic situations a run recognised (the `true` episodes of its
+//! situation monitors) against the true situations in the recorded traffic it observed (SUMO's
+//! floating car data with lanes and positions along them), through the anchoring's ground-truth
+//! mapping of the car stream; prints precision and recall per kind. The work is `kpl_score`'s
+//! (`situations`); this module reads the traffic and the network.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Args as ClapArgs, ValueEnum};
+use kpl_roads::{LaneKind, RoadNetwork};
+use kpl_score::situations::{
+    self, KindScore, MatchOptions, Situation, TRUE_KINDS, TrueStep, TrueVehicle, TruthParams,
+};
+use kpl_score::{Config, Options, Recording};
+use kpl_sim::recorded::{VehicleTypes, read_steps};
+
+const AFTER_HELP: &str = "\
+Examples:
+  kpl run specs/traffic/sumo_situations.kpl --clock sim --out out
+  kpl situations out/sumo_situations --traffic specs/traffic/sumo/overtake/fcd.xml.gz
+
+The recognised situations are the recorded verdict records with `verdict: true`, `start` and `end`
+of the monitors named overtake, speeding, stopped, tailgating (other monitors are listed without a
+truth). The true situations are computed from the traffic file (SUMO FCD with `lane` and `pos`),
+its first time being the run's time 0. A recognised situation is correct when a true one of its
+kind is about the vehicles its symbols stood for (the CLEAR MOT mapping of the car stream against
+the tracker's ground truth) and their times overlap (within --slack). See docs/situations.md.
+Exit status: 0 scored, 1 the recording or traffic cannot be scored, 2 usage or I/O errors.";
+
+#[derive(Debug, ClapArgs)]
+#[command(after_help = AFTER_HELP)]
+pub struct Args {
+    /// The run's output folder (every `*.jsonl` below it) or recorded `.jsonl` files.
+    #[arg(required = true, value_name = "RUN_DIR_OR_FILES")]
+    paths: Vec<PathBuf>,
+    /// The recorded traffic the run observed: SUMO FCD output with `lane` and `pos` (gzipped or not).
+    #[arg(long, value_name = "FILE")]
+    traffic: PathBuf,
+    /// The road network of the traffic (speed limits, lanes, junctions) [default: net.xml.gz
+    /// beside the traffic file].
+    #[arg(long, value_name = "FILE")]
+    network: Option<PathBuf>,
+    /// The vehicle types of the traffic (lengths), as for `sim.uav_tracker`'s `vtypes_file`
+    /// [default: vtypes.xml beside the traffic file, if there is one; else SUMO's defaults].
+    #[arg(long, value_name = "FILE")]
+    vtypes: Option<PathBuf>,
+    /// The stream of cars whose symbols the situations name.
+    #[arg(long, value_name = "STREAM", default_value = "onroad_car")]
+    stream: String,
+    /// The ground-truth stream (default: the one named `truth` or `*.truth`).
+    #[arg(long, value_name = "STREAM")]
+    truth: Option<String>,
+    /// Gating distance of the mapping, metres.
+    #[arg(long, value_name = "METRES", default_value_t = kpl_score::DEFAULT_MAX_DISTANCE)]
+    max_distance: f64,
+    /// How far apart in time a recognised and a true situation may be and still overlap, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
+    slack: f64,
+    /// How to print the scores.
+    #[arg(long, value_enum, default_value = "table")]
+    format: Format,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Format {
+    /// A table per kind.
+    Table,
+    /// One JSON document: scores per kind, and the true and recognised situations.
+    Json,
+}
+
+#[derive(serde::Serialize)]
+struct Output<'a> {
+    scores: &'a [KindScore],
+    truth_params: &'a TruthParams,
+    truth: &'a [TrueItem<'a>],
+    /// True situations left out: they end too soon after a vehicle entered.
+    entering: &'a [Situation],
+    recognised: &'a [situations::Recognised],
+}
+
+#[derive(serde::Serialize)]
+struct TrueItem<'a> {
+    #[serde(flatten)]
+    situation: &'a Situation,
+    found: bool,
+}
+
+pub fn run(args: Args) -> ExitCode {
+    match score(&args) {
+        Ok(code) => code,
+        Err((code, message)) => {
+            eprintln!("error: {message}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
+    let slack = (args.slack.is_finite() && args.slack >= 0.0)
+        .then(|| (args.slack * 1e6).round() as kpl_core::Time)
+        .ok_or((2, format!("--slack must be a number of seconds, not {}", args.slack)))?;
+    let config = Config::new(args.max_distance).map_err(|e| (2, e.to_string()))?;
+    let beside = |name: &str| args.traffic.parent().map_or_else(|| PathBuf::from(name), |dir| dir.join(name));
+    let network_path = args.network.clone().unwrap_or_else(|| beside("net.xml.gz"));
+    let network =
+        RoadNetwork::load(&network_path).map_err(|e| (2, format!("{}: {e}", network_path.display())))?;
+    let vtypes = args.vtypes.clone().or_else(|| Some(beside("vtypes.xml")).filter(|p| p.is_file()));
+    let types = match &vtypes {
+        Some(path) => VehicleTypes::read(path).map_err(|e| (2, e.to_string()))?,
+        None => VehicleTypes::builtin(),
+    };
+    let (steps, problems) = read_steps(&args.traffic, types).map_err(|e| (2, e.to_string()))?;
+    if let Some(p) = problems.first() {
+        eprintln!(
+            "warning: {} problems in the traffic file, left out (first: {}: {})",
+            problems.len(),
+            p.location,
+            p.error
+        );
+    }
+    let true_steps = true_steps(&steps, &network, &args.traffic)?;
+    let params = TruthParams::default();
+    let true_situations = situations::true_situations(&true_steps, &params);
+    let truth = &true_situations.situations;
+
+    let recording =
+        Recording::read(&args.paths).map_err(|e| (if e.is_data_error() { 1 } else { 2 }, e.to_string()))?;
+    let options = Options {
+        truth: args.truth.clone(),
+        streams: vec![args.stream.clone()],
+        config,
+        ..Options::default()
+    };
+    let scored = kpl_score::score_recording(&recording, &options).map_err(|e| (1, e.to_string()))?;
+    let Some(cars) = scored.streams.first() else {
+        let why = scored.report.failed.first().map_or(String::new(), |f| format!(": {}", f.error));
+        return Err((1, format!("the stream `{}` could not be scored{why}", args.stream)));
+    };
+    let mapping = &cars.evaluation.mapping;
+    let mut recognised = Vec::new();
+    for file in jsonl_files(&args.paths).map_err(|e| (2, e))? {
+        let (found, bad) =
+            situations::read_situations_file(&file).map_err(|e| (2, format!("{}: {e}", file.display())))?;
+        if bad > 0 {
+            eprintln!("warning: {}: {bad} lines that are not JSON, left out", file.display());
+        }
+        recognised.extend(found);
+    }
+    let matched =
+        situations::match_situations(&recognised, truth, TRUE_KINDS, mapping, &MatchOptions { slack });
+    let text = match args.format {
+        Format::Table => table(&matched.scores, true_situations.entering.len(), &params),
+        Format::Json => {
+            let truth: Vec<TrueItem<'_>> = truth
+                .iter()
+                .zip(&matched.found)
+                .map(|(situation, &found)| TrueItem { situation, found })
+                .collect();
+            let output = Output {
+                scores: &matched.scores,
+                truth_params: &params,
+                truth: &truth,
+                entering: &true_situations.entering,
+                recognised: &matched.recognised,
+            };
+            serde_json::to_string_pretty(&output).map_err(|e| (2, e.to_string()))? + "\n"
+        }
+    };
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush())
+        && e.kind() != std::io::ErrorKind::BrokenPipe
+    {
+        return Err((2, format!("standard output: {e}")));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The traffic's vehicles on the network: road, lane, centre along the lane, the lane's limit.
+fn true_steps(
+    steps: &[kpl_sim::recorded::Step],
+    network: &RoadNetwork,
+    path: &Path,
+) -> Result<Vec<TrueStep>, (u8, String)> {
+    let origin = steps.first().map_or(0, |s| s.time);
+    let mut out = Vec::with_capacity(steps.len());
+    let mut missing = 0usize;
+    for step in steps {
+        let mut vehicles = Vec::with_capacity(step.vehicles.len());
+        for v in &step.vehicles {
+            let (Some(lane_name), Some(front), Some(speed)) = (&v.lane, v.lane_pos, v.speed_mps) else {
+                missing += 1;
+                continue;
+            };
+            let Some(lane) = network.lane_by_name(lane_name) else {
+                missing += 1;
+                continue;
+            };
+            let road = match lane.kind {
+                LaneKind::Road { road, .. } => Some(network.road(road).name.clone()),
+                LaneKind::Connector { .. } => None,
+            };
+            vehicles.push(TrueVehicle {
+                id: v.name.to_string(),
+                road,
+                lane: lane_name.to_string(),
+                lane_pos: front - v.length_m / 2.0,
+                lane_length: lane.path.length(),
+                speed,
+                speed_limit: lane.speed_limit_mps,
+                length: v.length_m,
+            });
+        }
+        out.push(TrueStep { time: step.time - origin, vehicles });
+    }
+    if missing > 0 && out.iter().all(|s| s.vehicles.is_empty()) {
+        return Err((
+            1,
+            format!(
+                "{}: no vehicle has `lane`, `pos` and `speed` on the network's lanes (make FCD with --fcd-output.attributes x,y,angle,type,speed,lane,pos)",
+                path.display()
+            ),
+        ));
+    }
+    if missing > 0 {
+        eprintln!(
+            "warning: {missing} vehicle records without `lane`, `pos` or `speed` on the network, left out"
+        );
+    }
+    Ok(out)
+}
+
+/// The `.jsonl` files of the paths (folders searched recursively), sorted.
+fn jsonl_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+    let mut out = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let mut stack = vec![path.clone()];
+            while let Some(dir) = stack.pop() {
+                let entries = std::fs::read_dir(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+                for entry in entries {
+                    let p = entry.map_err(|e| format!("{}: {e}", dir.display()))?.path();
+                    if p.is_dir() {
+                        stack.push(p);
+                    } else if p.extension().is_some_and(|e| e == "jsonl") {
+                        out.push(p);
+                    }
+                }
+            }
+        } else {
+            out.push(path.clone());
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+fn table(scores: &[KindScore], entering: usize, params: &TruthParams) -> String {
+    let mut out =
+        String::from("kind          recognised  correct  precision   true  found  recall  unmapped\n");
+    let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
+    for s in scores {
+        out.push_str(&format!(
+            "{:<13} {:>10} {:>8} {:>10} {:>6} {:>6} {:>7} {:>9}\n",
+            s.kind,
+            s.recognised,
+            s.correct,
+            ratio(s.precision),
+            s.truth,
+            s.found,
+            ratio(s.recall),
+            s.unmapped
+        ));
+    }
+    if entering > 0 {
+        out.push_str(&format!(
+            "{entering} true situations left out: they end within {} s of a vehicle's first appearance\n",
+            params.settle as f64 / 1e6
+        ));
+    }
+    let uncovered: Vec<&str> =
+        scores.iter().filter(|s| !TRUE_KINDS.contains(&s.kind.as_str())).map(|s| s.kind.as_str()).collect();
+    if !uncovered.is_empty() {
+        out.push_str(&format!(
+            "no truth for: {} (only {} are computed from the traffic)\n",
+            uncovered.join(", "),
+            TRUE_KINDS.join(", ")
+        ));
+    }
+    out
+}
