@@ -99,6 +99,8 @@ fn write_spec(dir: &Path, states: &[Vec<(String, f64)>]) {
 struct Binding {
     progressor: Progressor,
     last_valid: Option<Time>,
+    /// The verdict of the episode not yet ended: an equal verdict that follows (with undecided
+    /// states between or not) continues it and is not reported again (docs/language.md, monitors).
     repeat: Option<bool>,
 }
 
@@ -114,6 +116,7 @@ fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, 
     let close = |id: &str, mut binding: Binding, verdicts: &mut Vec<(Time, String, bool)>| {
         if let Some(last) = binding.last_valid
             && let Some(verdict) = binding.progressor.finish()
+            && binding.repeat != Some(verdict)
         {
             verdicts.push((last, id.to_string(), verdict));
         }
@@ -146,10 +149,7 @@ fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, 
                     binding.progressor.reset();
                     binding.last_valid = None;
                 }
-                None => {
-                    binding.last_valid = Some(valid);
-                    binding.repeat = None;
-                }
+                None => binding.last_valid = Some(valid),
             }
         }
     }

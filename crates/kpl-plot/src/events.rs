@@ -68,7 +68,7 @@ impl EventReader {
                 return Err(io(std::io::Error::other("a line over 64 MiB: is this a JSON-lines recording?")));
             }
             // Cheap test first: most lines of a recording are no events.
-            if !line.contains("\"from\"") {
+            if !line.contains("\"from\"") && !line.contains("\"start\"") {
                 continue;
             }
             let Ok(Json::Object(sample)) = serde_json::from_str::<Json>(&line) else { continue };
@@ -82,7 +82,11 @@ impl EventReader {
             };
             for record in records {
                 let Json::Object(record) = record else { continue };
-                let Some(from) = record.get("from") else { continue };
+                // A monitor's episode (`start`, `end`, `verdict`) is an event when its verdict held.
+                let Some(from) = record.get("from").or_else(|| record.get("start")) else { continue };
+                if record.get("verdict") == Some(&Json::Bool(false)) {
+                    continue;
+                }
                 match event_of(stream, record, from) {
                     Ok(event) => self.add(event),
                     Err(what) => {
@@ -130,7 +134,7 @@ impl EventReader {
 
 fn event_of(stream: &str, record: &serde_json::Map<String, Json>, from: &Json) -> Result<Event, String> {
     let from = from.as_i64().ok_or_else(|| format!("event `from` is not an integer time: {from}"))?;
-    let to = match record.get("to") {
+    let to = match record.get("to").or_else(|| record.get("end")) {
         None | Some(Json::Null) => None,
         Some(to) => Some(to.as_i64().ok_or_else(|| format!("event `to` is not an integer time: {to}"))?),
     };
@@ -165,6 +169,21 @@ mod tests {
         let mut r = EventReader::default();
         r.read(Path::new("run.jsonl"), text.as_bytes()).unwrap();
         r.finish()
+    }
+
+    #[test]
+    fn monitor_episodes_are_events_when_their_verdict_held() {
+        let events = read(concat!(
+            r#"{"stream":"overtake","valid":31,"value":{"a":"co7","b":"co6","end":31,"start":26,"verdict":true}}"#,
+            "\n",
+            r#"{"stream":"overtake","valid":40,"value":{"a":"co7","b":"co6","end":40,"start":32,"verdict":false}}"#,
+            "\n",
+        ));
+        assert_eq!(events.problems, 0);
+        assert_eq!(events.events.len(), 1, "{:?}", events.events);
+        let e = &events.events[0];
+        assert_eq!((e.name.as_str(), e.from, e.to), ("overtake", 26, Some(31)));
+        assert_eq!(e.objects, ["co7", "co6"]);
     }
 
     #[test]
