@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::free_ports;
 use serde_json::Value;
 
 const HOSTS: [&str; 3] = ["a", "b", "c"];
@@ -187,19 +188,6 @@ impl Drop for Network {
             let _ = Command::new("ip").args(["netns", "del", ns]).status();
         }
     }
-}
-
-/// A base port whose next `n` ports are free now.
-fn free_ports(n: u16) -> u16 {
-    for _ in 0..100 {
-        let base = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-        if base.checked_add(n).is_some()
-            && (0..n).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
-        {
-            return base;
-        }
-    }
-    panic!("no {n} free consecutive ports on 127.0.0.1");
 }
 
 /// The runs of the three hosts: each host's current process and every output folder it had.

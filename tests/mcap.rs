@@ -15,21 +15,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{kpl, lines, root};
+use common::{kpl, lines, python, root};
 use serde_json::Value;
-
-fn python() -> Option<String> {
-    match std::env::var("KPL_PYTHON") {
-        Ok(python) if !python.is_empty() => Some(python),
-        _ => {
-            if std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1") {
-                panic!("KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set (scripts/test sets both)");
-            }
-            eprintln!("skipped the Python reader: set KPL_PYTHON to a Python with mcap (scripts/test does)");
-            None
-        }
-    }
-}
 
 fn ok(args: &[&str]) -> String {
     let out = kpl(args);
@@ -104,7 +91,7 @@ fn a_traffic_run_recorded_to_mcap_reads_converts_and_replays_like_its_json_lines
     assert!(!streams["onroad_car"].is_empty(), "cars were anchored");
 
     // The mcap Python package reads the same samples.
-    if let Some(python) = python() {
+    if let Some(python) = python("mcap") {
         let result = Command::new(&python)
             .arg(root().join("tests/mcap_reader.py"))
             .args([&mcap, &jsonl])

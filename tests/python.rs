@@ -17,28 +17,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{lines, root};
+use common::{free_ports, lines, python, root};
 use serde_json::Value;
 
 /// How long a process may take before the test gives up on it (a hang, not a speed limit).
 const HANG: Duration = Duration::from_secs(180);
 
-fn python() -> Option<String> {
-    match std::env::var("KPL_PYTHON") {
-        Ok(python) if !python.is_empty() => Some(python),
-        _ => {
-            if std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1") {
-                panic!("KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set (scripts/test sets both)");
-            }
-            eprintln!("skipped: set KPL_PYTHON to a Python with the kpl package (scripts/test installs it)");
-            None
-        }
-    }
-}
-
 /// The Python, once it is known to import the repository's package (not an older install).
 fn python_with_package() -> Option<String> {
-    let python = python()?;
+    let python = python("the kpl package")?;
     let out = Command::new(&python)
         .args(["-c", "import kpl, os; print(os.path.dirname(kpl.__file__))"])
         .current_dir(std::env::temp_dir())
@@ -64,21 +51,6 @@ fn python_with_package() -> Option<String> {
         }
     }
     Some(python)
-}
-
-/// A base port whose next `n` ports are free now (the processes bind them a moment later).
-fn free_ports(n: u16) -> u16 {
-    for _ in 0..100 {
-        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let base = probe.local_addr().unwrap().port();
-        drop(probe);
-        if base.checked_add(n).is_some()
-            && (0..n).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
-        {
-            return base;
-        }
-    }
-    panic!("no {n} free consecutive ports on 127.0.0.1");
 }
 
 /// `kpl run SPEC --host HOST --clock wall --out OUT`, zenoh's ports from `port_base`.
@@ -179,7 +151,7 @@ fn succeeded(out: &Output, name: &str) {
 
 #[test]
 fn the_package_s_own_tests_pass() {
-    let Some(python) = python() else { return };
+    let Some(python) = python("the kpl package") else { return };
     let out = Command::new(&python)
         .args(["-m", "unittest", "discover", "-s", "tests", "-v"])
         .current_dir(root().join("python"))

@@ -424,7 +424,7 @@ fn a_host_that_receives_nothing_stops_at_the_end_of_for() {
         out.to_str().unwrap(),
     ])
     .env("KPL_ZENOH_WAIT", "600")
-    .env("KPL_ZENOH_PORT_BASE", "27447")
+    .env("KPL_ZENOH_PORT_BASE", common::free_ports(2).to_string())
     .output()
     .unwrap();
     // Nothing arrived from another host: the run is incomplete (exit status 3) and says why.

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{kpl, root};
+use common::{free_ports, kpl, root};
 
 /// How long a benchmark is watched before it is stopped.
 const WATCH: Duration = Duration::from_secs(5);
@@ -146,20 +146,6 @@ fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
-/// A base port whose next two ports are free now (for a host of a deployed spec).
-fn free_ports() -> u16 {
-    for _ in 0..100 {
-        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let base = probe.local_addr().unwrap().port();
-        drop(probe);
-        if base < u16::MAX - 2 && (0..2).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
-        {
-            return base;
-        }
-    }
-    panic!("no free ports on 127.0.0.1");
-}
-
 /// `bash -c COMMAND` in `dir` with `dir/bin` first on the PATH, in its own process group.
 fn shell(dir: &Path, command: &str) -> Command {
     use std::os::unix::process::CommandExt;
@@ -170,7 +156,7 @@ fn shell(dir: &Path, command: &str) -> Command {
         .current_dir(dir)
         .env("PATH", path)
         .env("NO_COLOR", "1")
-        .env("KPL_ZENOH_PORT_BASE", free_ports().to_string())
+        .env("KPL_ZENOH_PORT_BASE", free_ports(2).to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

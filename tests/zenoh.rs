@@ -26,28 +26,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{lines, root};
+use common::{free_ports, lines, python, root};
 use serde_json::Value;
 
 const HANG: Duration = Duration::from_secs(180);
 
 fn out_dir(name: &str) -> PathBuf {
     common::fresh_dir("zenoh", name)
-}
-
-/// A base port whose next `n` ports are free now (the processes bind them a moment later).
-fn free_ports(n: u16) -> u16 {
-    for _ in 0..100 {
-        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let base = probe.local_addr().unwrap().port();
-        drop(probe);
-        if base.checked_add(n).is_some()
-            && (0..n).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
-        {
-            return base;
-        }
-    }
-    panic!("no {n} free consecutive ports on 127.0.0.1");
 }
 
 fn host(spec: &str, host: &str, out: &Path, port_base: u16) -> Child {
@@ -302,7 +287,7 @@ fn two_deployments_of_one_spec_never_mix() {
 /// The code of docs/streams.md, run by Python: seals envelopes, opens kpl's.
 #[test]
 fn the_documented_envelope_is_kpls() {
-    let Some(python) = python() else { return };
+    let Some(python) = python("eclipse-zenoh") else { return };
     use kpl_zenoh::credentials::Secret;
     use kpl_zenoh::envelope::Envelope;
     let secret_bytes: Vec<u8> = (0..32).collect();
@@ -360,7 +345,7 @@ fn the_documented_envelope_is_kpls() {
 
 #[test]
 fn outside_peers_cannot_slip_samples_or_ends_into_a_deployment_with_keys() {
-    let Some(python) = python() else { return };
+    let Some(python) = python("eclipse-zenoh") else { return };
     let dir = out_dir("keys");
     let port = free_ports(4);
     let (uav, ground, ground_tcp, relay) = (port, port + 1, port + 2, port + 3);
@@ -504,22 +489,9 @@ fn kpl_launch_runs_every_host_with_one_summary() {
     }
 }
 
-fn python() -> Option<String> {
-    match std::env::var("KPL_PYTHON") {
-        Ok(python) if !python.is_empty() => Some(python),
-        _ => {
-            if std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1") {
-                panic!("KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set (scripts/test sets both)");
-            }
-            eprintln!("skipped: set KPL_PYTHON to a Python with eclipse-zenoh (scripts/test does)");
-            None
-        }
-    }
-}
-
 #[test]
 fn python_follows_the_docs_to_decode_and_encode_samples() {
-    let Some(python) = python() else { return };
+    let Some(python) = python("eclipse-zenoh") else { return };
     let out = out_dir("python");
     // Readings with awkward values: non-ASCII and quoted text, tiny and huge floats, epoch times.
     let samples: Vec<Value> = (0..200i64)

@@ -40,3 +40,36 @@ pub fn lines(path: &Path) -> Vec<Value> {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect()
 }
+
+/// A base port whose next `n` ports on 127.0.0.1 are free now (the processes bind them a moment
+/// later).
+pub fn free_ports(n: u16) -> u16 {
+    for _ in 0..100 {
+        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let base = probe.local_addr().unwrap().port();
+        drop(probe);
+        if base.checked_add(n).is_some()
+            && (0..n).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
+        {
+            return base;
+        }
+    }
+    panic!("no {n} free consecutive ports on 127.0.0.1");
+}
+
+/// The Python of the test oracles (`KPL_PYTHON`, set by scripts/test), or `None` with a note that
+/// the test was skipped for want of a Python with `needs`; under `KPL_REQUIRE_ORACLES=1` a missing
+/// Python is a failure.
+#[allow(clippy::print_stderr, reason = "a skipped test says so")]
+pub fn python(needs: &str) -> Option<String> {
+    match std::env::var("KPL_PYTHON") {
+        Ok(python) if !python.is_empty() => Some(python),
+        _ => {
+            if std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1") {
+                panic!("KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set (scripts/test sets both)");
+            }
+            eprintln!("skipped: set KPL_PYTHON to a Python with {needs} (scripts/test does)");
+            None
+        }
+    }
+}

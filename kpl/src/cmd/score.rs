@@ -153,11 +153,8 @@ pub fn run(args: Args) -> ExitCode {
             }
         }
     };
-    // A reader that stops early (`| head`) is not an error.
     let mut stdout = std::io::stdout().lock();
-    if let Err(e) = stdout.write_all(output.as_bytes()).and_then(|()| stdout.flush())
-        && e.kind() != std::io::ErrorKind::BrokenPipe
-    {
+    if let Err(e) = stdout.write_all(output.as_bytes()).and_then(|()| stdout.flush()) {
         eprintln!("error: standard output: {e}");
         return ExitCode::from(2);
     }

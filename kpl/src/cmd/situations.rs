@@ -170,9 +170,7 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         }
     };
     let mut stdout = std::io::stdout().lock();
-    if let Err(e) = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush())
-        && e.kind() != std::io::ErrorKind::BrokenPipe
-    {
+    if let Err(e) = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush()) {
         return Err((2, format!("standard output: {e}")));
     }
     Ok(ExitCode::SUCCESS)
