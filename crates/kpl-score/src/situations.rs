@@ -420,6 +420,9 @@ pub struct Recognised {
     pub situation: Situation,
     pub truth_objects: Vec<Option<String>>,
     pub correct: bool,
+    /// Correct, and what it matched is a situation left out of the truth
+    /// ([`TrueSituations::entering`]): it happened, though recall does not ask for it.
+    pub left_out: bool,
 }
 
 /// The result of [`match_situations`].
@@ -433,14 +436,17 @@ pub struct Matched {
 
 /// Precision and recall per kind, for the kinds that have true situations or recognised ones;
 /// ordered by kind. `truth_kinds` are the kinds the truth covers: a recognised kind outside it is
-/// reported with no truth (recall and precision `None`).
+/// reported with no truth (recall and precision `None`). Recall is over `truth.situations`; a
+/// recognised situation is correct if it matches one of them or one left out as its vehicles
+/// entered (`truth.entering`: it happened, so recognising it is no mistake).
 pub fn match_situations(
     recognised: &[Situation],
-    truth: &[Situation],
+    true_situations: &TrueSituations,
     truth_kinds: &[&str],
     mapping: &Mapping,
     options: &MatchOptions,
 ) -> Matched {
+    let truth = &true_situations.situations;
     let mut kinds: Vec<String> =
         recognised.iter().map(|s| s.kind.clone()).chain(truth.iter().map(|s| s.kind.clone())).collect();
     kinds.sort();
@@ -466,18 +472,23 @@ pub fn match_situations(
             if truths.iter().all(Option::is_none) {
                 score.unmapped += 1;
             }
+            let matches = |t: &Situation| {
+                t.kind == kind
+                    && t.objects.len() == truths.len()
+                    && t.objects.iter().zip(&truths).all(|(o, m)| m.as_deref() == Some(o.as_str()))
+                    && overlaps(r, t, options.slack)
+            };
             let mut correct = false;
             for (k, t) in truth.iter().enumerate() {
-                let same_objects = t.kind == kind
-                    && t.objects.len() == truths.len()
-                    && t.objects.iter().zip(&truths).all(|(o, m)| m.as_deref() == Some(o.as_str()));
-                if same_objects && overlaps(r, t, options.slack) {
+                if matches(t) {
                     found[k] = true;
                     correct = true;
                 }
             }
+            let left_out = !correct && true_situations.entering.iter().any(matches);
+            correct |= left_out;
             score.correct += usize::from(correct);
-            details[i] = Some(Recognised { situation: r.clone(), truth_objects: truths, correct });
+            details[i] = Some(Recognised { situation: r.clone(), truth_objects: truths, correct, left_out });
         }
         score.found = truth.iter().zip(&found).filter(|(t, f)| t.kind == kind && **f).count();
         if covered {
@@ -650,7 +661,7 @@ not json "verdict"
             .unwrap();
         }
         let mapping = crate::mapping(&seq, &crate::Config::new(2.0).unwrap());
-        let truth = true_situations(&passing(), &TruthParams::default()).situations;
+        let truth = true_situations(&passing(), &TruthParams::default());
         let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
         assert_eq!(matched.recognised.len(), 2);
         assert!(matched.recognised[0].correct && !matched.recognised[1].correct);
@@ -660,5 +671,14 @@ not json "verdict"
         // co2 (the truck) was not speeding: a false recognition, and the car's speeding is missed.
         let speeding = scores.iter().find(|s| s.kind == "speeding").unwrap();
         assert_eq!((speeding.precision, speeding.recall), (Some(0.0), Some(0.0)));
+        // With 8 s to settle the pass (3.5 s to 7.5 s) is left out of the truth: recognising it
+        // is still correct, and recall does not ask for it.
+        let params = TruthParams { settle: 8_000_000, ..TruthParams::default() };
+        let truth = true_situations(&passing(), &params);
+        assert!(truth.situations.iter().all(|s| s.kind != "overtake"));
+        let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
+        assert!(matched.recognised[0].correct && matched.recognised[0].left_out);
+        let overtake = matched.scores.iter().find(|s| s.kind == "overtake").unwrap();
+        assert_eq!((overtake.correct, overtake.truth, overtake.precision, overtake.recall), (1, 0, Some(1.0), None));
     }
 }

@@ -77,7 +77,7 @@ struct Output<'a> {
     scores: &'a [KindScore],
     truth_params: &'a TruthParams,
     truth: &'a [TrueItem<'a>],
-    /// True situations left out: they end too soon after a vehicle entered.
+    /// True situations left out: they happen within the settle time of a vehicle's first appearance.
     entering: &'a [Situation],
     recognised: &'a [situations::Recognised],
 }
@@ -151,9 +151,12 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         recognised.extend(found);
     }
     let matched =
-        situations::match_situations(&recognised, truth, TRUE_KINDS, mapping, &MatchOptions { slack });
+        situations::match_situations(&recognised, &true_situations, TRUE_KINDS, mapping, &MatchOptions { slack });
     let text = match args.format {
-        Format::Table => table(&matched.scores, true_situations.entering.len(), &params),
+        Format::Table => {
+            let left_out = matched.recognised.iter().filter(|r| r.left_out).count();
+            table(&matched.scores, true_situations.entering.len(), left_out, &params)
+        }
         Format::Json => {
             let truth: Vec<TrueItem<'_>> = truth
                 .iter()
@@ -270,7 +273,7 @@ fn jsonl_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
     Ok(out)
 }
 
-fn table(scores: &[KindScore], entering: usize, params: &TruthParams) -> String {
+fn table(scores: &[KindScore], entering: usize, left_out: usize, params: &TruthParams) -> String {
     let mut out =
         String::from("kind          recognised  correct  precision   true  found  recall  unmapped\n");
     let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
@@ -289,8 +292,13 @@ fn table(scores: &[KindScore], entering: usize, params: &TruthParams) -> String 
     }
     if entering > 0 {
         out.push_str(&format!(
-            "{entering} true situations left out: they end within {} s of a vehicle's first appearance\n",
+            "{entering} true situations left out: they happen within {} s of a vehicle's first appearance\n",
             params.settle as f64 / 1e6
+        ));
+    }
+    if left_out > 0 {
+        out.push_str(&format!(
+            "{left_out} recognised situations match true ones left out (correct, not in recall)\n"
         ));
     }
     let uncovered: Vec<&str> =
