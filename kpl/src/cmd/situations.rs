@@ -150,8 +150,13 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         }
         recognised.extend(found);
     }
-    let matched =
-        situations::match_situations(&recognised, &true_situations, TRUE_KINDS, mapping, &MatchOptions { slack });
+    let matched = situations::match_situations(
+        &recognised,
+        &true_situations,
+        TRUE_KINDS,
+        mapping,
+        &MatchOptions { slack },
+    );
     let text = match args.format {
         Format::Table => {
             let left_out = matched.recognised.iter().filter(|r| r.left_out).count();
