@@ -169,7 +169,13 @@ impl AlongRoads {
     }
 
     /// The prediction of an object moving against its lane ([`AlongRoads`]).
-    fn predict_backwards(&self, start: &PredictionStart, lane: &LanePosition, time: Time, out: &mut Vec<Record>) {
+    fn predict_backwards(
+        &self,
+        start: &PredictionStart,
+        lane: &LanePosition,
+        time: Time,
+        out: &mut Vec<Record>,
+    ) {
         let (offset, speed) = self.backwards(start, lane, time);
         if offset < 0.0 {
             out.push((*start.state).clone());
@@ -342,8 +348,10 @@ mod tests {
         file.add_node("w", [0.0, 0.0]);
         file.add_node("e", [200.0, 0.0]);
         file.add_road("main", "w", "e", Vec::new());
-        file.roads[0].lanes =
-            vec![kpl_roads::format::LaneSpec { width_m: 3.5, direction: kpl_roads::format::LaneDirection::Forward }];
+        file.roads[0].lanes = vec![kpl_roads::format::LaneSpec {
+            width_m: 3.5,
+            direction: kpl_roads::format::LaneDirection::Forward,
+        }];
         let network = Arc::new(RoadNetwork::build(&file).unwrap());
         let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
         let mut s = (*state([150.0, -1.75], [-20.0, 0.0])).clone();

@@ -130,7 +130,8 @@ fn angle_between(a: f64, b: f64) -> f64 {
 
 /// Whether a vehicle moves against the direction of the lane it lies on.
 fn against_lane(v: &TrueVehicle, params: &TruthParams) -> bool {
-    v.speed >= params.wrong_way_speed_mps && angle_between(v.heading, v.lane_heading) > std::f64::consts::FRAC_PI_2
+    v.speed >= params.wrong_way_speed_mps
+        && angle_between(v.heading, v.lane_heading) > std::f64::consts::FRAC_PI_2
 }
 
 /// Runs of a condition per key: from the first time it held to the last, kept when long enough.
@@ -215,9 +216,9 @@ pub fn true_situations(steps: &[TrueStep], params: &TruthParams) -> TrueSituatio
     let entering = all_true_situations(steps, params)
         .into_iter()
         .filter(|s| {
-            !situations.iter().any(|k| {
-                k.kind == s.kind && k.objects == s.objects && k.start <= s.end && s.start <= k.end
-            })
+            !situations
+                .iter()
+                .any(|k| k.kind == s.kind && k.objects == s.objects && k.start <= s.end && s.start <= k.end)
         })
         .collect();
     TrueSituations { situations, entering }
@@ -679,6 +680,9 @@ not json "verdict"
         let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
         assert!(matched.recognised[0].correct && matched.recognised[0].left_out);
         let overtake = matched.scores.iter().find(|s| s.kind == "overtake").unwrap();
-        assert_eq!((overtake.correct, overtake.truth, overtake.precision, overtake.recall), (1, 0, Some(1.0), None));
+        assert_eq!(
+            (overtake.correct, overtake.truth, overtake.precision, overtake.recall),
+            (1, 0, Some(1.0), None)
+        );
     }
 }
