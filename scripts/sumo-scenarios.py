@@ -51,7 +51,7 @@ import tempfile
 
 FCD_PERIOD_S = 0.5
 STEP_LENGTH_S = 0.1
-SEED = 42  # --seed
+SEED = 42  # of the trips and the simulation (--seed); the networks keep netgenerate's 42
 OCCLUSION_S = 2.0
 
 
@@ -72,9 +72,10 @@ def run(cmd, cwd):
 
 
 class Sumo:
-    def __init__(self, home, work):
+    def __init__(self, home, work, seed=None):
         self.home = home
         self.work = work
+        self.seed = SEED if seed is None else seed
 
     def tool(self, name):
         return os.path.join(self.home, "bin", name)
@@ -88,12 +89,12 @@ class Sumo:
     def random_trips(self, net, routes, duration, period, *options):
         env_tools = os.path.join(self.home, "tools")
         run([sys.executable, os.path.join(env_tools, "randomTrips.py"), "-n", net, "-r", routes,
-             "-b", "0", "-e", str(duration), "-p", str(period), "--seed", str(SEED),
+             "-b", "0", "-e", str(duration), "-p", str(period), "--seed", str(self.seed),
              ] + list(options), self.work)
 
     def simulate(self, net, routes, fcd, duration, additional=None):
         cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
-               "--step-length", str(STEP_LENGTH_S), "--seed", str(SEED), "--no-step-log", "--no-warnings",
+               "--step-length", str(STEP_LENGTH_S), "--seed", str(self.seed), "--no-step-log", "--no-warnings",
                "--fcd-output", fcd, "--device.fcd.period", str(FCD_PERIOD_S),
                "--fcd-output.attributes", "x,y,angle,type,speed,lane,pos"]
         if additional:
@@ -281,11 +282,10 @@ def main():
             if name in OCCLUDED:
                 print("%s: %s" % (name, occluders(os.path.join(args.out, name), OCCLUDED[name])))
         return
-    globals()["SEED"] = args.seed
     home = sumo_home()
     for name in args.only or list(SCENARIOS):
         with tempfile.TemporaryDirectory() as work:
-            s = Sumo(home, work)
+            s = Sumo(home, work, args.seed)
             duration = args.duration or DURATION_S[name]
             files, vtypes = SCENARIOS[name](s, duration)
             target = os.path.join(args.out, name)
