@@ -416,7 +416,11 @@ fn a_scenario_made_afresh_with_sumo_reads() {
         let narrow = width(xs.collect()).min(width(ys.collect()));
         assert!((8.0..=2.0 * 13.9).contains(&narrow), "{} is {narrow} m wide", occluder.name);
         for node in net.nodes() {
-            assert!(!kpl_roads::geom::point_in_polygon(node.pos, &occluder.area), "{node:?} under {}", occluder.name);
+            assert!(
+                !kpl_roads::geom::point_in_polygon(node.pos, &occluder.area),
+                "{node:?} under {}",
+                occluder.name
+            );
         }
     }
     std::fs::remove_dir_all(&dir).unwrap();

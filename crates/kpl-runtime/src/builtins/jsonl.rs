@@ -366,8 +366,9 @@ mod tests {
             float.clone().prop_map(Value::Float),
             r#"[a-z"\\é\n]{0,6}"#.prop_map(|s| Value::Str(s.into())),
             (float.clone(), float.clone()).prop_map(|(x, y)| Value::Vec2([x, y])),
-            (float.clone(), float.clone(), float.clone(), float)
-                .prop_map(|(a, b, c, d)| Value::BBox(std::sync::Arc::new(kpl_core::BBox { x1: a, y1: b, x2: c, y2: d }))),
+            (float.clone(), float.clone(), float.clone(), float).prop_map(|(a, b, c, d)| Value::BBox(
+                std::sync::Arc::new(kpl_core::BBox { x1: a, y1: b, x2: c, y2: d })
+            )),
             any::<i64>().prop_map(Value::Duration),
         ];
         leaf.prop_recursive(3, 24, 4, |inner| {
@@ -377,10 +378,12 @@ mod tests {
                     proptest::option::of("[a-z]{0,3}"),
                     proptest::collection::vec(("id|pos|a|b|[a-z]{1,3}", inner), 0..5)
                 )
-                    .prop_map(|(id, fields)| Value::Record(std::sync::Arc::new(kpl_core::Record {
-                        id: id.map(Into::into),
-                        fields: fields.into_iter().map(|(name, value)| (name.into(), value)).collect(),
-                    }))),
+                    .prop_map(|(id, fields)| Value::Record(std::sync::Arc::new(
+                        kpl_core::Record {
+                            id: id.map(Into::into),
+                            fields: fields.into_iter().map(|(name, value)| (name.into(), value)).collect(),
+                        }
+                    ))),
             ]
         })
     }
