@@ -122,7 +122,7 @@ fn kalman_params(params: &Params) -> Result<KalmanParams, String> {
             None => defaults.velocity_noise_mps,
             Some(v) => match v.as_f64() {
                 Some(x) if x.is_finite() && x > 0.0 => Some(x),
-                Some(x) if x == 0.0 => None,
+                Some(0.0) => None,
                 _ => return Err(format!("`velocity_noise_mps` must be a number, 0 or more, found {v}")),
             },
         },
