@@ -53,6 +53,9 @@ struct Work {
     /// Confidence at the start of this cycle (`-inf` for anchors created this cycle).
     previous_confidence: f64,
     removed: bool,
+    /// The box before this cycle's alignment, and the type of the percept aligned to it (if any).
+    box_before: BBox,
+    percept_type: Option<Symbol>,
 }
 
 impl Aapa {
@@ -125,9 +128,11 @@ impl Aapa {
             work.push(Work {
                 previous_centre: seen_last_cycle.then(|| centre(&anchor.bbox)),
                 previous_confidence: anchor.confidence,
+                box_before: anchor.bbox,
                 anchor,
                 aligned: false,
                 removed: false,
+                percept_type: None,
             });
         }
 
@@ -170,6 +175,8 @@ impl Aapa {
             } else {
                 percept.bbox
             };
+            w.box_before = w.anchor.bbox;
+            w.percept_type = Some(percept.object_type.clone());
             let new_centre = centre(&observed);
             w.anchor.velocity = match (w.previous_centre, dt_seconds) {
                 (Some(old), Some(dt)) if dt > 0.0 => {
@@ -229,6 +236,8 @@ impl Aapa {
                 previous_centre: None,
                 previous_confidence: f64::NEG_INFINITY,
                 removed: false,
+                box_before: percept.bbox,
+                percept_type: Some(percept.object_type.clone()),
             });
         }
 
@@ -317,7 +326,7 @@ impl Aapa {
         &self,
         action: &Action,
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         bindings: &mut Vec<Binding>,
         notes: &mut Vec<String>,
     ) {
@@ -330,7 +339,7 @@ impl Aapa {
         });
         if !ambiguous {
             for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, work, theta_anch, notes);
+                apply_rule(rule, action, time, work, &self.params, notes);
             }
             return;
         }
@@ -368,6 +377,7 @@ impl Aapa {
                         let symbol = match bindings[i].bound.clone() {
                             Some(symbol) => Some(symbol),
                             None => {
+                                self.reassign_nearest(i, action, time, work, bindings, notes);
                                 let taken = bound_symbols(bindings);
                                 let symbol = near_other(action, &bindings[i], work, theta_anch, &taken)
                                     .or_else(|| first_mover(&bindings[i], work, &taken, 0.0))
@@ -404,14 +414,57 @@ impl Aapa {
         action: &Action,
         symbol: &Symbol,
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         notes: &mut Vec<String>,
     ) {
         let mut bound = action.clone();
         bound.args[0] = symbol.clone();
         for rule in self.rules_for(&bound) {
-            apply_rule(rule, &bound, time, work, self.params.theta_anch, notes);
+            apply_rule(rule, &bound, time, work, &self.params, notes);
         }
+    }
+
+    /// An action that names another, single object (`_contain(cone, snitch)`) is decided by where
+    /// that object is when it completes, the surest evidence there is. If the candidate nearest it
+    /// was taken by another action on the type that was decided only by the order of motion (a
+    /// lift shows before a slide that started earlier), that other action gets another candidate.
+    fn reassign_nearest(
+        &self,
+        i: usize,
+        action: &Action,
+        time: Time,
+        work: &mut Vec<Work>,
+        bindings: &mut [Binding],
+        notes: &mut Vec<String>,
+    ) {
+        let Some(nearest) = near_other(action, &bindings[i], work, self.params.theta_anch, &[]) else { return };
+        let Some(j) = bindings.iter().position(|b| b.bound.as_ref() == Some(&nearest)) else { return };
+        if j == i || names_single_other(&bindings[j].action, work) {
+            return;
+        }
+        let taken = bound_symbols(bindings);
+        let Some(other) = bindings[j]
+            .candidates
+            .iter()
+            .map(|c| c.symbol.clone())
+            .find(|s| *s != nearest && !taken.contains(s))
+        else {
+            return;
+        };
+        notes.push(format!(
+            "action `{}` rebound from `{nearest}` to `{other}`: `{}` is nearest `{}`",
+            bindings[j].action.name,
+            nearest,
+            action.args.get(1).map_or("", |a| a.as_ref())
+        ));
+        if let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == nearest) {
+            stop_moving(&mut w.anchor);
+        }
+        if !bindings[j].completed {
+            let started = bindings[j].action.clone();
+            self.apply_bound(&started, &other, time, work, notes);
+        }
+        bindings[j].bound = Some(other);
     }
 
     /// Notes which candidates started moving, decides the open bindings (oldest first) whose
@@ -420,7 +473,7 @@ impl Aapa {
         &self,
         bindings: &mut [Binding],
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         notes: &mut Vec<String>,
     ) {
         for binding in bindings.iter_mut().filter(|b| b.bound.is_none()) {
@@ -935,14 +988,93 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
     })
 }
 
+/// [`ChildPlacement::Under`]: the parent `pa` has come down over the child `c`. If the child took a
+/// percept of the parent's type this cycle, that was the parent arriving: the parent gets it and
+/// the child its box from before. Otherwise a parent not seen this cycle (it moved hidden) is moved
+/// so that its bottom centre is the child's. Returns the parent's box.
+fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> BBox {
+    let parent_type = work[pa].anchor.object_type.clone();
+    let child = &work[c];
+    let took_parent = child.aligned
+        && !work[pa].aligned
+        && child.percept_type.as_ref().is_some_and(|t| *t == parent_type && *t != child.anchor.object_type);
+    if took_parent {
+        let seen = child.anchor.bbox;
+        let before = child.box_before;
+        work[c].anchor.bbox = before;
+        work[c].aligned = false;
+        let p = &mut work[pa];
+        p.anchor.bbox = seen;
+        p.anchor.status = AnchorStatus::Visible;
+        p.anchor.last_seen = time;
+        p.aligned = true;
+    } else if !work[pa].aligned {
+        let base = bottom_centre(&work[c].anchor.bbox);
+        let p = &mut work[pa].anchor;
+        p.bbox = from_bottom_centre(base, size(&p.bbox));
+    }
+    work[pa].anchor.bbox
+}
+
+/// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
+/// perceived, inside its container `pa` (a square of half the container's box width on its base).
+fn infer_hidden_child(
+    object_type: &Symbol,
+    pa: usize,
+    time: Time,
+    work: &mut Vec<Work>,
+    theta_anch: f64,
+    notes: &mut Vec<String>,
+) -> usize {
+    let parent_box = work[pa].anchor.bbox;
+    let side = parent_box.width() / 2.0;
+    let bbox = from_bottom_centre(bottom_centre(&parent_box), [side, side]);
+    let used: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+    let symbol = fresh_symbol(&Percept::new("", object_type, bbox), &used);
+    notes.push(format!(
+        "`{symbol}` ({object_type}) inferred inside `{}`: never perceived",
+        work[pa].anchor.symbol
+    ));
+    work.push(Work {
+        anchor: Anchor {
+            symbol,
+            object_type: object_type.clone(),
+            bbox,
+            confidence: theta_anch,
+            status: AnchorStatus::Attached,
+            colour: None,
+            first_seen: time,
+            last_seen: time,
+            velocity: [0.0, 0.0],
+            moving: false,
+            moving_until: None,
+            moving_since: None,
+            full_size: None,
+            last_percept_box: None,
+            partial: false,
+            attachment: None,
+            for_inference: false,
+            type_votes: vec![(object_type.clone(), 1)],
+        },
+        aligned: false,
+        previous_centre: None,
+        previous_confidence: theta_anch,
+        removed: false,
+        box_before: bbox,
+        percept_type: None,
+    });
+    work.len() - 1
+}
+
 fn apply_rule(
     rule: &ActionRule,
     action: &Action,
     time: Time,
-    work: &mut [Work],
-    theta_anch: f64,
+    work: &mut Vec<Work>,
+    params: &Params,
     notes: &mut Vec<String>,
 ) {
+    let theta_anch = params.theta_anch;
     // Other arguments that name a type several anchors share are the one nearest the moving object
     // (argument 0): what a cone comes down over is where it ends.
     let lookup = |k: usize, work: &[Work], notes: &mut Vec<String>| -> Option<usize> {
@@ -965,8 +1097,14 @@ fn apply_rule(
     for effect in &rule.effects {
         match effect {
             Effect::Attach { child, parent, relation, place_child, hides_child } => {
-                let (Some(c), Some(pa)) = (lookup(*child, work, notes), lookup(*parent, work, notes)) else {
-                    continue;
+                let Some(pa) = lookup(*parent, work, notes) else { continue };
+                let c = match lookup(*child, work, notes) {
+                    Some(c) => c,
+                    None if *hides_child && params.extensions.infer_hidden => {
+                        let Some(arg) = action.args.get(*child) else { continue };
+                        infer_hidden_child(arg, pa, time, work, theta_anch, notes)
+                    }
+                    None => continue,
                 };
                 let index = symbol_index(work);
                 if c == pa || is_ancestor(c, pa, work, &index) {
@@ -986,8 +1124,13 @@ fn apply_rule(
                         args: [work[a].anchor.symbol.clone(), work[b].anchor.symbol.clone()],
                     })
                 });
+                let parent_box = if *place_child == ChildPlacement::Under {
+                    put_over(c, pa, work, time)
+                } else {
+                    parent_box
+                };
                 let w = &mut work[c];
-                if *place_child == ChildPlacement::AtParentIfApart
+                if matches!(place_child, ChildPlacement::AtParentIfApart | ChildPlacement::Under)
                     && !w.aligned
                     && !intersects(&w.anchor.bbox, &parent_box)
                 {

@@ -78,6 +78,11 @@ pub struct Extensions {
     /// tentative anchor counts double, so a short-lived false detection kept as occluded does not
     /// take the object that has been there all along when it reappears.
     pub established_first: bool,
+    /// An object that an attaching action hides (`_contain(cone, obj)`) but that has no anchor (it
+    /// was never perceived: hidden behind another from the start) gets one, inferred from the
+    /// action: inside its container, at the container's base, a square of half the container's box
+    /// width (its size was never seen), at θ_anch. The action says it exists and where it is.
+    pub infer_hidden: bool,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -102,6 +107,7 @@ impl Default for Extensions {
             motion_profile: MotionProfile::EaseInOut,
             restore_partial_boxes: false,
             established_first: true,
+            infer_hidden: true,
         }
     }
 }
@@ -181,6 +187,11 @@ pub enum ChildPlacement {
     /// placed on the parent's bottom centre: the action says it is inside (a cone put over it), so
     /// a stale position cannot be right.
     AtParentIfApart,
+    /// The parent came down over the child (a cone put over it), so their bottom centres meet. A
+    /// parent not seen this cycle (it moved hidden) is moved over the child; a child that took the
+    /// parent's percept this cycle (the arriving cone, where the child was) gives it back to the
+    /// parent and keeps its own box; otherwise as [`ChildPlacement::AtParentIfApart`].
+    Under,
 }
 
 /// A relation produced by an attaching action, `name(args[a], args[b])`.
@@ -247,6 +258,7 @@ impl Params {
                 motion_profile: MotionProfile::ConstantVelocity,
                 restore_partial_boxes: false,
                 established_first: false,
+                infer_hidden: false,
             },
             ..Params::cater()
         }
@@ -317,7 +329,7 @@ impl ActionRule {
                         child: 1,
                         parent: 0,
                         relation: Some(RelationRule { name: "contained".into(), args: [1, 0] }),
-                        place_child: ChildPlacement::AtParentIfApart,
+                        place_child: ChildPlacement::Under,
                         hides_child: true,
                     },
                 ],

@@ -22,17 +22,17 @@ use kpl_cater::sim::Motion;
 pub enum Command {
     /// Generate videos by CATER's procedure: scene JSON, `<video>_bb.json`, perfect and detector
     /// perception, OPNet's annotation files.
-    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  \
-                      kpl cater generate --videos 20 --seed 2 --motion all --out /tmp/cater-all\n\n\
+    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out out/cater\n  \
+                      kpl cater generate --videos 20 --seed 2 --motion all --out out/cater-all\n\n\
                       LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
     #[command(
-        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
-                      kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --frames from-first-detection\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --per-video /tmp/aapa.csv\n\n\
+        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out out/cater`):\n  \
+                      kpl cater eval --data out/cater --model aapa --perception perfect\n  \
+                      kpl cater eval --data out/cater --model heuristic --perception detector --json out/h.json\n  \
+                      kpl cater eval --data out/cater --model aapa --frames from-first-detection\n  \
+                      kpl cater eval --data out/cater --model aapa --per-video out/aapa.csv\n\n\
                       LA-CATER's own files: --pickles DIR reads OPNet's perception pickles, --videos FILE a split, \
                       --annotations DIR its annotation files (docs/cater.md)."
     )]
