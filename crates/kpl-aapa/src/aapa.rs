@@ -33,6 +33,7 @@ use crate::geometry::{
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
     Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
+    StillBox,
     Symbol, WorldState,
 };
 
@@ -190,7 +191,7 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
-            w.anchor.bbox = observed;
+            w.anchor.bbox = if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
             vote_type(&mut w.anchor, &percept.object_type);
             w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
             w.anchor.status = AnchorStatus::Visible;
@@ -231,6 +232,7 @@ impl Aapa {
                     attachment: None,
                     for_inference: false,
                     type_votes: vec![(percept.object_type.clone(), 1)],
+                    still: None,
                 },
                 aligned: true,
                 previous_centre: None,
@@ -774,6 +776,38 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
     }
 }
 
+/// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen
+/// of it are one box plus the detector's noise. While it is not moving and each new box stays within
+/// [`STILL_PX`] pixels (plus 5 % of its size) of the mean so far, the anchor's box is that mean (of at
+/// most [`STILL_MAX`] boxes, so it can follow a slow drift); otherwise the mean starts again here.
+fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
+    let obs = [observed.x1, observed.y1, observed.x2, observed.y2];
+    let restart = StillBox { mean: obs, count: 1 };
+    let next = match anchor.still {
+        Some(still) if !anchor.moving => {
+            let m = still.mean;
+            let tolerance = STILL_PX + 0.05 * scale(&observed);
+            let near = (0..4).all(|k| (obs[k] - m[k]).abs() <= tolerance);
+            if near {
+                let n = (still.count + 1).min(STILL_MAX);
+                let w = 1.0 / f64::from(n);
+                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n }
+            } else {
+                restart
+            }
+        }
+        _ => restart,
+    };
+    anchor.still = Some(next);
+    let [x1, y1, x2, y2] = next.mean;
+    BBox::new(x1, y1, x2, y2)
+}
+
+/// How far (pixels, plus 5 % of the box's size) a box of a still object may stray from the mean.
+const STILL_PX: f64 = 3.0;
+/// Boxes averaged at most for a still object.
+const STILL_MAX: u32 = 60;
+
 /// The move an action started is over (or no longer believed): no motion state is left.
 fn stop_moving(anchor: &mut Anchor) {
     anchor.moving = false;
@@ -1055,6 +1089,7 @@ fn infer_hidden_child(
             attachment: None,
             for_inference: false,
             type_votes: vec![(object_type.clone(), 1)],
+            still: None,
         },
         aligned: false,
         previous_centre: None,

@@ -83,6 +83,11 @@ pub struct Extensions {
     /// action: inside its container, at the container's base, a square of half the container's box
     /// width (its size was never seen), at θ_anch. The action says it exists and where it is.
     pub infer_hidden: bool,
+    /// For detectors whose boxes are noisy (not for ground-truth boxes): an object that no action
+    /// is moving stands still (H1), so its box is the mean of the boxes seen since it last moved,
+    /// not the latest detection with its noise (a contained object follows that steadier box too).
+    /// A box that strays from the mean starts it again. Off by default: it describes the sensor.
+    pub average_still: bool,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -108,6 +113,7 @@ impl Default for Extensions {
             restore_partial_boxes: false,
             established_first: true,
             infer_hidden: true,
+            average_still: false,
         }
     }
 }
@@ -259,6 +265,7 @@ impl Params {
                 restore_partial_boxes: false,
                 established_first: false,
                 infer_hidden: false,
+                average_still: false,
             },
             ..Params::cater()
         }

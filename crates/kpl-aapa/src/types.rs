@@ -182,6 +182,17 @@ pub struct Anchor {
     /// detector's occasional misclassification does not rename the object.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub type_votes: Vec<(Symbol, u32)>,
+    /// While the object stands still (extension `average_still`): the mean of the boxes seen since
+    /// it last moved, and how many there were.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still: Option<StillBox>,
+}
+
+/// The running mean of the boxes of an object standing still.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StillBox {
+    pub mean: [f64; 4],
+    pub count: u32,
 }
 
 impl Anchor {

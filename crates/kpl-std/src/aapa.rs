@@ -369,6 +369,7 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             restore_partial_boxes: boolean(ctx, "restore_partial_boxes")?,
             established_first: boolean(ctx, "established_first")?,
             infer_hidden: boolean(ctx, "infer_hidden")?,
+            average_still: boolean(ctx, "average_still")?,
         },
     })
 }
@@ -525,6 +526,11 @@ fn anchor_entry() -> Entry {
         "infer_hidden",
         ext.infer_hidden,
         "extension: an object a containing action hides but never perceived gets an anchor inside its container",
+    ))
+    .param(b(
+        "average_still",
+        ext.average_still,
+        "extension: the box of an object no action moves is the mean of its boxes since it last moved",
     ))
     .param(Param::optional(
         "action_rules",

@@ -233,7 +233,7 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     };
     let params = match &args.params {
         None => None,
-        Some(path) => Some(read_params(path, model)?),
+        Some(path) => Some(read_params(path, model, perception.noisy())?),
     };
     let videos = match &args.videos {
         None => None,
@@ -295,11 +295,11 @@ fn write_file(path: &Path, text: &str) -> Result<(), Failure> {
     std::fs::write(path, text).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))
 }
 
-fn read_params(path: &Path, model: Model) -> Result<Params, Failure> {
+fn read_params(path: &Path, model: Model, noisy_boxes: bool) -> Result<Params, Failure> {
     let text =
         std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
     // Fields missing from the file keep the model's defaults.
-    let mut base = serde_json::to_value(model.default_params())
+    let mut base = serde_json::to_value(model.params_for(noisy_boxes))
         .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
     let overrides: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;
