@@ -681,7 +681,22 @@ impl Aapa {
             let Some(att) = work[i].anchor.attachment.clone() else { continue };
             let Some(&parent) = index.get(&att.parent) else { continue };
             let parent_box = work[parent].anchor.bbox;
+            let parent_moving = work[parent].anchor.moving;
+            let parent_seen_still = work[parent].aligned && !parent_moving;
             let w = &mut work[i];
+            if att.provisional && !w.aligned {
+                if parent_seen_still {
+                    // The parent is seen where it came over the child: the geometry is fixed from
+                    // the child's box, which has not moved.
+                    let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
+                    geometry.hidden = att.hidden;
+                    w.anchor.attachment = Some(geometry);
+                    continue;
+                }
+                if parent_moving && let Some(a) = &mut w.anchor.attachment {
+                    a.provisional = false;
+                }
+            }
             if w.aligned {
                 let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
                 geometry.hidden = att.hidden;
@@ -868,6 +883,7 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         size: size(child),
         parent_scale: scale(parent),
         hidden: false,
+        provisional: false,
     }
 }
 
@@ -1025,8 +1041,9 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
 /// [`ChildPlacement::Under`]: the parent `pa` has come down over the child `c`. If the child took a
 /// percept of the parent's type this cycle, that was the parent arriving: the parent gets it and
 /// the child its box from before. Otherwise a parent not seen this cycle (it moved hidden) is moved
-/// so that its bottom centre is the child's. Returns the parent's box.
-fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> BBox {
+/// so that its bottom centre is the child's (a guess: the attachment is provisional). Returns the
+/// parent's box and whether it was guessed.
+fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) {
     let parent_type = work[pa].anchor.object_type.clone();
     let child = &work[c];
     let took_parent = child.aligned
@@ -1046,8 +1063,9 @@ fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> BBox {
         let base = bottom_centre(&work[c].anchor.bbox);
         let p = &mut work[pa].anchor;
         p.bbox = from_bottom_centre(base, size(&p.bbox));
+        return (p.bbox, true);
     }
-    work[pa].anchor.bbox
+    (work[pa].anchor.bbox, false)
 }
 
 /// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
@@ -1159,10 +1177,10 @@ fn apply_rule(
                         args: [work[a].anchor.symbol.clone(), work[b].anchor.symbol.clone()],
                     })
                 });
-                let parent_box = if *place_child == ChildPlacement::Under {
+                let (parent_box, guessed) = if *place_child == ChildPlacement::Under {
                     put_over(c, pa, work, time)
                 } else {
-                    parent_box
+                    (parent_box, false)
                 };
                 let w = &mut work[c];
                 if matches!(place_child, ChildPlacement::AtParentIfApart | ChildPlacement::Under)
@@ -1173,6 +1191,7 @@ fn apply_rule(
                 }
                 let mut attachment = geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel);
                 attachment.hidden = *hides_child;
+                attachment.provisional = guessed;
                 w.anchor.attachment = Some(attachment);
             }
             Effect::Detach { child, parent } => {

@@ -136,6 +136,11 @@ pub struct Attachment {
     /// The child cannot be seen while attached (contained): it is not aligned to percepts.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub hidden: bool,
+    /// The parent's box was a guess when the geometry was fixed (it came over the child unseen):
+    /// the geometry is fixed again, with the child where it is, when the parent is next seen
+    /// before it moves.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub provisional: bool,
 }
 
 /// One anchor: a symbol grounded in percepts (III-B).

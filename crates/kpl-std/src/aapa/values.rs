@@ -268,7 +268,7 @@ field_names! {
     offset = "offset", size = "size", parent_scale = "parent_scale", type_votes = "type_votes",
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
     relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
-    still = "still", mean = "mean", count = "count",
+    still = "still", mean = "mean", count = "count", provisional = "provisional",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -352,6 +352,9 @@ fn anchor_value(a: &Anchor) -> Value {
         geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
         if att.hidden {
             geometry.push((n.hidden.clone(), Value::Bool(true)));
+        }
+        if att.provisional {
+            geometry.push((n.provisional.clone(), Value::Bool(true)));
         }
         fields.push((n.attachment.clone(), named(geometry)));
     }
