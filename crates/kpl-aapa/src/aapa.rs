@@ -593,6 +593,7 @@ impl Aapa {
                 att.offset = [att.offset[0] * zoom, att.offset[1] * zoom];
                 att.size = [att.size[0] * zoom, att.size[1] * zoom];
                 att.parent_scale *= zoom;
+                att.parent_size = [att.parent_size[0] * zoom, att.parent_size[1] * zoom];
             }
         }
         Ok(())
@@ -707,8 +708,16 @@ impl Aapa {
                 } else {
                     1.0
                 };
+                // The offset scales with the parent's width and height (a carried object's offset
+                // in the image follows its carrier's shape, not only its size).
+                let [kx, ky] = match att.parent_size {
+                    [w0, h0] if self.params.extensions.scale_attached && w0 > 0.0 && h0 > 0.0 => {
+                        [parent_box.width() / w0, parent_box.height() / h0]
+                    }
+                    _ => [k, k],
+                };
                 let base = bottom_centre(&parent_box);
-                let reference = [base[0] + att.offset[0] * k, base[1] + att.offset[1] * k];
+                let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
                 w.anchor.bbox = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
             }
         }
@@ -882,6 +891,7 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         offset: [c[0] - p[0], c[1] - p[1]],
         size: size(child),
         parent_scale: scale(parent),
+        parent_size: size(parent),
         hidden: false,
         provisional: false,
     }

@@ -133,6 +133,10 @@ pub struct Attachment {
     pub size: [f64; 2],
     /// The parent's scale (square root of its box area) when the geometry was fixed.
     pub parent_scale: f64,
+    /// The parent's width and height when the geometry was fixed (`[0, 0]`: unknown, the offset
+    /// then scales with `parent_scale`).
+    #[serde(default)]
+    pub parent_size: [f64; 2],
     /// The child cannot be seen while attached (contained): it is not aligned to percepts.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub hidden: bool,

@@ -269,6 +269,7 @@ field_names! {
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
     relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
     still = "still", mean = "mean", count = "count", provisional = "provisional",
+    parent_size = "parent_size",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -350,6 +351,7 @@ fn anchor_value(a: &Anchor) -> Value {
         geometry.push((n.offset.clone(), floats(&att.offset)));
         geometry.push((n.size.clone(), floats(&att.size)));
         geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
+        geometry.push((n.parent_size.clone(), floats(&att.parent_size)));
         if att.hidden {
             geometry.push((n.hidden.clone(), Value::Bool(true)));
         }
