@@ -33,8 +33,7 @@ use crate::geometry::{
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
     Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
-    StillBox,
-    Symbol, WorldState,
+    StillBox, Symbol, WorldState,
 };
 
 /// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
@@ -191,7 +190,8 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
-            w.anchor.bbox = if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
+            w.anchor.bbox =
+                if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
             vote_type(&mut w.anchor, &percept.object_type);
             w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
             w.anchor.status = AnchorStatus::Visible;
@@ -439,7 +439,9 @@ impl Aapa {
         bindings: &mut [Binding],
         notes: &mut Vec<String>,
     ) {
-        let Some(nearest) = near_other(action, &bindings[i], work, self.params.theta_anch, &[]) else { return };
+        let Some(nearest) = near_other(action, &bindings[i], work, self.params.theta_anch, &[]) else {
+            return;
+        };
         let Some(j) = bindings.iter().position(|b| b.bound.as_ref() == Some(&nearest)) else { return };
         if j == i || names_single_other(&bindings[j].action, work) {
             return;

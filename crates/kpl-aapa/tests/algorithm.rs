@@ -574,10 +574,8 @@ fn an_object_a_contain_names_but_never_perceived_is_inferred_inside_the_cone() {
     assert_eq!(s.status, AnchorStatus::Attached);
     assert!(s.attachment.as_ref().is_some_and(|a| &*a.parent == "cone0" && a.hidden));
     // The published algorithm has no anchor to attach, nor with the extension off.
-    let off = Params {
-        extensions: Extensions { infer_hidden: false, ..Extensions::default() },
-        ..Params::cater()
-    };
+    let off =
+        Params { extensions: Extensions { infer_hidden: false, ..Extensions::default() }, ..Params::cater() };
     for params in [Params::paper_cater(), off] {
         let last = run(&Aapa::new(params).unwrap(), &frames).pop().unwrap();
         assert!(last.best_of_type("snitch", 0.0).is_none());
@@ -682,20 +680,28 @@ fn the_boxes_of_an_object_standing_still_are_averaged_when_asked() {
         })
         .collect();
     let error = |b: &BBox| {
-        [b.x1 - truth[0], b.y1 - truth[1], b.x2 - truth[2], b.y2 - truth[3]].iter().map(|d| d.abs()).sum::<f64>()
+        [b.x1 - truth[0], b.y1 - truth[1], b.x2 - truth[2], b.y2 - truth[3]]
+            .iter()
+            .map(|d| d.abs())
+            .sum::<f64>()
     };
-    let averaging = Params {
-        extensions: Extensions { average_still: true, ..Extensions::default() },
-        ..Params::cater()
-    };
+    let averaging =
+        Params { extensions: Extensions { average_still: true, ..Extensions::default() }, ..Params::cater() };
     let raw = run(&cater(), &frames).pop().unwrap().anchor("cube0").unwrap().bbox;
-    let mean = run(&Aapa::new(averaging.clone()).unwrap(), &frames).pop().unwrap().anchor("cube0").unwrap().bbox;
+    let mean =
+        run(&Aapa::new(averaging.clone()).unwrap(), &frames).pop().unwrap().anchor("cube0").unwrap().bbox;
     assert_eq!(raw, frames[19].0[0].bbox, "off by default: the latest box");
     assert!(error(&mean) < 0.5 * error(&raw), "mean {mean:?}, raw {raw:?}");
     // A move (an action) starts the mean again: right after it, the box is the new one.
     let mut moved = frames.clone();
-    moved.push((vec![p("cube0", "cube", bx(60., 50., 90., 90.))], vec![Action::started("_slide", &["cube0"], None)]));
-    moved.push((vec![p("cube0", "cube", bx(70., 50., 100., 90.))], vec![Action::completed("_slide", &["cube0"])]));
+    moved.push((
+        vec![p("cube0", "cube", bx(60., 50., 90., 90.))],
+        vec![Action::started("_slide", &["cube0"], None)],
+    ));
+    moved.push((
+        vec![p("cube0", "cube", bx(70., 50., 100., 90.))],
+        vec![Action::completed("_slide", &["cube0"])],
+    ));
     let last = run(&Aapa::new(averaging).unwrap(), &moved).pop().unwrap();
     assert_eq!(last.anchor("cube0").unwrap().bbox, bx(70., 50., 100., 90.));
 }

@@ -288,7 +288,8 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
         }
         None => AnnotationSet::read(&annotations_dir(&options.data))?,
     };
-    let params = options.params.clone().unwrap_or_else(|| options.model.params_for(options.perception.noisy()));
+    let params =
+        options.params.clone().unwrap_or_else(|| options.model.params_for(options.perception.noisy()));
     let next = AtomicUsize::new(0);
     type Outcome = Result<VideoScore, String>;
     let results: Mutex<Vec<Option<Outcome>>> = Mutex::new(vec![None; videos.len()]);

@@ -27,15 +27,13 @@ pub enum Command {
                       LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
-    #[command(
-        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out out/cater`):\n  \
+    #[command(after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out out/cater`):\n  \
                       kpl cater eval --data out/cater --model aapa --perception perfect\n  \
                       kpl cater eval --data out/cater --model heuristic --perception detector --json out/h.json\n  \
                       kpl cater eval --data out/cater --model aapa --frames from-first-detection\n  \
                       kpl cater eval --data out/cater --model aapa --per-video out/aapa.csv\n\n\
                       LA-CATER's own files: --pickles DIR reads OPNet's perception pickles, --videos FILE a split, \
-                      --annotations DIR its annotation files (docs/cater.md)."
-    )]
+                      --annotations DIR its annotation files (docs/cater.md).")]
     Eval(EvalArgs),
 }
 

@@ -361,7 +361,10 @@ fn anchor_value(a: &Anchor) -> Value {
         fields.push((n.attachment.clone(), named(geometry)));
     }
     if let Some(still) = still {
-        let mean = vec![(n.mean.clone(), floats(&still.mean)), (n.count.clone(), Value::Int(i64::from(still.count)))];
+        let mean = vec![
+            (n.mean.clone(), floats(&still.mean)),
+            (n.count.clone(), Value::Int(i64::from(still.count))),
+        ];
         fields.push((n.still.clone(), named(mean)));
     }
     if !type_votes.is_empty() {
