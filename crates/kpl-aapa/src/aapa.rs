@@ -746,6 +746,10 @@ fn validate(p: &Params) -> Result<(), AapaError> {
     if !(p.conf_minus > 0.0 && p.conf_minus <= 1.0) {
         return bad("conf_minus", "must be in (0, 1]");
     }
+    let [w, c] = p.extensions.infer_hidden_box;
+    if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+        return bad("infer_hidden_box", "width must be a positive number and the centre finite");
+    }
     if let Some(img) = p.image
         && !(img.width > 0.0 && img.height > 0.0 && img.width.is_finite() && img.height.is_finite())
     {
@@ -1081,18 +1085,22 @@ fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) 
 }
 
 /// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
-/// perceived, inside its container `pa` (a square of half the container's box width on its base).
+/// perceived, inside its container `pa` (a square placed by `placement`, see
+/// [`Extensions::infer_hidden_box`](crate::Extensions::infer_hidden_box)).
 fn infer_hidden_child(
     object_type: &Symbol,
     pa: usize,
+    placement: [f64; 2],
     time: Time,
     work: &mut Vec<Work>,
     theta_anch: f64,
     notes: &mut Vec<String>,
 ) -> usize {
     let parent_box = work[pa].anchor.bbox;
-    let side = parent_box.width() / 2.0;
-    let bbox = from_bottom_centre(bottom_centre(&parent_box), [side, side]);
+    let [w, c] = placement;
+    let side = parent_box.width() * w;
+    let [cx, cy] = [centre(&parent_box)[0], parent_box.y1 + parent_box.height() * c];
+    let bbox = BBox::new(cx - side / 2.0, cy - side / 2.0, cx + side / 2.0, cy + side / 2.0);
     let used: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
     let symbol = fresh_symbol(&Percept::new("", object_type, bbox), &used);
     notes.push(format!(
@@ -1167,7 +1175,15 @@ fn apply_rule(
                     Some(c) => c,
                     None if *hides_child && params.extensions.infer_hidden => {
                         let Some(arg) = action.args.get(*child) else { continue };
-                        infer_hidden_child(arg, pa, time, work, theta_anch, notes)
+                        infer_hidden_child(
+                            arg,
+                            pa,
+                            params.extensions.infer_hidden_box,
+                            time,
+                            work,
+                            theta_anch,
+                            notes,
+                        )
                     }
                     None => continue,
                 };

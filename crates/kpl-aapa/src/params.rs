@@ -80,9 +80,14 @@ pub struct Extensions {
     pub established_first: bool,
     /// An object that an attaching action hides (`_contain(cone, obj)`) but that has no anchor (it
     /// was never perceived: hidden behind another from the start) gets one, inferred from the
-    /// action: inside its container, at the container's base, a square of half the container's box
-    /// width (its size was never seen), at θ_anch. The action says it exists and where it is.
+    /// action: inside its container, a square placed by `infer_hidden_box`, at θ_anch. The action
+    /// says it exists and where it is; its size was never seen.
     pub infer_hidden: bool,
+    /// Where an inferred hidden object's box is in its container's box: `[w, c]`, a square of
+    /// width `w` times the container's box width, centred horizontally, its centre `c` of the
+    /// container's box height down from its top. The default `[0.42, 0.6]` is the median of CATER's
+    /// snitch under its cone (the generator's tuning seed, 148 contains).
+    pub infer_hidden_box: [f64; 2],
     /// For detectors whose boxes are noisy (not for ground-truth boxes): an object that no action
     /// is moving stands still (H1), so its box is the mean of the boxes seen since it last moved,
     /// not the latest detection with its noise (a contained object follows that steadier box too).
@@ -113,6 +118,7 @@ impl Default for Extensions {
             restore_partial_boxes: false,
             established_first: true,
             infer_hidden: true,
+            infer_hidden_box: [0.42, 0.6],
             average_still: false,
         }
     }
@@ -265,6 +271,7 @@ impl Params {
                 restore_partial_boxes: false,
                 established_first: false,
                 infer_hidden: false,
+                infer_hidden_box: Extensions::default().infer_hidden_box,
                 average_still: false,
             },
             ..Params::cater()

@@ -369,6 +369,7 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             restore_partial_boxes: boolean(ctx, "restore_partial_boxes")?,
             established_first: boolean(ctx, "established_first")?,
             infer_hidden: boolean(ctx, "infer_hidden")?,
+            infer_hidden_box: Extensions::default().infer_hidden_box,
             average_still: boolean(ctx, "average_still")?,
         },
     })
