@@ -33,7 +33,7 @@ use crate::geometry::{
 use crate::params::{ActionRule, ChildPlacement, Effect, MotionProfile, Params};
 use crate::types::{
     Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
-    Symbol, WorldState,
+    StillBox, Symbol, WorldState,
 };
 
 /// The AAPA algorithm with its parameters. Holds no per-run state: that is the world state.
@@ -53,6 +53,9 @@ struct Work {
     /// Confidence at the start of this cycle (`-inf` for anchors created this cycle).
     previous_confidence: f64,
     removed: bool,
+    /// The box before this cycle's alignment, and the type of the percept aligned to it (if any).
+    box_before: BBox,
+    percept_type: Option<Symbol>,
 }
 
 impl Aapa {
@@ -125,9 +128,11 @@ impl Aapa {
             work.push(Work {
                 previous_centre: seen_last_cycle.then(|| centre(&anchor.bbox)),
                 previous_confidence: anchor.confidence,
+                box_before: anchor.bbox,
                 anchor,
                 aligned: false,
                 removed: false,
+                percept_type: None,
             });
         }
 
@@ -170,6 +175,8 @@ impl Aapa {
             } else {
                 percept.bbox
             };
+            w.box_before = w.anchor.bbox;
+            w.percept_type = Some(percept.object_type.clone());
             let new_centre = centre(&observed);
             w.anchor.velocity = match (w.previous_centre, dt_seconds) {
                 (Some(old), Some(dt)) if dt > 0.0 => {
@@ -183,7 +190,8 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
-            w.anchor.bbox = observed;
+            w.anchor.bbox =
+                if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
             vote_type(&mut w.anchor, &percept.object_type);
             w.anchor.confidence = (w.anchor.confidence + p.conf_plus).min(1.0);
             w.anchor.status = AnchorStatus::Visible;
@@ -224,11 +232,14 @@ impl Aapa {
                     attachment: None,
                     for_inference: false,
                     type_votes: vec![(percept.object_type.clone(), 1)],
+                    still: None,
                 },
                 aligned: true,
                 previous_centre: None,
                 previous_confidence: f64::NEG_INFINITY,
                 removed: false,
+                box_before: percept.bbox,
+                percept_type: Some(percept.object_type.clone()),
             });
         }
 
@@ -317,7 +328,7 @@ impl Aapa {
         &self,
         action: &Action,
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         bindings: &mut Vec<Binding>,
         notes: &mut Vec<String>,
     ) {
@@ -330,7 +341,7 @@ impl Aapa {
         });
         if !ambiguous {
             for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, work, theta_anch, notes);
+                apply_rule(rule, action, time, work, &self.params, notes);
             }
             return;
         }
@@ -368,6 +379,7 @@ impl Aapa {
                         let symbol = match bindings[i].bound.clone() {
                             Some(symbol) => Some(symbol),
                             None => {
+                                self.reassign_nearest(i, action, time, work, bindings, notes);
                                 let taken = bound_symbols(bindings);
                                 let symbol = near_other(action, &bindings[i], work, theta_anch, &taken)
                                     .or_else(|| first_mover(&bindings[i], work, &taken, 0.0))
@@ -404,14 +416,59 @@ impl Aapa {
         action: &Action,
         symbol: &Symbol,
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         notes: &mut Vec<String>,
     ) {
         let mut bound = action.clone();
         bound.args[0] = symbol.clone();
         for rule in self.rules_for(&bound) {
-            apply_rule(rule, &bound, time, work, self.params.theta_anch, notes);
+            apply_rule(rule, &bound, time, work, &self.params, notes);
         }
+    }
+
+    /// An action that names another, single object (`_contain(cone, snitch)`) is decided by where
+    /// that object is when it completes, the surest evidence there is. If the candidate nearest it
+    /// was taken by another action on the type that was decided only by the order of motion (a
+    /// lift shows before a slide that started earlier), that other action gets another candidate.
+    fn reassign_nearest(
+        &self,
+        i: usize,
+        action: &Action,
+        time: Time,
+        work: &mut Vec<Work>,
+        bindings: &mut [Binding],
+        notes: &mut Vec<String>,
+    ) {
+        let Some(nearest) = near_other(action, &bindings[i], work, self.params.theta_anch, &[]) else {
+            return;
+        };
+        let Some(j) = bindings.iter().position(|b| b.bound.as_ref() == Some(&nearest)) else { return };
+        if j == i || names_single_other(&bindings[j].action, work) {
+            return;
+        }
+        let taken = bound_symbols(bindings);
+        let Some(other) = bindings[j]
+            .candidates
+            .iter()
+            .map(|c| c.symbol.clone())
+            .find(|s| *s != nearest && !taken.contains(s))
+        else {
+            return;
+        };
+        notes.push(format!(
+            "action `{}` rebound from `{nearest}` to `{other}`: `{}` is nearest `{}`",
+            bindings[j].action.name,
+            nearest,
+            action.args.get(1).map_or("", |a| a.as_ref())
+        ));
+        if let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == nearest) {
+            stop_moving(&mut w.anchor);
+        }
+        if !bindings[j].completed {
+            let started = bindings[j].action.clone();
+            self.apply_bound(&started, &other, time, work, notes);
+        }
+        bindings[j].bound = Some(other);
     }
 
     /// Notes which candidates started moving, decides the open bindings (oldest first) whose
@@ -420,7 +477,7 @@ impl Aapa {
         &self,
         bindings: &mut [Binding],
         time: Time,
-        work: &mut [Work],
+        work: &mut Vec<Work>,
         notes: &mut Vec<String>,
     ) {
         for binding in bindings.iter_mut().filter(|b| b.bound.is_none()) {
@@ -538,6 +595,7 @@ impl Aapa {
                 att.offset = [att.offset[0] * zoom, att.offset[1] * zoom];
                 att.size = [att.size[0] * zoom, att.size[1] * zoom];
                 att.parent_scale *= zoom;
+                att.parent_size = [att.parent_size[0] * zoom, att.parent_size[1] * zoom];
             }
         }
         Ok(())
@@ -626,7 +684,22 @@ impl Aapa {
             let Some(att) = work[i].anchor.attachment.clone() else { continue };
             let Some(&parent) = index.get(&att.parent) else { continue };
             let parent_box = work[parent].anchor.bbox;
+            let parent_moving = work[parent].anchor.moving;
+            let parent_seen_still = work[parent].aligned && !parent_moving;
             let w = &mut work[i];
+            if att.provisional && !w.aligned {
+                if parent_seen_still {
+                    // The parent is seen where it came over the child: the geometry is fixed from
+                    // the child's box, which has not moved.
+                    let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
+                    geometry.hidden = att.hidden;
+                    w.anchor.attachment = Some(geometry);
+                    continue;
+                }
+                if parent_moving && let Some(a) = &mut w.anchor.attachment {
+                    a.provisional = false;
+                }
+            }
             if w.aligned {
                 let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
                 geometry.hidden = att.hidden;
@@ -637,8 +710,16 @@ impl Aapa {
                 } else {
                     1.0
                 };
+                // The offset scales with the parent's width and height (a carried object's offset
+                // in the image follows its carrier's shape, not only its size).
+                let [kx, ky] = match att.parent_size {
+                    [w0, h0] if self.params.extensions.scale_attached && w0 > 0.0 && h0 > 0.0 => {
+                        [parent_box.width() / w0, parent_box.height() / h0]
+                    }
+                    _ => [k, k],
+                };
                 let base = bottom_centre(&parent_box);
-                let reference = [base[0] + att.offset[0] * k, base[1] + att.offset[1] * k];
+                let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
                 w.anchor.bbox = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
             }
         }
@@ -664,6 +745,10 @@ fn validate(p: &Params) -> Result<(), AapaError> {
     }
     if !(p.conf_minus > 0.0 && p.conf_minus <= 1.0) {
         return bad("conf_minus", "must be in (0, 1]");
+    }
+    let [w, c] = p.extensions.infer_hidden_box;
+    if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+        return bad("infer_hidden_box", "width must be a positive number and the centre finite");
     }
     if let Some(img) = p.image
         && !(img.width > 0.0 && img.height > 0.0 && img.width.is_finite() && img.height.is_finite())
@@ -720,6 +805,38 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
         }
     }
 }
+
+/// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen
+/// of it are one box plus the detector's noise. While it is not moving and each new box stays within
+/// [`STILL_PX`] pixels (plus 5 % of its size) of the mean so far, the anchor's box is that mean (of at
+/// most [`STILL_MAX`] boxes, so it can follow a slow drift); otherwise the mean starts again here.
+fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
+    let obs = [observed.x1, observed.y1, observed.x2, observed.y2];
+    let restart = StillBox { mean: obs, count: 1 };
+    let next = match anchor.still {
+        Some(still) if !anchor.moving => {
+            let m = still.mean;
+            let tolerance = STILL_PX + 0.05 * scale(&observed);
+            let near = (0..4).all(|k| (obs[k] - m[k]).abs() <= tolerance);
+            if near {
+                let n = (still.count + 1).min(STILL_MAX);
+                let w = 1.0 / f64::from(n);
+                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n }
+            } else {
+                restart
+            }
+        }
+        _ => restart,
+    };
+    anchor.still = Some(next);
+    let [x1, y1, x2, y2] = next.mean;
+    BBox::new(x1, y1, x2, y2)
+}
+
+/// How far (pixels, plus 5 % of the box's size) a box of a still object may stray from the mean.
+const STILL_PX: f64 = 3.0;
+/// Boxes averaged at most for a still object.
+const STILL_MAX: u32 = 60;
 
 /// The move an action started is over (or no longer believed): no motion state is left.
 fn stop_moving(anchor: &mut Anchor) {
@@ -780,7 +897,9 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         offset: [c[0] - p[0], c[1] - p[1]],
         size: size(child),
         parent_scale: scale(parent),
+        parent_size: size(parent),
         hidden: false,
+        provisional: false,
     }
 }
 
@@ -935,14 +1054,100 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
     })
 }
 
+/// [`ChildPlacement::Under`]: the parent `pa` has come down over the child `c`. If the child took a
+/// percept of the parent's type this cycle, that was the parent arriving: the parent gets it and
+/// the child its box from before. Otherwise a parent not seen this cycle (it moved hidden) is moved
+/// so that its bottom centre is the child's (a guess: the attachment is provisional). Returns the
+/// parent's box and whether it was guessed.
+fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) {
+    let parent_type = work[pa].anchor.object_type.clone();
+    let child = &work[c];
+    let took_parent = child.aligned
+        && !work[pa].aligned
+        && child.percept_type.as_ref().is_some_and(|t| *t == parent_type && *t != child.anchor.object_type);
+    if took_parent {
+        let seen = child.anchor.bbox;
+        let before = child.box_before;
+        work[c].anchor.bbox = before;
+        work[c].aligned = false;
+        let p = &mut work[pa];
+        p.anchor.bbox = seen;
+        p.anchor.status = AnchorStatus::Visible;
+        p.anchor.last_seen = time;
+        p.aligned = true;
+    } else if !work[pa].aligned {
+        let base = bottom_centre(&work[c].anchor.bbox);
+        let p = &mut work[pa].anchor;
+        p.bbox = from_bottom_centre(base, size(&p.bbox));
+        return (p.bbox, true);
+    }
+    (work[pa].anchor.bbox, false)
+}
+
+/// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
+/// perceived, inside its container `pa` (a square placed by `placement`, see
+/// [`Extensions::infer_hidden_box`](crate::Extensions::infer_hidden_box)).
+fn infer_hidden_child(
+    object_type: &Symbol,
+    pa: usize,
+    placement: [f64; 2],
+    time: Time,
+    work: &mut Vec<Work>,
+    theta_anch: f64,
+    notes: &mut Vec<String>,
+) -> usize {
+    let parent_box = work[pa].anchor.bbox;
+    let [w, c] = placement;
+    let side = parent_box.width() * w;
+    let [cx, cy] = [centre(&parent_box)[0], parent_box.y1 + parent_box.height() * c];
+    let bbox = BBox::new(cx - side / 2.0, cy - side / 2.0, cx + side / 2.0, cy + side / 2.0);
+    let used: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+    let symbol = fresh_symbol(&Percept::new("", object_type, bbox), &used);
+    notes.push(format!(
+        "`{symbol}` ({object_type}) inferred inside `{}`: never perceived",
+        work[pa].anchor.symbol
+    ));
+    work.push(Work {
+        anchor: Anchor {
+            symbol,
+            object_type: object_type.clone(),
+            bbox,
+            confidence: theta_anch,
+            status: AnchorStatus::Attached,
+            colour: None,
+            first_seen: time,
+            last_seen: time,
+            velocity: [0.0, 0.0],
+            moving: false,
+            moving_until: None,
+            moving_since: None,
+            full_size: None,
+            last_percept_box: None,
+            partial: false,
+            attachment: None,
+            for_inference: false,
+            type_votes: vec![(object_type.clone(), 1)],
+            still: None,
+        },
+        aligned: false,
+        previous_centre: None,
+        previous_confidence: theta_anch,
+        removed: false,
+        box_before: bbox,
+        percept_type: None,
+    });
+    work.len() - 1
+}
+
 fn apply_rule(
     rule: &ActionRule,
     action: &Action,
     time: Time,
-    work: &mut [Work],
-    theta_anch: f64,
+    work: &mut Vec<Work>,
+    params: &Params,
     notes: &mut Vec<String>,
 ) {
+    let theta_anch = params.theta_anch;
     // Other arguments that name a type several anchors share are the one nearest the moving object
     // (argument 0): what a cone comes down over is where it ends.
     let lookup = |k: usize, work: &[Work], notes: &mut Vec<String>| -> Option<usize> {
@@ -965,8 +1170,22 @@ fn apply_rule(
     for effect in &rule.effects {
         match effect {
             Effect::Attach { child, parent, relation, place_child, hides_child } => {
-                let (Some(c), Some(pa)) = (lookup(*child, work, notes), lookup(*parent, work, notes)) else {
-                    continue;
+                let Some(pa) = lookup(*parent, work, notes) else { continue };
+                let c = match lookup(*child, work, notes) {
+                    Some(c) => c,
+                    None if *hides_child && params.extensions.infer_hidden => {
+                        let Some(arg) = action.args.get(*child) else { continue };
+                        infer_hidden_child(
+                            arg,
+                            pa,
+                            params.extensions.infer_hidden_box,
+                            time,
+                            work,
+                            theta_anch,
+                            notes,
+                        )
+                    }
+                    None => continue,
                 };
                 let index = symbol_index(work);
                 if c == pa || is_ancestor(c, pa, work, &index) {
@@ -986,8 +1205,13 @@ fn apply_rule(
                         args: [work[a].anchor.symbol.clone(), work[b].anchor.symbol.clone()],
                     })
                 });
+                let (parent_box, guessed) = if *place_child == ChildPlacement::Under {
+                    put_over(c, pa, work, time)
+                } else {
+                    (parent_box, false)
+                };
                 let w = &mut work[c];
-                if *place_child == ChildPlacement::AtParentIfApart
+                if matches!(place_child, ChildPlacement::AtParentIfApart | ChildPlacement::Under)
                     && !w.aligned
                     && !intersects(&w.anchor.bbox, &parent_box)
                 {
@@ -995,6 +1219,7 @@ fn apply_rule(
                 }
                 let mut attachment = geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel);
                 attachment.hidden = *hides_child;
+                attachment.provisional = guessed;
                 w.anchor.attachment = Some(attachment);
             }
             Effect::Detach { child, parent } => {

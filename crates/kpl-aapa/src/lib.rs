@@ -28,5 +28,5 @@ pub use params::{
 };
 pub use types::{
     Action, ActionPhase, Anchor, AnchorStatus, Attachment, Binding, CameraPose, Candidate, Percept, Relation,
-    Symbol, WorldState, bbox_array,
+    StillBox, Symbol, WorldState, bbox_array,
 };

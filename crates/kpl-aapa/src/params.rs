@@ -78,6 +78,21 @@ pub struct Extensions {
     /// tentative anchor counts double, so a short-lived false detection kept as occluded does not
     /// take the object that has been there all along when it reappears.
     pub established_first: bool,
+    /// An object that an attaching action hides (`_contain(cone, obj)`) but that has no anchor (it
+    /// was never perceived: hidden behind another from the start) gets one, inferred from the
+    /// action: inside its container, a square placed by `infer_hidden_box`, at θ_anch. The action
+    /// says it exists and where it is; its size was never seen.
+    pub infer_hidden: bool,
+    /// Where an inferred hidden object's box is in its container's box: `[w, c]`, a square of
+    /// width `w` times the container's box width, centred horizontally, its centre `c` of the
+    /// container's box height down from its top. The default `[0.42, 0.6]` is the median of CATER's
+    /// snitch under its cone (the generator's tuning seed, 148 contains).
+    pub infer_hidden_box: [f64; 2],
+    /// For detectors whose boxes are noisy (not for ground-truth boxes): an object that no action
+    /// is moving stands still (H1), so its box is the mean of the boxes seen since it last moved,
+    /// not the latest detection with its noise (a contained object follows that steadier box too).
+    /// A box that strays from the mean starts it again. Off by default: it describes the sensor.
+    pub average_still: bool,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -102,6 +117,9 @@ impl Default for Extensions {
             motion_profile: MotionProfile::EaseInOut,
             restore_partial_boxes: false,
             established_first: true,
+            infer_hidden: true,
+            infer_hidden_box: [0.42, 0.6],
+            average_still: false,
         }
     }
 }
@@ -181,6 +199,11 @@ pub enum ChildPlacement {
     /// placed on the parent's bottom centre: the action says it is inside (a cone put over it), so
     /// a stale position cannot be right.
     AtParentIfApart,
+    /// The parent came down over the child (a cone put over it), so their bottom centres meet. A
+    /// parent not seen this cycle (it moved hidden) is moved over the child; a child that took the
+    /// parent's percept this cycle (the arriving cone, where the child was) gives it back to the
+    /// parent and keeps its own box; otherwise as [`ChildPlacement::AtParentIfApart`].
+    Under,
 }
 
 /// A relation produced by an attaching action, `name(args[a], args[b])`.
@@ -247,6 +270,9 @@ impl Params {
                 motion_profile: MotionProfile::ConstantVelocity,
                 restore_partial_boxes: false,
                 established_first: false,
+                infer_hidden: false,
+                infer_hidden_box: Extensions::default().infer_hidden_box,
+                average_still: false,
             },
             ..Params::cater()
         }
@@ -317,7 +343,7 @@ impl ActionRule {
                         child: 1,
                         parent: 0,
                         relation: Some(RelationRule { name: "contained".into(), args: [1, 0] }),
-                        place_child: ChildPlacement::AtParentIfApart,
+                        place_child: ChildPlacement::Under,
                         hides_child: true,
                     },
                 ],

@@ -133,9 +133,18 @@ pub struct Attachment {
     pub size: [f64; 2],
     /// The parent's scale (square root of its box area) when the geometry was fixed.
     pub parent_scale: f64,
+    /// The parent's width and height when the geometry was fixed (`[0, 0]`: unknown, the offset
+    /// then scales with `parent_scale`).
+    #[serde(default)]
+    pub parent_size: [f64; 2],
     /// The child cannot be seen while attached (contained): it is not aligned to percepts.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub hidden: bool,
+    /// The parent's box was a guess when the geometry was fixed (it came over the child unseen):
+    /// the geometry is fixed again, with the child where it is, when the parent is next seen
+    /// before it moves.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub provisional: bool,
 }
 
 /// One anchor: a symbol grounded in percepts (III-B).
@@ -182,6 +191,17 @@ pub struct Anchor {
     /// detector's occasional misclassification does not rename the object.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub type_votes: Vec<(Symbol, u32)>,
+    /// While the object stands still (extension `average_still`): the mean of the boxes seen since
+    /// it last moved, and how many there were.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still: Option<StillBox>,
+}
+
+/// The running mean of the boxes of an object standing still.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StillBox {
+    pub mean: [f64; 4],
+    pub count: u32,
 }
 
 impl Anchor {

@@ -560,3 +560,156 @@ fn an_action_that_never_completes_is_forgotten() {
     }
     assert!(world.bindings.is_empty());
 }
+
+#[test]
+fn an_object_a_contain_names_but_never_perceived_is_inferred_inside_the_cone() {
+    let cone = p("cone0", "cone", bx(200., 60., 240., 100.));
+    let mut frames = still(vec![cone.clone()], 3);
+    frames.push((vec![cone.clone()], vec![Action::completed("_contain", &["cone0", "snitch"])]));
+    frames.push((vec![cone], vec![]));
+    let last = run(&cater(), &frames).pop().unwrap();
+    let s = last.best_of_type("snitch", 0.1).expect("inferred from the action");
+    // A square of 0.42 of the cone's width centred 0.6 of its height down, attached, hidden.
+    let expected = bx(220. - 8.4, 84. - 8.4, 220. + 8.4, 84. + 8.4);
+    for (a, b) in [
+        (s.bbox.x1, expected.x1),
+        (s.bbox.y1, expected.y1),
+        (s.bbox.x2, expected.x2),
+        (s.bbox.y2, expected.y2),
+    ] {
+        assert!((a - b).abs() < 1e-9, "{:?}", s.bbox);
+    }
+    assert_eq!(s.status, AnchorStatus::Attached);
+    assert!(s.attachment.as_ref().is_some_and(|a| &*a.parent == "cone0" && a.hidden));
+    // The published algorithm has no anchor to attach, nor with the extension off.
+    let off =
+        Params { extensions: Extensions { infer_hidden: false, ..Extensions::default() }, ..Params::cater() };
+    for params in [Params::paper_cater(), off] {
+        let last = run(&Aapa::new(params).unwrap(), &frames).pop().unwrap();
+        assert!(last.best_of_type("snitch", 0.0).is_none());
+    }
+}
+
+#[test]
+fn a_cone_that_came_down_unseen_is_put_over_its_content() {
+    // The cone is last seen far away; it moves hidden and comes down over the snitch, which is
+    // hidden by the cone in the completion frame. The contained snitch stays where it was, the cone
+    // is believed over it, and when the cone is seen again the snitch keeps its place.
+    let snitch = p("spl0", "snitch", bx(100., 90., 110., 100.));
+    let far = p("cone0", "cone", bx(200., 60., 240., 100.));
+    let mut frames = still(vec![far, snitch.clone()], 8);
+    frames.push((vec![snitch], vec![Action::started("_contain", &["cone0", "spl0"], Some(11 * FRAME))]));
+    frames.push((vec![], vec![]));
+    frames.push((vec![], vec![]));
+    frames.push((vec![], vec![Action::completed("_contain", &["cone0", "spl0"])]));
+    let worlds = run(&cater(), &frames);
+    let at_completion = &worlds[11];
+    assert_eq!(at_completion.anchor("spl0").unwrap().bbox, bx(100., 90., 110., 100.));
+    let cone = at_completion.anchor("cone0").unwrap();
+    assert_eq!((cone.bbox.x1 + cone.bbox.x2) / 2.0, 105.0, "{:?}", cone.bbox);
+    // Seen again a little lower (its rim is in front of the snitch): the snitch does not move.
+    let mut frames = frames.clone();
+    frames.push((vec![p("cone0", "cone", bx(85., 66., 125., 106.))], vec![]));
+    frames.push((vec![p("cone0", "cone", bx(85., 66., 125., 106.))], vec![]));
+    let last = run(&cater(), &frames).pop().unwrap();
+    assert_eq!(last.anchor("spl0").unwrap().bbox, bx(100., 90., 110., 100.));
+    assert_eq!(last.anchor("spl0").unwrap().status, AnchorStatus::Attached);
+}
+
+#[test]
+fn a_cone_percept_taken_by_its_content_goes_back_to_the_cone() {
+    // The cone moved hidden; when it lands over the snitch, its percept is nearer the snitch's
+    // anchor than the cone's and is aligned to the snitch (type mismatch and all). The contain
+    // completing in that frame gives it back.
+    let snitch = p("spl0", "snitch", bx(100., 90., 110., 100.));
+    let far = p("cone0", "cone", bx(250., 20., 270., 40.));
+    let mut frames = still(vec![far, snitch], 3);
+    frames.push((vec![], vec![Action::started("_contain", &["cone0", "spl0"], Some(5 * FRAME))]));
+    let landed = p("cone0", "cone", bx(95., 80., 115., 101.));
+    frames.push((vec![landed.clone()], vec![Action::completed("_contain", &["cone0", "spl0"])]));
+    frames.push((vec![landed], vec![]));
+    let worlds = run(&cater(), &frames);
+    for w in &worlds[4..] {
+        assert_eq!(w.anchor("cone0").unwrap().bbox, bx(95., 80., 115., 101.));
+        assert_eq!(w.anchor("spl0").unwrap().bbox, bx(100., 90., 110., 100.));
+    }
+}
+
+#[test]
+fn a_contain_decided_by_proximity_takes_its_cone_back_from_a_slide_bound_by_motion_order() {
+    // Two identical cones: a slide of the type starts first, then a contain of the snitch. The
+    // contain's cone (lifted) shows motion before the slider, so the slide binds it first; the
+    // contain completes over the snitch and takes that cone back.
+    const CONE: &str = "large_blue_cone";
+    let snitch = bx(100., 100., 110., 110.);
+    let mut frames = Vec::new();
+    for f in 0..40 {
+        let u = |a: f64, b: f64| ((f as f64 - a) / (b - a)).clamp(0.0, 1.0);
+        let lift = 30.0 * (u(12.0, 16.0) - u(26.0, 30.0));
+        let x = 200.0 + (100.0 - 200.0) * u(16.0, 26.0);
+        let lifted = bx(x - 8.0, 80.0 - lift, x + 18.0, 112.0 - lift);
+        // The slider creeps from frame 10 and shows no motion before frame 14.
+        let lx = 40.0 - 20.0 * u(14.0, 30.0).powi(2);
+        let slider = bx(lx, 80.0, lx + 26.0, 112.0);
+        let mut percepts = vec![p("cone0", CONE, slider), p("cone1", CONE, lifted)];
+        if f < 26 {
+            percepts.push(p("spl0", "snitch", snitch));
+        }
+        let mut actions = Vec::new();
+        if f == 10 {
+            actions.push(Action::started("_slide", &[CONE], Some(30 * FRAME)));
+        }
+        if f == 12 {
+            actions.push(Action::started("_contain", &[CONE, "snitch"], Some(30 * FRAME)));
+        }
+        if f == 30 {
+            actions.push(Action::completed("_slide", &[CONE]));
+            actions.push(Action::completed("_contain", &[CONE, "snitch"]));
+        }
+        frames.push((percepts, actions));
+    }
+    let worlds = run(&cater(), &frames);
+    let last = worlds.last().unwrap();
+    let parent = &last.anchor("spl0").unwrap().attachment.as_ref().expect("contained").parent;
+    assert_eq!(&**parent, "cone1");
+    assert!(worlds.iter().any(|w| w.notes.iter().any(|n| n.contains("rebound"))));
+}
+
+#[test]
+fn the_boxes_of_an_object_standing_still_are_averaged_when_asked() {
+    // A detector's noise around a fixed box; the object is not moved by any action.
+    let truth = [50.0, 50.0, 80.0, 90.0];
+    let noise = [0.8, -1.1, 0.4, 1.3, -0.9, 0.2, -0.6, 1.0, -1.2, 0.7];
+    let frames: Vec<(Vec<Percept>, Vec<Action>)> = (0..20)
+        .map(|f| {
+            let e = |k: usize| noise[(f * 3 + k) % noise.len()];
+            let b = bx(truth[0] + e(0), truth[1] + e(1), truth[2] + e(2), truth[3] + e(3));
+            (vec![p("cube0", "cube", b)], vec![])
+        })
+        .collect();
+    let error = |b: &BBox| {
+        [b.x1 - truth[0], b.y1 - truth[1], b.x2 - truth[2], b.y2 - truth[3]]
+            .iter()
+            .map(|d| d.abs())
+            .sum::<f64>()
+    };
+    let averaging =
+        Params { extensions: Extensions { average_still: true, ..Extensions::default() }, ..Params::cater() };
+    let raw = run(&cater(), &frames).pop().unwrap().anchor("cube0").unwrap().bbox;
+    let mean =
+        run(&Aapa::new(averaging.clone()).unwrap(), &frames).pop().unwrap().anchor("cube0").unwrap().bbox;
+    assert_eq!(raw, frames[19].0[0].bbox, "off by default: the latest box");
+    assert!(error(&mean) < 0.5 * error(&raw), "mean {mean:?}, raw {raw:?}");
+    // A move (an action) starts the mean again: right after it, the box is the new one.
+    let mut moved = frames.clone();
+    moved.push((
+        vec![p("cube0", "cube", bx(60., 50., 90., 90.))],
+        vec![Action::started("_slide", &["cube0"], None)],
+    ));
+    moved.push((
+        vec![p("cube0", "cube", bx(70., 50., 100., 90.))],
+        vec![Action::completed("_slide", &["cube0"])],
+    ));
+    let last = run(&Aapa::new(averaging).unwrap(), &moved).pop().unwrap();
+    assert_eq!(last.anchor("cube0").unwrap().bbox, bx(70., 50., 100., 90.));
+}

@@ -41,6 +41,13 @@ impl PerceptionSource {
         }
     }
 
+    /// Whether its boxes are a detector's, with noise: this project's detector perception and
+    /// OPNet's pickles (its detector's `od_perception`; for its perfect-perception pickles,
+    /// `--params` can turn `average_still` off).
+    pub fn noisy(&self) -> bool {
+        !matches!(self, PerceptionSource::Json(Perception::Perfect))
+    }
+
     pub fn load(&self, data: &Path, video: &str) -> Result<PerceptionFile, CaterError> {
         match self {
             PerceptionSource::Json(p) => PerceptionFile::read(&perception_path(data, video, *p)),
@@ -281,7 +288,8 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
         }
         None => AnnotationSet::read(&annotations_dir(&options.data))?,
     };
-    let params = options.params.clone().unwrap_or_else(|| options.model.default_params());
+    let params =
+        options.params.clone().unwrap_or_else(|| options.model.params_for(options.perception.noisy()));
     let next = AtomicUsize::new(0);
     type Outcome = Result<VideoScore, String>;
     let results: Mutex<Vec<Option<Outcome>>> = Mutex::new(vec![None; videos.len()]);

@@ -368,6 +368,9 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             motion_profile,
             restore_partial_boxes: boolean(ctx, "restore_partial_boxes")?,
             established_first: boolean(ctx, "established_first")?,
+            infer_hidden: boolean(ctx, "infer_hidden")?,
+            infer_hidden_box: Extensions::default().infer_hidden_box,
+            average_still: boolean(ctx, "average_still")?,
         },
     })
 }
@@ -519,6 +522,16 @@ fn anchor_entry() -> Entry {
         "established_first",
         ext.established_first,
         "extension: alignment costs to tentative anchors (confidence below 0.5) count double",
+    ))
+    .param(b(
+        "infer_hidden",
+        ext.infer_hidden,
+        "extension: an object a containing action hides but never perceived gets an anchor inside its container",
+    ))
+    .param(b(
+        "average_still",
+        ext.average_still,
+        "extension: the box of an object no action moves is the mean of its boxes since it last moved",
     ))
     .param(Param::optional(
         "action_rules",

@@ -22,20 +22,18 @@ use kpl_cater::sim::Motion;
 pub enum Command {
     /// Generate videos by CATER's procedure: scene JSON, `<video>_bb.json`, perfect and detector
     /// perception, OPNet's annotation files.
-    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  \
-                      kpl cater generate --videos 20 --seed 2 --motion all --out /tmp/cater-all\n\n\
+    #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out out/cater\n  \
+                      kpl cater generate --videos 20 --seed 2 --motion all --out out/cater-all\n\n\
                       LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
-    #[command(
-        after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out /tmp/cater`):\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --perception perfect\n  \
-                      kpl cater eval --data /tmp/cater --model heuristic --perception detector --json /tmp/h.json\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --frames from-first-detection\n  \
-                      kpl cater eval --data /tmp/cater --model aapa --per-video /tmp/aapa.csv\n\n\
+    #[command(after_help = "Examples (after `kpl cater generate --videos 20 --seed 1 --out out/cater`):\n  \
+                      kpl cater eval --data out/cater --model aapa --perception perfect\n  \
+                      kpl cater eval --data out/cater --model heuristic --perception detector --json out/h.json\n  \
+                      kpl cater eval --data out/cater --model aapa --frames from-first-detection\n  \
+                      kpl cater eval --data out/cater --model aapa --per-video out/aapa.csv\n\n\
                       LA-CATER's own files: --pickles DIR reads OPNet's perception pickles, --videos FILE a split, \
-                      --annotations DIR its annotation files (docs/cater.md)."
-    )]
+                      --annotations DIR its annotation files (docs/cater.md).")]
     Eval(EvalArgs),
 }
 
@@ -233,7 +231,7 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     };
     let params = match &args.params {
         None => None,
-        Some(path) => Some(read_params(path, model)?),
+        Some(path) => Some(read_params(path, model, perception.noisy())?),
     };
     let videos = match &args.videos {
         None => None,
@@ -295,11 +293,11 @@ fn write_file(path: &Path, text: &str) -> Result<(), Failure> {
     std::fs::write(path, text).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))
 }
 
-fn read_params(path: &Path, model: Model) -> Result<Params, Failure> {
+fn read_params(path: &Path, model: Model, noisy_boxes: bool) -> Result<Params, Failure> {
     let text =
         std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
     // Fields missing from the file keep the model's defaults.
-    let mut base = serde_json::to_value(model.default_params())
+    let mut base = serde_json::to_value(model.params_for(noisy_boxes))
         .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
     let overrides: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;

@@ -43,12 +43,23 @@ impl Model {
         Model::ALL.into_iter().find(|m| m.name() == name)
     }
 
-    /// The AAPA parameters this model uses unless overridden.
+    /// The AAPA parameters this model uses unless overridden, for ground-truth boxes.
     pub fn default_params(self) -> Params {
         match self {
             Model::AapaPaper => Params::paper_cater(),
             _ => Params::cater(),
         }
+    }
+
+    /// The parameters for a perception whose boxes are noisy (a detector's) or not: the
+    /// extended models then average the boxes of objects standing still (`average_still`, a
+    /// property of the sensor); the published algorithm has no extensions.
+    pub fn params_for(self, noisy_boxes: bool) -> Params {
+        let mut params = self.default_params();
+        if noisy_boxes && self != Model::AapaPaper {
+            params.extensions.average_still = true;
+        }
+        params
     }
 }
 

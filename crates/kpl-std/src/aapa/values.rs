@@ -268,6 +268,8 @@ field_names! {
     offset = "offset", size = "size", parent_scale = "parent_scale", type_votes = "type_votes",
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
     relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
+    still = "still", mean = "mean", count = "count", provisional = "provisional",
+    parent_size = "parent_size",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -309,6 +311,7 @@ fn anchor_value(a: &Anchor) -> Value {
         attachment,
         for_inference,
         type_votes,
+        still,
     } = a;
     let mut fields = vec![
         (n.symbol.clone(), Value::Str(symbol.clone())),
@@ -348,10 +351,21 @@ fn anchor_value(a: &Anchor) -> Value {
         geometry.push((n.offset.clone(), floats(&att.offset)));
         geometry.push((n.size.clone(), floats(&att.size)));
         geometry.push((n.parent_scale.clone(), Value::Float(att.parent_scale)));
+        geometry.push((n.parent_size.clone(), floats(&att.parent_size)));
         if att.hidden {
             geometry.push((n.hidden.clone(), Value::Bool(true)));
         }
+        if att.provisional {
+            geometry.push((n.provisional.clone(), Value::Bool(true)));
+        }
         fields.push((n.attachment.clone(), named(geometry)));
+    }
+    if let Some(still) = still {
+        let mean = vec![
+            (n.mean.clone(), floats(&still.mean)),
+            (n.count.clone(), Value::Int(i64::from(still.count))),
+        ];
+        fields.push((n.still.clone(), named(mean)));
     }
     if !type_votes.is_empty() {
         let votes = type_votes
