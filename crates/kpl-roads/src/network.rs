@@ -542,22 +542,37 @@ impl RoadNetwork {
     /// other. So a car standing in a queue, whose velocity says nothing about its heading, stays
     /// on its lane instead of jumping to the oncoming one when noise puts it nearer.
     pub fn snap(&self, pos: Point, hint: &SnapHint) -> Option<LanePosition> {
+        self.snap_within(pos, hint, self.snap_radius_m)
+    }
+
+    /// The lane whose centre line passes within `tolerance_m` of `pos` (nearer than the network's
+    /// snap radius), the nearest: what [`RoadNetwork::snap_to_lane`] without a heading gives when
+    /// its `lateral_m` is within the tolerance, looking only that far (a point that an earlier
+    /// snap put on a lane centre is found in the cell it is in).
+    pub fn lane_centre_at(&self, pos: Point, tolerance_m: f64) -> Option<LaneId> {
+        let snapped = self.snap_within(pos, &SnapHint::default(), tolerance_m.min(self.snap_radius_m))?;
+        (snapped.lateral_m.abs() < tolerance_m).then_some(snapped.lane)
+    }
+
+    /// [`RoadNetwork::snap`] among the lanes within `radius_m` (at most the snap radius).
+    fn snap_within(&self, pos: Point, hint: &SnapHint, radius_m: f64) -> Option<LanePosition> {
+        let radius_m = radius_m.min(self.snap_radius_m);
         let mut best: Option<(f64, LaneId, u32)> = None;
         let wanted = hint.heading.filter(|h| h.is_finite()).map(geom::unit);
         let continuity = hint
             .previous
             .and_then(|p| self.continuations.get(p.0 as usize).map(|c| c.get_or_init(|| self.continuation(p))));
-        self.lane_grid.for_each_near(pos, self.snap_radius_m, |item| {
+        self.lane_grid.for_each_near(pos, radius_m, |item| {
             let segment = &self.lane_segments[item as usize];
             // Penalties are never negative, so a segment already further than the best is out.
-            let limit = best.map_or(self.snap_radius_m, |(cost, _, _)| (cost + 1e-12).min(self.snap_radius_m));
+            let limit = best.map_or(radius_m, |(cost, _, _)| (cost + 1e-12).min(radius_m));
             // First on the squared distance, which needs no `hypot`: the margin is far above
             // their rounding, so only segments the exact distance rules out are skipped here.
             if dist2_to_segment(pos, segment.a, segment.b) > limit * limit * (1.0 + 1e-9) + 1e-300 {
                 return;
             }
             let d = dist_to_segment(pos, segment.a, segment.b);
-            if d > self.snap_radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
+            if d > radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
                 return;
             }
             let heading_penalty = match wanted {
