@@ -111,7 +111,11 @@ fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, 
 
 /// The same with one progressor per binding of `vars` (one variable: each car; two: each
 /// ordered pair of distinct cars), a binding named by its cars joined with `|`.
-fn independent_bindings(vars: &[&str], body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, bool)> {
+fn independent_bindings(
+    vars: &[&str],
+    body: &str,
+    states: &[Vec<(String, f64)>],
+) -> Vec<(Time, String, bool)> {
     let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Ms);
     for (i, var) in vars.iter().enumerate() {
         assert_eq!(ctx.declare_value(var), i as u32);
@@ -141,7 +145,9 @@ fn independent_bindings(vars: &[&str], body: &str, states: &[Vec<(String, f64)>]
             _ => cars
                 .iter()
                 .flat_map(|a| cars.iter().filter(move |b| b.0 != a.0).map(move |b| (a, b)))
-                .map(|(a, b)| (format!("{}|{}", a.0, b.0), SlotState::new(vec![Some(record(a)), Some(record(b))])))
+                .map(|(a, b)| {
+                    (format!("{}|{}", a.0, b.0), SlotState::new(vec![Some(record(a)), Some(record(b))]))
+                })
                 .collect(),
         };
         let gone: Vec<String> =

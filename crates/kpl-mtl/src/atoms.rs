@@ -25,7 +25,12 @@ use kpl_core::Value;
 pub(crate) enum AtomPlan {
     General,
     /// `xydist(a, b) op bound` (or `dist` of two positions), with `a` and `b` positions.
-    Distance { a: PointPath, b: PointPath, op: BinOp, bound: f64 },
+    Distance {
+        a: PointPath,
+        b: PointPath,
+        op: BinOp,
+        bound: f64,
+    },
 }
 
 /// Where a position is: a name of the state (a `vec2`, or a record's `pos`) or one attribute

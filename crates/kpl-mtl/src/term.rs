@@ -367,8 +367,9 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
                 Native::XyDist => distance(&a, &b, "xydist"),
                 Native::Dist => dist(&a, &b),
             };
-            return result
-                .map_err(|message| Box::new(EvalError::Function { func: function.name.to_string(), message }));
+            return result.map_err(|message| {
+                Box::new(EvalError::Function { func: function.name.to_string(), message })
+            });
         }
         let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
         let result = match args.len() {

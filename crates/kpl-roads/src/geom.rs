@@ -72,7 +72,7 @@ pub fn dist_to_segment(p: Point, a: Point, b: Point) -> f64 {
 /// Whether `dist_to_segment(p, a, b) <= r`, with the same answer, computing the exact distance
 /// (a `hypot`) only when the squared distance is too near `r * r` to tell.
 pub fn within_segment(p: Point, a: Point, b: Point, r: f64) -> bool {
-    if !(r >= 0.0) {
+    if r.is_nan() || r < 0.0 {
         return dist_to_segment(p, a, b) <= r;
     }
     let d2 = dist2_to_segment(p, a, b);

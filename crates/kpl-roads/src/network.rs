@@ -559,9 +559,9 @@ impl RoadNetwork {
         let radius_m = radius_m.min(self.snap_radius_m);
         let mut best: Option<(f64, LaneId, u32)> = None;
         let wanted = hint.heading.filter(|h| h.is_finite()).map(geom::unit);
-        let continuity = hint
-            .previous
-            .and_then(|p| self.continuations.get(p.0 as usize).map(|c| c.get_or_init(|| self.continuation(p))));
+        let continuity = hint.previous.and_then(|p| {
+            self.continuations.get(p.0 as usize).map(|c| c.get_or_init(|| self.continuation(p)))
+        });
         self.lane_grid.for_each_near(pos, radius_m, |item| {
             let segment = &self.lane_segments[item as usize];
             // Penalties are never negative, so a segment already further than the best is out.

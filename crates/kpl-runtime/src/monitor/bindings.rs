@@ -207,6 +207,9 @@ impl Hasher for KeyHasher {
     }
 }
 
+/// Episodes to report, each with the symbols of its binding.
+type Reports = Vec<(Box<[Arc<str>]>, Episode)>;
+
 fn key(numbers: [u32; 2]) -> u64 {
     (u64::from(numbers[0]) << 32) | u64::from(numbers[1])
 }
@@ -276,7 +279,7 @@ impl Bindings {
     }
 
     /// Emits episodes in the order of their bindings' symbols (stable: one binding's in order).
-    fn report(&self, mut episodes: Vec<(Box<[Arc<str>]>, Episode)>, out: &mut Emitter) {
+    fn report(&self, mut episodes: Reports, out: &mut Emitter) {
         episodes.sort_by(|a, b| a.0.cmp(&b.0));
         for (ids, episode) in episodes {
             out.emit_at(episode.decided, self.verdict(&ids, episode));
@@ -377,13 +380,13 @@ impl Bindings {
         slot
     }
 
-    /// Drops the binding in `slot`: the episodes it still had to report.
-    fn close_binding(&mut self, slot: u32) -> Option<(Box<[Arc<str>]>, Vec<Episode>)> {
-        let mut binding = self.bindings.get_mut(slot as usize)?.take()?;
+    /// Drops the binding in `slot`; the episodes it still had to report go to `reports`.
+    fn close_binding(&mut self, slot: u32, reports: &mut Reports) {
+        let Some(mut binding) = self.bindings.get_mut(slot as usize).and_then(Option::take) else { return };
         self.free.push(slot);
         self.by_key.remove(&binding.key);
         let episodes = binding.close(&mut self.group);
-        Some((binding.ids, episodes))
+        reports.extend(episodes.into_iter().map(|e| (binding.ids.clone(), e)));
     }
 
     /// Steps the bindings of the objects present (those within the gate, and those with an open
@@ -418,8 +421,8 @@ impl Bindings {
             }
             let mut positions = [0; 2];
             let mut all_present = true;
-            for v in 0..self.vars.len() {
-                match self.symbols[v].position(binding.numbers[v], epoch) {
+            for (v, symbols) in self.symbols.iter().enumerate() {
+                match symbols.position(binding.numbers[v], epoch) {
                     Some(at) => positions[v] = at,
                     None => all_present = false,
                 }
@@ -433,9 +436,7 @@ impl Bindings {
         }
         let mut reports = Vec::new();
         for slot in ended {
-            if let Some((ids, episodes)) = self.close_binding(slot) {
-                reports.extend(episodes.into_iter().map(|e| (ids.clone(), e)));
-            }
+            self.close_binding(slot, &mut reports);
         }
         self.report(std::mem::take(&mut reports), out);
         for &(slot, positions) in &todo {
@@ -461,9 +462,7 @@ impl Bindings {
     pub fn close(&mut self, out: &mut Emitter) {
         let mut reports = Vec::new();
         for slot in 0..self.bindings.len() as u32 {
-            if let Some((ids, episodes)) = self.close_binding(slot) {
-                reports.extend(episodes.into_iter().map(|e| (ids.clone(), e)));
-            }
+            self.close_binding(slot, &mut reports);
         }
         self.report(reports, out);
     }
