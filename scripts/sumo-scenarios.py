@@ -24,6 +24,13 @@ Scenarios:
             speeders (about 34 m/s), slow trucks (17 m/s) and a car that breaks down for 30 s: overtakes,
             speeding and a stopped vehicle, with lane and
             position along the lane in the floating car data (the truth of kpl score situations).
+  motorway  overtakes on another road: a straight 2 km road heading north-north-east, three
+            lanes one way at 120 km/h, with cars, speeders (about 42 m/s), vans (30 m/s) and
+            16.5 m trucks (22.5 m/s).
+  wrong_way a straight 1.2 km road, two lanes one way at 90 km/h, with cars and trucks, and two
+            wrong-way drivers on the left lane (20 and 15 m/s, from 30 s and 110 s). SUMO keeps
+            vehicles to their lanes' direction, so it simulates them on a hidden edge over that
+            lane going the other way; the shipped network does not have it (wrong_way's doc).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -174,14 +181,82 @@ def overtake(s, duration):
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
 
+MOTORWAY_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="45" speedFactor="1.0" speedDev="0.05" lcSpeedGain="2"/>
+    <vType id="speeder" vClass="passenger" length="4.4" width="1.8" maxSpeed="45" speedFactor="1.25" speedDev="0.03" lcSpeedGain="4"/>
+    <vType id="van" vClass="delivery" length="6.5" width="2.1" maxSpeed="30" speedFactor="1.0" speedDev="0.05" lcSpeedGain="1"/>
+    <vType id="truck" vClass="truck" length="16.5" width="2.55" maxSpeed="22.5" speedFactor="1.0" speedDev="0.03"/>
+</additional>
+"""
+
+
+def motorway(s, duration):
+    """Overtakes on a wider, faster road than `overtake`'s, with another traffic mix."""
+    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
+        f.write('<nodes>\n    <node id="south" x="0" y="0"/>\n    <node id="north" x="600" y="1900"/>\n</nodes>\n')
+    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
+        f.write('<edges>\n'
+                '    <edge id="northbound" from="south" to="north" numLanes="3" speed="33.33"/>\n'
+                '</edges>\n')
+    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
+        f.write(MOTORWAY_VTYPES)
+    s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+    flows = []
+    for name, vtype, per_hour, lane in [("cars", "car", 700, "random"), ("speeders", "speeder", 120, "random"),
+                                        ("vans", "van", 200, "random"), ("trucks", "truck", 200, "0")]:
+        flows.append('    <flow id="%s" type="%s" route="r" begin="0" end="%d" vehsPerHour="%d" '
+                     'departLane="%s" departSpeed="max"/>' % (name, vtype, duration, per_hour, lane))
+    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
+        f.write('<routes>\n    <route id="r" edges="northbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+def wrong_way(s, duration):
+    """Wrong-way drivers, which SUMO cannot make on the network they are wrong on: SUMO simulates
+    a network with a hidden one-lane edge `ghost` laid over the left lane of `eastbound`, going
+    west, and two vehicles drive it; the shipped network (what the tracker, the anchoring and the
+    truth see) is `eastbound` alone, on which they drive against the lane. They pass through the
+    eastbound traffic (vehicles on different edges do not see each other)."""
+    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
+        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1200" y="0"/>\n'
+                '    <node id="ghost_east" x="1200" y="-1.6"/>\n    <node id="ghost_west" x="0" y="-1.6"/>\n'
+                '</nodes>\n')
+    road = '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
+    # The ghost's one lane has its centre on eastbound_1's (y = -1.6).
+    ghost = '    <edge id="ghost" from="ghost_east" to="ghost_west" numLanes="1" speed="25.0" spreadType="center"/>\n'
+    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
+        f.write("<edges>\n" + road + "</edges>\n")
+    with open(os.path.join(s.work, "sim.edg.xml"), "w") as f:
+        f.write("<edges>\n" + road + ghost + "</edges>\n")
+    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
+        f.write(OVERTAKE_VTYPES)
+    # Both networks in the nodes' own coordinates (netconvert would move each to its own origin).
+    for net, edges in [("net.net.xml", "edges.edg.xml"), ("sim.net.xml", "sim.edg.xml")]:
+        s.netconvert(net, "-n", "nodes.nod.xml", "-e", edges, "--no-turnarounds", "--offset.disable-normalization")
+    flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="600" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="trucks" type="truck" route="r" begin="0" end="%d" vehsPerHour="150" '
+             'departLane="0" departSpeed="max"/>' % duration,
+             '    <vehicle id="ghost.0" type="car" route="g" depart="30" departSpeed="20"/>',
+             '    <vehicle id="ghost.1" type="car" route="g" depart="110" departSpeed="15"/>']
+    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
+        f.write('<routes>\n    <route id="r" edges="eastbound"/>\n    <route id="g" edges="ghost"/>\n'
+                + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("sim.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
 def town400(s, duration):
     s.netgenerate("net.net.xml", "--grid", "--grid.number", "20", "--grid.length", "100",
                   "--default-junction-type", "traffic_light", "--tls.default-type", "static")
     return ["net.net.xml"], None
 
 
-SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake, "town400": town400}
-DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "town400": 0}
+SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
+             "motorway": motorway, "wrong_way": wrong_way, "town400": town400}
+DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
+              "wrong_way": 180, "town400": 0}
 
 
 def main():

@@ -106,7 +106,9 @@ impl PredictionModel for Stationary {
 /// network's border) is dropped; when every route has, the prediction has ended
 /// ([`PredictionModel::ended`]): the object stays where it was last predicted, unanchored, and
 /// the spec's `forget` removes it (or at once, with `forget_at_end`). An object that cannot be snapped (no lane within the snap
-/// radius) is predicted with constant velocity.
+/// radius) is predicted with constant velocity. An object that moves against the lane it was
+/// snapped to (a wrong-way driver where no lane goes its way) keeps moving backwards along that
+/// lane, still against it, until the lane's start, where its prediction ends.
 #[derive(Debug, Clone)]
 pub struct AlongRoads {
     network: Arc<RoadNetwork>,
@@ -151,6 +153,48 @@ impl AlongRoads {
         let distance = speed * seconds(start.time, time);
         (self.network.advance(lane, distance, self.max_hypotheses), speed, distance)
     }
+
+    /// Whether the object moved against its lane when prediction began.
+    fn against_lane(&self, start: &PredictionStart, lane: &LanePosition) -> bool {
+        velocity(&start.state).is_some_and(|v| {
+            geom::norm(v) >= self.min_heading_speed_mps && geom::dot(v, geom::unit(lane.heading)) < 0.0
+        })
+    }
+
+    /// How far back along its lane an object moving against it is at `time` (negative: it has
+    /// passed the lane's start), and its speed.
+    fn backwards(&self, start: &PredictionStart, lane: &LanePosition, time: Time) -> (f64, f64) {
+        let speed = velocity(&start.state).map_or(0.0, geom::norm);
+        (lane.offset_m - speed * seconds(start.time, time), speed)
+    }
+
+    /// The prediction of an object moving against its lane ([`AlongRoads`]).
+    fn predict_backwards(
+        &self,
+        start: &PredictionStart,
+        lane: &LanePosition,
+        time: Time,
+        out: &mut Vec<Record>,
+    ) {
+        let (offset, speed) = self.backwards(start, lane, time);
+        if offset < 0.0 {
+            out.push((*start.state).clone());
+            return;
+        }
+        let at = self.network.lane_position(lane.lane, offset);
+        let vel = geom::scale(geom::unit(at.heading), -speed);
+        let mut record =
+            with_fields(&start.state, &[("pos", Value::Vec2(at.point)), ("vel", Value::Vec2(vel))]);
+        let on = OnLane {
+            network: &self.network,
+            at: &at,
+            vel: Some(vel),
+            min_heading_speed_mps: self.min_heading_speed_mps,
+            lane_heading: None,
+        };
+        set_road_attributes(&mut record, &on);
+        out.push(record);
+    }
 }
 
 impl PredictionModel for AlongRoads {
@@ -168,6 +212,9 @@ impl PredictionModel for AlongRoads {
 
     fn ended(&self, start: &PredictionStart, time: Time) -> bool {
         let Some(lane) = &start.lane else { return false };
+        if self.against_lane(start, lane) {
+            return self.backwards(start, lane, time).0 < 0.0;
+        }
         let (routes, _, _) = self.routes(start, lane, time);
         !routes.is_empty() && routes.iter().all(|h| h.reached_end)
     }
@@ -181,6 +228,10 @@ impl PredictionModel for AlongRoads {
             ConstantVelocity.predict(start, time, out);
             return;
         };
+        if self.against_lane(start, lane) {
+            self.predict_backwards(start, lane, time, out);
+            return;
+        }
         let (mut hypotheses, speed, _) = self.routes(start, lane, time);
         // A route that left the map is not where the object can be.
         hypotheses.retain(|h| !h.reached_end);
@@ -287,5 +338,38 @@ mod tests {
         // Off the network: constant velocity.
         let out = predict(&model, state([60.0, 60.0], [1.0, 0.0]), 2.0);
         assert_eq!(out[0].get("pos"), Some(&Value::vec2(62.0, 60.0)));
+    }
+
+    #[test]
+    fn along_roads_keeps_a_wrong_way_driver_going_against_its_lane() {
+        // A one-way road, 200 m west to east; a car drives it westwards at 20 m/s.
+        let mut file = kpl_roads::NetworkFile::new();
+        file.add_node("w", [0.0, 0.0]);
+        file.add_node("e", [200.0, 0.0]);
+        file.add_road("main", "w", "e", Vec::new());
+        file.roads[0].lanes = vec![kpl_roads::format::LaneSpec {
+            width_m: 3.5,
+            direction: kpl_roads::format::LaneDirection::Forward,
+        }];
+        let network = Arc::new(RoadNetwork::build(&file).unwrap());
+        let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
+        let mut s = (*state([150.0, -1.75], [-20.0, 0.0])).clone();
+        for (name, value) in [("heading", Value::Float(0.0)), ("lane_heading", Value::Float(0.0))] {
+            s.fields.push((name.into(), value));
+        }
+        let s = Arc::new(s);
+        let out = predict(&model, s.clone(), 2.0);
+        assert_eq!(out.len(), 1);
+        let pos = out[0].get("pos").unwrap().as_vec2().unwrap();
+        assert!((pos[0] - 110.0).abs() < 0.5, "40 m back along the lane: {pos:?}");
+        let vel = out[0].get("vel").unwrap().as_vec2().unwrap();
+        assert!((vel[0] + 20.0).abs() < 1e-9 && vel[1].abs() < 1e-9, "{vel:?}");
+        let heading = out[0].get("heading").unwrap().as_f64().unwrap();
+        let lane_heading = out[0].get("lane_heading").unwrap().as_f64().unwrap();
+        assert!(crate::relations::angle_between(heading, lane_heading) > 3.0, "still against the lane");
+        // At the lane's start (150 m back, after 7.5 s) the prediction ends.
+        let start = model.start(s, 1_000_000);
+        assert!(!model.ended(&start, 8_000_000));
+        assert!(model.ended(&start, 9_000_000));
     }
 }

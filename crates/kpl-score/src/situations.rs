@@ -11,15 +11,26 @@
 //! - `stopped`: under [`TruthParams::stop_speed_mps`] for at least [`TruthParams::stop_min`],
 //!   not in a junction, more than [`TruthParams::junction_margin_m`] before the lane's end, and
 //!   with no other standing vehicle in front within [`TruthParams::queue_gap_m`] on its lane;
-//! - `overtake` (a overtakes b): a behind b within [`TruthParams::overtake_close_m`] (or beside
-//!   it) on one road, then in front, within [`TruthParams::overtake_max`], on another lane at
-//!   some time in between; from the first time of that run to the first time in front;
+//! - `overtake` (a overtakes b): a behind b within [`TruthParams::overtake_close_m`] on one road,
+//!   then, staying within that distance, in front, within [`TruthParams::overtake_max`], on another
+//!   lane than b at some time in between; from the first time of that run to the first time in
+//!   front;
 //! - `tailgating` (a follows b): on b's lane, behind it, with a gap under
 //!   [`TruthParams::tailgating_gap_s`] seconds at a's speed, for at least
-//!   [`TruthParams::tailgating_min`].
+//!   [`TruthParams::tailgating_min`];
+//! - `wrong_way`: moving (at least [`TruthParams::wrong_way_speed_mps`]) with a heading more than
+//!   90 degrees off the direction of the lane it lies on, for at least
+//!   [`TruthParams::wrong_way_min`].
+//!
+//! A vehicle is left out of the truth for its first [`TruthParams::settle`] on the road: no
+//! tracker can anchor a vehicle the moment it appears, so what happens before (a fast car that
+//! enters beside a slow one and passes it at once, a speeder slowed down a second after it
+//! entered) is not observable. The situations that this leaves out are reported apart.
 //!
 //! Positions are the vehicles' centres along the lane (metres); "behind" means the centres are
-//! more than half the summed lengths apart, as [`kpl_anchor`'s relations] say.
+//! more than half the summed lengths apart, as [`kpl_anchor`'s relations] say. Two vehicles are
+//! in a pair situation only while they go one way (headings less than 90 degrees apart), as
+//! the relations' `same_road` says: a wrong-way driver passing a car is no overtake.
 //!
 //! [`kpl_anchor`'s relations]: https://docs.rs/kpl-anchor
 
@@ -55,6 +66,10 @@ pub struct TrueVehicle {
     pub speed: f64,
     pub speed_limit: f64,
     pub length: f64,
+    /// Its direction of travel (radians counter-clockwise from east).
+    pub heading: f64,
+    /// The direction of the lane it lies on at its position (radians).
+    pub lane_heading: f64,
 }
 
 /// Every vehicle at one time (microseconds, on the run's clock).
@@ -78,9 +93,9 @@ pub struct TruthParams {
     pub overtake_max: Time,
     pub tailgating_gap_s: f64,
     pub tailgating_min: Time,
-    /// A true situation that ends sooner than this after one of its vehicles first appeared is
-    /// left out (reported apart): no tracker can anchor a vehicle the moment it enters, so such
-    /// a situation (a fast car passing another as both enter the road) is not observable.
+    pub wrong_way_speed_mps: f64,
+    pub wrong_way_min: Time,
+    /// A vehicle is left out of the truth for this long after it first appeared (module doc).
     pub settle: Time,
 }
 
@@ -97,13 +112,27 @@ impl Default for TruthParams {
             overtake_max: 60_000_000,
             tailgating_gap_s: 1.0,
             tailgating_min: 2_000_000,
+            wrong_way_speed_mps: 2.0,
+            wrong_way_min: 2_000_000,
             settle: 3_000_000,
         }
     }
 }
 
 /// The kinds [`true_situations`] computes.
-pub const TRUE_KINDS: &[&str] = &["overtake", "speeding", "stopped", "tailgating"];
+pub const TRUE_KINDS: &[&str] = &["overtake", "speeding", "stopped", "tailgating", "wrong_way"];
+
+/// The smallest angle between two headings, in [0, π].
+fn angle_between(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    if d > std::f64::consts::PI { std::f64::consts::TAU - d } else { d }
+}
+
+/// Whether a vehicle moves against the direction of the lane it lies on.
+fn against_lane(v: &TrueVehicle, params: &TruthParams) -> bool {
+    v.speed >= params.wrong_way_speed_mps
+        && angle_between(v.heading, v.lane_heading) > std::f64::consts::FRAC_PI_2
+}
 
 /// Runs of a condition per key: from the first time it held to the last, kept when long enough.
 #[derive(Debug, Default)]
@@ -158,7 +187,8 @@ struct Passing {
 pub struct TrueSituations {
     /// Ordered by kind, then start.
     pub situations: Vec<Situation>,
-    /// Ending within [`TruthParams::settle`] of a vehicle's first appearance.
+    /// Situations of the trajectories that are gone, or shorter than their minimum, once each
+    /// vehicle is left out for its first [`TruthParams::settle`]: they happened as it entered.
     pub entering: Vec<Situation>,
 }
 
@@ -170,16 +200,34 @@ pub fn true_situations(steps: &[TrueStep], params: &TruthParams) -> TrueSituatio
             first_seen.entry(v.id.as_str()).or_insert(step.time);
         }
     }
-    let all = all_true_situations(steps, params);
-    let (situations, entering) = all.into_iter().partition(|s: &Situation| {
-        s.objects.iter().all(|o| first_seen.get(o.as_str()).is_none_or(|&t| s.end - t >= params.settle))
-    });
+    let settled: Vec<TrueStep> = steps
+        .iter()
+        .map(|step| TrueStep {
+            time: step.time,
+            vehicles: step
+                .vehicles
+                .iter()
+                .filter(|v| first_seen.get(v.id.as_str()).is_none_or(|&t| step.time - t >= params.settle))
+                .cloned()
+                .collect(),
+        })
+        .collect();
+    let situations = all_true_situations(&settled, params);
+    let entering = all_true_situations(steps, params)
+        .into_iter()
+        .filter(|s| {
+            !situations
+                .iter()
+                .any(|k| k.kind == s.kind && k.objects == s.objects && k.start <= s.end && s.start <= k.end)
+        })
+        .collect();
     TrueSituations { situations, entering }
 }
 
 fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situation> {
     let mut out = Vec::new();
     let (mut speeding, mut stopped, mut tailgating) = (Runs::default(), Runs::default(), Runs::default());
+    let mut wrong_way = Runs::default();
     let mut passing: HashMap<(String, String), Passing> = HashMap::new();
     for step in steps {
         let v = &step.vehicles;
@@ -209,12 +257,16 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
             .map(|x| vec![x.id.clone()])
             .collect();
         stopped.step(step.time, stops, params.stop_min, "stopped", &mut out);
+        let against: Vec<Vec<String>> =
+            v.iter().filter(|x| against_lane(x, params)).map(|x| vec![x.id.clone()]).collect();
+        wrong_way.step(step.time, against, params.wrong_way_min, "wrong_way", &mut out);
         let mut follows = Vec::new();
         let mut seen_pairs = Vec::new();
         for a in v {
             let Some(road) = &a.road else { continue };
             for b in v {
-                if a.id == b.id || b.road.as_ref() != Some(road) {
+                let one_way = angle_between(a.heading, b.heading) < std::f64::consts::FRAC_PI_2;
+                if a.id == b.id || b.road.as_ref() != Some(road) || !one_way {
                     continue;
                 }
                 let ahead = b.lane_pos - a.lane_pos;
@@ -245,8 +297,13 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                         });
                     }
                 } else if ahead <= params.overtake_close_m {
-                    let p = passing.entry(key).or_insert(Passing { start: step.time, other_lane: false });
-                    p.other_lane |= a.lane != b.lane;
+                    // A run begins with a behind b, and goes on beside it.
+                    let other_lane = a.lane != b.lane;
+                    if let Some(p) = passing.get_mut(&key) {
+                        p.other_lane |= other_lane;
+                    } else if ahead > overlap {
+                        passing.insert(key, Passing { start: step.time, other_lane });
+                    }
                 } else {
                     passing.remove(&key);
                 }
@@ -259,6 +316,7 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
     speeding.finish(params.speeding_min, "speeding", &mut out);
     stopped.finish(params.stop_min, "stopped", &mut out);
     tailgating.finish(params.tailgating_min, "tailgating", &mut out);
+    wrong_way.finish(params.wrong_way_min, "wrong_way", &mut out);
     out.sort_by(|a, b| a.kind.cmp(&b.kind).then(a.start.cmp(&b.start)).then(a.objects.cmp(&b.objects)));
     out
 }
@@ -363,6 +421,9 @@ pub struct Recognised {
     pub situation: Situation,
     pub truth_objects: Vec<Option<String>>,
     pub correct: bool,
+    /// Correct, and what it matched is a situation left out of the truth
+    /// ([`TrueSituations::entering`]): it happened, though recall does not ask for it.
+    pub left_out: bool,
 }
 
 /// The result of [`match_situations`].
@@ -376,14 +437,17 @@ pub struct Matched {
 
 /// Precision and recall per kind, for the kinds that have true situations or recognised ones;
 /// ordered by kind. `truth_kinds` are the kinds the truth covers: a recognised kind outside it is
-/// reported with no truth (recall and precision `None`).
+/// reported with no truth (recall and precision `None`). Recall is over `truth.situations`; a
+/// recognised situation is correct if it matches one of them or one left out as its vehicles
+/// entered (`truth.entering`: it happened, so recognising it is no mistake).
 pub fn match_situations(
     recognised: &[Situation],
-    truth: &[Situation],
+    true_situations: &TrueSituations,
     truth_kinds: &[&str],
     mapping: &Mapping,
     options: &MatchOptions,
 ) -> Matched {
+    let truth = &true_situations.situations;
     let mut kinds: Vec<String> =
         recognised.iter().map(|s| s.kind.clone()).chain(truth.iter().map(|s| s.kind.clone())).collect();
     kinds.sort();
@@ -409,18 +473,23 @@ pub fn match_situations(
             if truths.iter().all(Option::is_none) {
                 score.unmapped += 1;
             }
+            let matches = |t: &Situation| {
+                t.kind == kind
+                    && t.objects.len() == truths.len()
+                    && t.objects.iter().zip(&truths).all(|(o, m)| m.as_deref() == Some(o.as_str()))
+                    && overlaps(r, t, options.slack)
+            };
             let mut correct = false;
             for (k, t) in truth.iter().enumerate() {
-                let same_objects = t.kind == kind
-                    && t.objects.len() == truths.len()
-                    && t.objects.iter().zip(&truths).all(|(o, m)| m.as_deref() == Some(o.as_str()));
-                if same_objects && overlaps(r, t, options.slack) {
+                if matches(t) {
                     found[k] = true;
                     correct = true;
                 }
             }
+            let left_out = !correct && true_situations.entering.iter().any(matches);
+            correct |= left_out;
             score.correct += usize::from(correct);
-            details[i] = Some(Recognised { situation: r.clone(), truth_objects: truths, correct });
+            details[i] = Some(Recognised { situation: r.clone(), truth_objects: truths, correct, left_out });
         }
         score.found = truth.iter().zip(&found).filter(|(t, f)| t.kind == kind && **f).count();
         if covered {
@@ -447,6 +516,8 @@ mod tests {
             speed,
             speed_limit: 25.0,
             length: 5.0,
+            heading: 0.0,
+            lane_heading: 0.0,
         }
     }
 
@@ -469,7 +540,8 @@ mod tests {
 
     #[test]
     fn a_pass_on_the_other_lane_is_an_overtake_and_the_fast_car_speeds() {
-        let truth = true_situations(&passing(), &TruthParams::default()).situations;
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let truth = true_situations(&passing(), &params).situations;
         let overtakes: Vec<&Situation> = truth.iter().filter(|s| s.kind == "overtake").collect();
         assert_eq!(overtakes.len(), 1, "{truth:?}");
         assert_eq!(overtakes[0].objects, ["car", "truck"]);
@@ -489,8 +561,8 @@ mod tests {
 
     #[test]
     fn situations_as_vehicles_enter_are_left_out() {
-        // The truck enters at 3 s: the pass ends at 7.5 s, 4.5 s later (kept with a 3 s settle
-        // time, left out with 5 s).
+        // The truck enters at 3 s: the pass ends at 7.5 s; the car is 10 m behind it at 6 s
+        // (kept with a 3 s settle time) and in front at 8 s (left out with 5 s).
         let mut steps = passing();
         for s in &mut steps {
             if s.time < 3_000_000 {
@@ -499,6 +571,9 @@ mod tests {
         }
         let kept = true_situations(&steps, &TruthParams::default());
         assert!(kept.situations.iter().any(|s| s.kind == "overtake"));
+        // The car, there from 0 s, speeds in the truth from 3 s on.
+        let speeding = kept.situations.iter().find(|s| s.kind == "speeding").unwrap();
+        assert_eq!((speeding.start, speeding.end), (3_000_000, 29_500_000));
         let params = TruthParams { settle: 5_000_000, ..TruthParams::default() };
         let left = true_situations(&steps, &params);
         assert!(left.situations.iter().all(|s| s.kind != "overtake"));
@@ -515,6 +590,30 @@ mod tests {
         }
         let truth = true_situations(&steps, &TruthParams::default()).situations;
         assert!(truth.iter().all(|s| s.kind != "overtake"), "{truth:?}");
+    }
+
+    #[test]
+    fn a_car_against_its_lane_drives_the_wrong_way_and_overtakes_nobody() {
+        // A ghost driver at 20 m/s on lane e_1 against its direction passes a car on e_0 going
+        // the lane's way; it slows to a stop at the end (not wrong-way while standing).
+        let steps: Vec<TrueStep> = (0..40)
+            .map(|k| {
+                let t = k as f64 * 0.5;
+                let ghost_speed = if t < 15.0 { 20.0 } else { 0.0 };
+                let mut ghost = vehicle("ghost", "e_1", 700.0 - 20.0 * t.min(15.0), ghost_speed);
+                ghost.heading = std::f64::consts::PI;
+                TrueStep {
+                    time: (t * 1e6) as Time,
+                    vehicles: vec![ghost, vehicle("car", "e_0", 400.0 + 20.0 * t, 20.0)],
+                }
+            })
+            .collect();
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let truth = true_situations(&steps, &params).situations;
+        let kinds: Vec<&str> = truth.iter().map(|s| s.kind.as_str()).collect();
+        assert_eq!(kinds, ["wrong_way"], "{truth:?}");
+        assert_eq!(truth[0].objects, ["ghost"]);
+        assert_eq!((truth[0].start, truth[0].end), (0, 14_500_000));
     }
 
     #[test]
@@ -563,7 +662,7 @@ not json "verdict"
             .unwrap();
         }
         let mapping = crate::mapping(&seq, &crate::Config::new(2.0).unwrap());
-        let truth = true_situations(&passing(), &TruthParams::default()).situations;
+        let truth = true_situations(&passing(), &TruthParams::default());
         let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
         assert_eq!(matched.recognised.len(), 2);
         assert!(matched.recognised[0].correct && !matched.recognised[1].correct);
@@ -573,5 +672,17 @@ not json "verdict"
         // co2 (the truck) was not speeding: a false recognition, and the car's speeding is missed.
         let speeding = scores.iter().find(|s| s.kind == "speeding").unwrap();
         assert_eq!((speeding.precision, speeding.recall), (Some(0.0), Some(0.0)));
+        // With 8 s to settle the pass (3.5 s to 7.5 s) is left out of the truth: recognising it
+        // is still correct, and recall does not ask for it.
+        let params = TruthParams { settle: 8_000_000, ..TruthParams::default() };
+        let truth = true_situations(&passing(), &params);
+        assert!(truth.situations.iter().all(|s| s.kind != "overtake"));
+        let matched = match_situations(&recognised, &truth, TRUE_KINDS, &mapping, &MatchOptions::default());
+        assert!(matched.recognised[0].correct && matched.recognised[0].left_out);
+        let overtake = matched.scores.iter().find(|s| s.kind == "overtake").unwrap();
+        assert_eq!(
+            (overtake.correct, overtake.truth, overtake.precision, overtake.recall),
+            (1, 0, Some(1.0), None)
+        );
     }
 }

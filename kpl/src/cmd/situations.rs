@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args as ClapArgs, ValueEnum};
-use kpl_roads::{LaneKind, RoadNetwork};
+use kpl_roads::{LaneKind, RoadNetwork, SnapHint};
 use kpl_score::situations::{
     self, KindScore, MatchOptions, Situation, TRUE_KINDS, TrueStep, TrueVehicle, TruthParams,
 };
@@ -22,9 +22,10 @@ Examples:
   kpl situations out/sumo_situations --traffic specs/traffic/sumo/overtake/fcd.xml.gz
 
 The recognised situations are the recorded verdict records with `verdict: true`, `start` and `end`
-of the monitors named overtake, speeding, stopped, tailgating (other monitors are listed without a
-truth). The true situations are computed from the traffic file (SUMO FCD with `lane` and `pos`),
-its first time being the run's time 0. A recognised situation is correct when a true one of its
+of the monitors named overtake, speeding, stopped, tailgating, wrong_way (other monitors are listed
+without a truth). The true situations are computed from the traffic file (SUMO FCD with `lane` and
+`pos`; a vehicle on a lane the network does not have is placed on its nearest lane), its first time
+being the run's time 0. A recognised situation is correct when a true one of its
 kind is about the vehicles its symbols stood for (the CLEAR MOT mapping of the car stream against
 the tracker's ground truth) and their times overlap (within --slack). See docs/situations.md.
 Exit status: 0 scored, 1 the recording or traffic cannot be scored, 2 usage or I/O errors.";
@@ -76,7 +77,7 @@ struct Output<'a> {
     scores: &'a [KindScore],
     truth_params: &'a TruthParams,
     truth: &'a [TrueItem<'a>],
-    /// True situations left out: they end too soon after a vehicle entered.
+    /// True situations left out: they happen within the settle time of a vehicle's first appearance.
     entering: &'a [Situation],
     recognised: &'a [situations::Recognised],
 }
@@ -149,10 +150,18 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         }
         recognised.extend(found);
     }
-    let matched =
-        situations::match_situations(&recognised, truth, TRUE_KINDS, mapping, &MatchOptions { slack });
+    let matched = situations::match_situations(
+        &recognised,
+        &true_situations,
+        TRUE_KINDS,
+        mapping,
+        &MatchOptions { slack },
+    );
     let text = match args.format {
-        Format::Table => table(&matched.scores, true_situations.entering.len(), &params),
+        Format::Table => {
+            let left_out = matched.recognised.iter().filter(|r| r.left_out).count();
+            table(&matched.scores, true_situations.entering.len(), left_out, &params)
+        }
         Format::Json => {
             let truth: Vec<TrueItem<'_>> = truth
                 .iter()
@@ -176,7 +185,10 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The traffic's vehicles on the network: road, lane, centre along the lane, the lane's limit.
+/// The traffic's vehicles on the network: road, lane, centre along the lane, the lane's limit
+/// and direction. A vehicle on a lane the network does not have (a recording simulated on
+/// another network, as the `wrong_way` scenario's) is placed on the network's lane nearest to its
+/// centre, whatever its direction.
 fn true_steps(
     steps: &[kpl_sim::recorded::Step],
     network: &RoadNetwork,
@@ -192,23 +204,34 @@ fn true_steps(
                 missing += 1;
                 continue;
             };
-            let Some(lane) = network.lane_by_name(lane_name) else {
+            let at = match network.lane_by_name(lane_name) {
+                Some(lane) => Some((lane.id, front - v.length_m / 2.0)),
+                None => network
+                    .snap(v.pos, &SnapHint::default())
+                    .filter(|s| s.lateral_m.abs() <= network.lane(s.lane).width_m / 2.0)
+                    .map(|s| (s.lane, s.offset_m)),
+            };
+            let Some((lane_id, lane_pos)) = at else {
                 missing += 1;
                 continue;
             };
+            let lane = network.lane(lane_id);
             let road = match lane.kind {
                 LaneKind::Road { road, .. } => Some(network.road(road).name.clone()),
                 LaneKind::Connector { .. } => None,
             };
+            let lane_heading = lane.path.heading_at(lane_pos);
             vehicles.push(TrueVehicle {
                 id: v.name.to_string(),
                 road,
-                lane: lane_name.to_string(),
-                lane_pos: front - v.length_m / 2.0,
+                lane: lane.name.to_string(),
+                lane_pos,
                 lane_length: lane.path.length(),
                 speed,
                 speed_limit: lane.speed_limit_mps,
                 length: v.length_m,
+                heading: v.heading.unwrap_or(lane_heading),
+                lane_heading,
             });
         }
         out.push(TrueStep { time: step.time - origin, vehicles });
@@ -255,7 +278,7 @@ fn jsonl_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
     Ok(out)
 }
 
-fn table(scores: &[KindScore], entering: usize, params: &TruthParams) -> String {
+fn table(scores: &[KindScore], entering: usize, left_out: usize, params: &TruthParams) -> String {
     let mut out =
         String::from("kind          recognised  correct  precision   true  found  recall  unmapped\n");
     let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
@@ -274,8 +297,13 @@ fn table(scores: &[KindScore], entering: usize, params: &TruthParams) -> String 
     }
     if entering > 0 {
         out.push_str(&format!(
-            "{entering} true situations left out: they end within {} s of a vehicle's first appearance\n",
+            "{entering} true situations left out: they happen within {} s of a vehicle's first appearance\n",
             params.settle as f64 / 1e6
+        ));
+    }
+    if left_out > 0 {
+        out.push_str(&format!(
+            "{left_out} recognised situations match true ones left out (correct, not in recall)\n"
         ));
     }
     let uncovered: Vec<&str> =
