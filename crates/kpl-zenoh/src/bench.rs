@@ -494,10 +494,12 @@ fn latency(
                         times.push(start.elapsed().as_secs_f64() * 1e6);
                     }
                 }
-                // As the runtime does: a receiver goes when its stream is done, so that the
-                // other side's `end` sees this host has everything.
-                drop(pong);
+                // As the runtime does: the end of `ping` (which the other side confirms), then
+                // the end of `pong`, which this side confirms by receiving it (the other side's
+                // `end` waits for that; a receiver dropped before it left that wait to run out).
                 ping.end().await;
+                let _ = tokio::time::timeout(IDLE, pong.recv()).await;
+                drop(pong);
                 tokens.extend(ping.token.take());
             }
         }

@@ -113,7 +113,7 @@ impl Sessions {
             .map(|credentials| Security { credentials, access_control: access_control.clone() });
         let zenoh_config = config::session_config(&endpoints, &options, security.as_ref())?;
         let who = host.map_or_else(|| "this run".to_string(), |h| format!("host `{h}`"));
-        let session = zenoh::open(zenoh_config).await.map_err(|e| {
+        let session = open_off_thread(zenoh_config).await.map_err(|e| {
             TransportError(format!(
                 "cannot open the zenoh session of {who} (listen {:?}, connect {:?}): {e}",
                 endpoints.listen, endpoints.connect
@@ -124,5 +124,21 @@ impl Sessions {
             Arc::new(HostSession { session, host: host.map(String::from), endpoints, options, credentials });
         *current = Arc::downgrade(&open);
         Ok(open)
+    }
+}
+
+/// Opens a zenoh session on a thread of its own.
+///
+/// `zenoh::open(..).await` does not yield: it blocks the calling thread in a `block_on` of
+/// zenoh's own runtime (nested in `block_in_place`), which parks on the same thread-local parker
+/// as a `block_on` that called it. A wake-up of that outer task while the session opens (which can
+/// take a connect retry, hundreds of milliseconds) is then taken by the inner `block_on` and lost:
+/// two hosts run by `run_async` in one task (`tokio::join!`) hung that way, one waiting forever
+/// for a timer that had fired. On a thread of the blocking pool nothing else waits on its parker.
+async fn open_off_thread(config: zenoh::Config) -> Result<zenoh::Session, String> {
+    use zenoh::Wait;
+    match tokio::task::spawn_blocking(move || zenoh::open(config).wait()).await {
+        Ok(opened) => opened.map_err(|e| e.to_string()),
+        Err(e) => Err(format!("the thread opening the session failed: {e}")),
     }
 }

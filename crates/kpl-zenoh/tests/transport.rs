@@ -313,11 +313,11 @@ fn lines(path: &std::path::Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-// Known defect (found at the end of the stop that merged deployments' faults and security): two
-// hosts run by the runtime inside ONE process sometimes never finish (about 1 run in 3 here; two
-// hosts as two processes, tests/zenoh.rs and tests/faults.rs, are not affected). Run it with
-// `cargo test -p kpl-zenoh --test transport -- --ignored`; the timeout turns the hang into a failure.
-#[ignore = "two hosts in one process intermittently hang; see the comment above"]
+// Both hosts run in this test's one task (`tokio::join!`), so a wake-up of one must not be lost
+// while the other opens its session: `zenoh::open` blocks its thread in a nested `block_on` that
+// shared the outer one's parker and took such wake-ups (about 1 run in 8 to 1 in 3 hung until the
+// timeout, whenever the second session took a connect retry to open); sessions now open on a
+// blocking-pool thread (kpl_zenoh::session).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_hosts_of_a_spec_run_by_the_runtime() {
     let port = free_port();
@@ -334,6 +334,11 @@ deploy {{
 }}
 "#
     );
+    // The hosts' logs, with RUST_LOG (e.g. `RUST_LOG=kpl_zenoh=debug`), shown when the test fails.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
     let mut registry = kpl_runtime::Registry::with_builtins();
     let sessions = Sessions::new(ZenohOptions::default());
     kpl_zenoh::register_with(&mut registry, sessions);
