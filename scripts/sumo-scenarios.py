@@ -8,10 +8,21 @@ car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type
 position along the lane,
 every 0.5 s) and, where the traffic uses vehicle types of its own, their definitions (vtypes.xml).
 Everything is seeded, so the same SUMO release makes the same traffic (only the files' "generated
-on" comments differ).
+on" comments differ); `--seed` makes other traffic on the same network (a scenario one did not
+tune on).
+
+The grid, the random network and the highway also get occluders (occluders.json, the tracker's
+`occluders_file`): bridges across the main roads, each as wide as a vehicle at the scenario's
+typical speed (the median speed of the moving vehicles in the recording) drives in
+OCCLUSION_S seconds, so that the tracker loses a vehicle for about that long and gives it a new
+percept id when it comes out. They cross roads between junctions: a vertical one between two
+columns of junctions near the middle of the network, and (not on the highway) a horizontal one
+between two rows. `--occluders-only` writes them anew for scenario folders that exist.
 
     .venv/bin/python scripts/sumo-scenarios.py                 # every scenario into specs/traffic/sumo
     .venv/bin/python scripts/sumo-scenarios.py --only grid --out /tmp/s --duration 30
+    .venv/bin/python scripts/sumo-scenarios.py --only highway --out /tmp/s --seed 5   # other traffic
+    .venv/bin/python scripts/sumo-scenarios.py --occluders-only       # occluders.json anew
 
 Scenarios:
   grid      a 4 x 4 grid of 120 m blocks with traffic lights at every crossing and 80 m roads out of
@@ -37,7 +48,9 @@ Scenarios:
 
 import argparse
 import gzip
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -45,6 +58,8 @@ import tempfile
 
 FCD_PERIOD_S = 0.5
 STEP_LENGTH_S = 0.1
+SEED = 42  # of the trips and the simulation (--seed); the networks keep netgenerate's 42
+OCCLUSION_S = 2.0
 
 
 def sumo_home():
@@ -64,9 +79,10 @@ def run(cmd, cwd):
 
 
 class Sumo:
-    def __init__(self, home, work):
+    def __init__(self, home, work, seed=None):
         self.home = home
         self.work = work
+        self.seed = SEED if seed is None else seed
 
     def tool(self, name):
         return os.path.join(self.home, "bin", name)
@@ -80,12 +96,12 @@ class Sumo:
     def random_trips(self, net, routes, duration, period, *options):
         env_tools = os.path.join(self.home, "tools")
         run([sys.executable, os.path.join(env_tools, "randomTrips.py"), "-n", net, "-r", routes,
-             "-b", "0", "-e", str(duration), "-p", str(period), "--seed", "42",
+             "-b", "0", "-e", str(duration), "-p", str(period), "--seed", str(self.seed),
              ] + list(options), self.work)
 
     def simulate(self, net, routes, fcd, duration, additional=None):
         cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
-               "--step-length", str(STEP_LENGTH_S), "--seed", "42", "--no-step-log", "--no-warnings",
+               "--step-length", str(STEP_LENGTH_S), "--seed", str(self.seed), "--no-step-log", "--no-warnings",
                "--fcd-output", fcd, "--device.fcd.period", str(FCD_PERIOD_S),
                "--fcd-output.attributes", "x,y,angle,type,speed,lane,pos"]
         if additional:
@@ -253,6 +269,70 @@ def town400(s, duration):
     return ["net.net.xml"], None
 
 
+def junction_coordinates(net_gz):
+    """The x and y coordinates of the network's junctions (not the internal ones) and its
+    boundary (x0, y0, x1, y1)."""
+    with gzip.open(net_gz, "rt") as f:
+        text = f.read()
+    bounds = [float(v) for v in re.search(r'convBoundary="([^"]*)"', text).group(1).split(",")]
+    xs, ys = set(), set()
+    for junction in re.findall(r"<junction [^>]*>", text):
+        if 'type="internal"' in junction:
+            continue
+        xs.add(float(re.search(r' x="([^"]*)"', junction).group(1)))
+        ys.add(float(re.search(r' y="([^"]*)"', junction).group(1)))
+    return sorted(xs), sorted(ys), bounds
+
+
+def typical_speed(fcd_gz):
+    """The median speed (m/s) of the moving vehicles (over 2 m/s) in a recording."""
+    speeds = []
+    with gzip.open(fcd_gz, "rt") as f:
+        for line in f:
+            found = re.search(r' speed="([^"]*)"', line)
+            if found and float(found.group(1)) > 2.0:
+                speeds.append(float(found.group(1)))
+    speeds.sort()
+    return speeds[len(speeds) // 2]
+
+
+def middle_gap(coordinates, low, high):
+    """The middle of the gap between two neighbouring coordinates closest to the middle of
+    [low, high] (or that middle, with fewer than two coordinates)."""
+    centre = (low + high) / 2
+    gaps = [(a + b) / 2 for a, b in zip(coordinates, coordinates[1:]) if b - a > 1.0]
+    return min(gaps, key=lambda g: abs(g - centre)) if gaps else centre
+
+
+def occluders(folder, horizontal):
+    """Bridges across the main roads of a scenario folder (its net.xml.gz and fcd.xml.gz), each
+    OCCLUSION_S seconds wide at the typical speed: a vertical one between two columns of
+    junctions near the middle, and with `horizontal` a horizontal one between two rows. They
+    reach 30 m beyond the network's boundary."""
+    xs, ys, (x0, y0, x1, y1) = junction_coordinates(os.path.join(folder, "net.xml.gz"))
+    speed = typical_speed(os.path.join(folder, "fcd.xml.gz"))
+    half = speed * OCCLUSION_S / 2
+    items = []
+    x = middle_gap(xs, x0, x1)
+    items.append({"id": "bridge_x%d" % round(x), "kind": "bridge",
+                  "polygon": [[round(x - half, 2), y0 - 30], [round(x + half, 2), y0 - 30],
+                              [round(x + half, 2), y1 + 30], [round(x - half, 2), y1 + 30]]})
+    if horizontal:
+        y = middle_gap(ys, y0, y1)
+        items.append({"id": "bridge_y%d" % round(y), "kind": "bridge",
+                      "polygon": [[x0 - 30, round(y - half, 2)], [x1 + 30, round(y - half, 2)],
+                                  [x1 + 30, round(y + half, 2)], [x0 - 30, round(y + half, 2)]]})
+    note = ("bridges %.1f m wide: %.1f s at the recording's median speed of moving vehicles, %.1f m/s "
+            "(scripts/sumo-scenarios.py)" % (2 * half, OCCLUSION_S, speed))
+    with open(os.path.join(folder, "occluders.json"), "w") as f:
+        f.write('{"occluders": [\n  %s\n]}\n' % ",\n  ".join(json.dumps(item) for item in items))
+    return note
+
+
+# The scenarios with occluders (and whether they get a horizontal bridge too).
+OCCLUDED = {"grid": True, "random": True, "highway": False}
+
+
 SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
              "motorway": motorway, "wrong_way": wrong_way, "town400": town400}
 DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
@@ -267,11 +347,20 @@ def main():
     parser.add_argument("--only", choices=sorted(SCENARIOS), action="append",
                         help="make only this scenario (may be given more than once)")
     parser.add_argument("--duration", type=int, help="seconds of traffic (default per scenario)")
+    parser.add_argument("--seed", type=int, default=SEED,
+                        help="seed of the trips and the simulation (default %d: the shipped traffic)" % SEED)
+    parser.add_argument("--occluders-only", action="store_true",
+                        help="only write occluders.json anew in the scenario folders that exist")
     args = parser.parse_args()
+    if args.occluders_only:
+        for name in args.only or list(OCCLUDED):
+            if name in OCCLUDED:
+                print("%s: %s" % (name, occluders(os.path.join(args.out, name), OCCLUDED[name])))
+        return
     home = sumo_home()
     for name in args.only or list(SCENARIOS):
         with tempfile.TemporaryDirectory() as work:
-            s = Sumo(home, work)
+            s = Sumo(home, work, args.seed)
             duration = args.duration or DURATION_S[name]
             files, vtypes = SCENARIOS[name](s, duration)
             target = os.path.join(args.out, name)
@@ -281,6 +370,8 @@ def main():
                 gzip_to(os.path.join(work, produced), os.path.join(target, stem + ".xml.gz"))
             if vtypes:
                 shutil.copy(os.path.join(work, vtypes), os.path.join(target, "vtypes.xml"))
+            if name in OCCLUDED:
+                occluders(target, OCCLUDED[name])
             sizes = ", ".join("%s %d KiB" % (f, os.path.getsize(os.path.join(target, f)) // 1024)
                               for f in sorted(os.listdir(target)))
             print("%s: %s" % (target, sizes))

@@ -117,6 +117,15 @@ fn kalman_params(params: &Params) -> Result<KalmanParams, String> {
             defaults.initial_velocity_sd_mps,
         )?,
         acceleration_noise: positive(params, "acceleration_noise", defaults.acceleration_noise)?,
+        // 0 (the default): the linked-from object's velocity is not a measurement.
+        velocity_noise_mps: match params.get("velocity_noise_mps") {
+            None => defaults.velocity_noise_mps,
+            Some(v) => match v.as_f64() {
+                Some(x) if x.is_finite() && x > 0.0 => Some(x),
+                Some(0.0) => None,
+                _ => return Err(format!("`velocity_noise_mps` must be a number, 0 or more, found {v}")),
+            },
+        },
     })
 }
 

@@ -2,7 +2,9 @@
 //! constant-velocity Kalman filter, instead of copied from each percept (whose position is noisy
 //! and whose velocity is the tracker's noisier guess).
 //!
-//! - `anchor.kalman`: one position measurement per state, the linked-from object's `pos`.
+//! - `anchor.kalman`: one position measurement per state, the linked-from object's `pos`, and
+//!   with `velocity_noise_mps` also its `vel` (a tracker's velocity, which tells at once when a
+//!   car speeds up, brakes or turns, where the positions alone tell it only after some states).
 //! - `anchor.fuse(other)`: the same filter, also updated with a second source given as an extra
 //!   input stream of the link (a roadside radar's detections, another sensor's objects): at each
 //!   state, the `other` object closest to the filter's estimate within `gate_m` is a second
@@ -19,8 +21,9 @@
 //! The model: state x = (px, py, vx, vy); between two states dt apart, x' = F x with
 //! F = [[I, dt I], [0, I]], and process noise for white-noise acceleration of spectral density
 //! q (m²/s³) per axis, Q = q [[dt³/3 I, dt²/2 I], [dt²/2 I, dt I]]; a position measurement
-//! z = H x + v with H = [I 0] and v ~ N(0, r I). A measurement older than the filter's time
-//! (links step independently) is applied at the filter's time.
+//! z = H x + v with H = [I 0] and v ~ N(0, r I); with a velocity measurement too, z = x + v
+//! with v ~ N(0, diag(r, r, r_v, r_v)). A measurement older than the filter's time (links step
+//! independently) is applied at the filter's time.
 
 use std::sync::Arc;
 
@@ -114,6 +117,31 @@ impl CvFilter {
         Ok(())
     }
 
+    /// Takes in a measurement of both position `z` (variance `r` per axis) and velocity `v`
+    /// (variance `r_v` per axis), independent of each other (Joseph form).
+    pub fn update_with_velocity(
+        &mut self,
+        z: [f64; 2],
+        r: f64,
+        v: [f64; 2],
+        r_v: f64,
+    ) -> Result<(), FilterError> {
+        let noise = Matrix4::from_diagonal(&Vector4::new(r, r, r_v, r_v));
+        let innovation = Vector4::new(z[0], z[1], v[0], v[1]) - self.x;
+        let s = self.p + noise;
+        let s_inv = s.try_inverse().ok_or(FilterError::Singular)?;
+        let gain = self.p * s_inv;
+        let x = self.x + gain * innovation;
+        let i_k = Matrix4::identity() - gain;
+        let p = i_k * self.p * i_k.transpose() + gain * noise * gain.transpose();
+        if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
+            return Err(FilterError::NotFinite);
+        }
+        self.x = x;
+        self.p = p;
+        Ok(())
+    }
+
     /// The standard deviation of the position estimate (the root of the mean of the two axes'
     /// variances), metres.
     pub fn position_sd(&self) -> f64 {
@@ -131,11 +159,19 @@ pub struct KalmanParams {
     pub initial_velocity_sd_mps: f64,
     /// Spectral density of the white-noise acceleration (m²/s³): how fast the velocity may change.
     pub acceleration_noise: f64,
+    /// Standard deviation of the linked-from object's `vel`, per axis (m/s), when it is a
+    /// measurement too (a tracker's velocity); `None`: only its position is measured.
+    pub velocity_noise_mps: Option<f64>,
 }
 
 impl Default for KalmanParams {
     fn default() -> KalmanParams {
-        KalmanParams { position_noise_m: 1.0, initial_velocity_sd_mps: 3.0, acceleration_noise: 2.0 }
+        KalmanParams {
+            position_noise_m: 1.0,
+            initial_velocity_sd_mps: 3.0,
+            acceleration_noise: 2.0,
+            velocity_noise_mps: None,
+        }
     }
 }
 
@@ -175,12 +211,21 @@ impl Kalman {
             Some(previous) => {
                 let mut filter = previous.clone();
                 filter.predict(call.time, self.params.acceleration_noise);
-                filter.update(pos, r).map_err(|e| e.to_string())?;
+                match (self.params.velocity_noise_mps, velocity(call.from)) {
+                    (Some(sd), Some(vel)) => filter.update_with_velocity(pos, r, vel, sd * sd),
+                    _ => filter.update(pos, r),
+                }
+                .map_err(|e| e.to_string())?;
                 filter
             }
             None => {
                 let vel = velocity(call.from).unwrap_or([0.0, 0.0]);
-                CvFilter::new(pos, vel, r, self.params.initial_velocity_sd_mps.powi(2), call.time)
+                // A measured velocity is trusted as such from the first state on.
+                let vel_sd = match (self.params.velocity_noise_mps, velocity(call.from)) {
+                    (Some(sd), Some(_)) => sd.min(self.params.initial_velocity_sd_mps),
+                    _ => self.params.initial_velocity_sd_mps,
+                };
+                CvFilter::new(pos, vel, r, vel_sd * vel_sd, call.time)
             }
         };
         if let (Some(fuse), Some(Some(other))) = (self.fuse, call.inputs.first()) {
@@ -281,6 +326,47 @@ mod tests {
         assert!((f.p[(0, 0)] - 0.5).abs() < 1e-12);
         let mut exact = CvFilter::new([0.0, 0.0], [0.0, 0.0], 0.0, 0.0, 0);
         assert_eq!(exact.update([1.0, 1.0], 0.0), Err(FilterError::Singular));
+    }
+
+    #[test]
+    fn a_velocity_measurement_is_weighed_by_its_variance_too() {
+        let mut f = CvFilter::new([0.0, 0.0], [10.0, 0.0], 1.0, 1.0, 0);
+        f.update_with_velocity([2.0, 0.0], 1.0, [14.0, 2.0], 1.0).unwrap();
+        // Independent axes and equal variances: halfway in position and in velocity.
+        assert!((f.position()[0] - 1.0).abs() < 1e-12 && f.position()[1].abs() < 1e-12);
+        assert!((f.velocity()[0] - 12.0).abs() < 1e-12 && (f.velocity()[1] - 1.0).abs() < 1e-12);
+        assert!((f.p[(2, 2)] - 0.5).abs() < 1e-12 && (f.p[(0, 0)] - 0.5).abs() < 1e-12);
+        // A velocity 4 times as certain as the estimate counts 4 times as much.
+        let mut f = CvFilter::new([0.0, 0.0], [0.0, 0.0], 1.0, 1.0, 0);
+        f.update_with_velocity([0.0, 0.0], 1.0, [5.0, 0.0], 0.25).unwrap();
+        assert!((f.velocity()[0] - 4.0).abs() < 1e-12, "{:?}", f.velocity());
+    }
+
+    /// A target that speeds up (2 m/s² for 3 s), measured at 10 Hz with 1 m position noise and
+    /// 0.5 m/s velocity noise: a filter that also measures the velocity follows the change, one
+    /// that measures positions only lags behind it.
+    #[test]
+    fn measured_velocities_follow_an_acceleration() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let speed = |t: f64| if t < 2.0 { 8.0 } else { 8.0 + 2.0 * (t - 2.0).min(3.0) };
+        let (mut pos_only, mut with_vel) = (
+            CvFilter::new([0.0, 0.0], [8.0, 0.0], 1.0, 1.0, 0),
+            CvFilter::new([0.0, 0.0], [8.0, 0.0], 1.0, 1.0, 0),
+        );
+        let (mut x, mut worst) = (0.0, [0.0f64, 0.0f64]);
+        for step in 1..=60 {
+            let t = step as f64 / 10.0;
+            x += speed(t) * 0.1;
+            let z = [x + gauss(&mut rng, 1.0), gauss(&mut rng, 1.0)];
+            let v = [speed(t) + gauss(&mut rng, 0.5), gauss(&mut rng, 0.5)];
+            pos_only.predict(step * 100_000, 2.0);
+            pos_only.update(z, 1.0).unwrap();
+            with_vel.predict(step * 100_000, 2.0);
+            with_vel.update_with_velocity(z, 1.0, v, 0.25).unwrap();
+            worst[0] = worst[0].max((pos_only.velocity()[0] - speed(t)).abs());
+            worst[1] = worst[1].max((with_vel.velocity()[0] - speed(t)).abs());
+        }
+        assert!(worst[1] < 1.2 && worst[0] > 2.0 * worst[1], "worst velocity errors {worst:?}");
     }
 
     /// A target moving at constant velocity, measured with 1 m noise at 10 Hz: after a few

@@ -57,6 +57,12 @@ fn kalman_params(entry: Entry) -> Entry {
             Value::Float(defaults.acceleration_noise),
             "spectral density of the white-noise acceleration (m²/s³): how fast the velocity may change",
         ))
+        .param(Param::optional(
+            "velocity_noise_mps",
+            ParamType::Float,
+            Value::Float(defaults.velocity_noise_mps.unwrap_or(0.0)),
+            "standard deviation of the linked-from object's `vel` as a measurement, per axis (m/s); 0: only `pos` is measured",
+        ))
 }
 
 /// `on_road(pos)`, provided by `anchor.snap_to_lane`.

@@ -1,7 +1,7 @@
 //! The shipped SUMO specs (`specs/traffic/sumo_*.kpl`) anchoring recorded SUMO traffic, run
 //! through the simulated tracker straight into the engine: cars standing in queues stay on their
 //! own lane (snapping keeps lane continuity), cars waiting at red lights get a car symbol without
-//! having to drive first, symbols of cars that left the map are not driven off it, and identity
+//! having to drive first, every moving car gets its car symbol within 3 s, symbols of cars that left the map are not driven off it, and identity
 //! switches stay rare.
 #![allow(clippy::unwrap_used, reason = "tests")]
 #![allow(clippy::print_stderr, reason = "tests say when an oracle is missing and what they measured")]
@@ -39,8 +39,11 @@ struct Outcome {
     /// The same, snapping the percept as before lane continuity (nearest lane, heading of the
     /// noisy velocity above 0.5 m/s).
     standing_elsewhere_before: usize,
-    /// Seconds from each car's first percept to its first car symbol.
-    car_symbol_delay_s: Vec<f64>,
+    /// Issue 9's measure, per moving car: seconds from its first percept while moving (above
+    /// 2 m/s) to its first car symbol, leaving out the frames in which it was hidden (under an
+    /// occluder or out of view), with the car's name; a car that had its symbol before it moved
+    /// counts 0.
+    moving_car_symbol_delay_s: Vec<(f64, String)>,
     /// Cars that stood still from their first percept on for at least 5 s, and those of them that
     /// had no car symbol after those 5 s.
     queued_from_start: BTreeSet<CarId>,
@@ -60,12 +63,29 @@ fn run_driver(mut driver: SimDriver) -> Outcome {
     let mut first_seen: BTreeMap<CarId, (f64, bool)> = BTreeMap::new();
     let mut has_car: BTreeSet<CarId> = BTreeSet::new();
     let mut moved: BTreeSet<CarId> = BTreeSet::new();
+    // Per car seen moving: (when first seen moving, seconds hidden since).
+    let mut moving_since: BTreeMap<CarId, (f64, f64)> = BTreeMap::new();
+    let mut last_t: Option<f64> = None;
     driver
         .run_until(i64::MAX / 4, |step| {
             outcome.score.record(&step);
             let t = step.time as f64 / 1e6;
             let (_, frame) = step.frames[0];
             let truth: BTreeMap<CarId, &kpl_sim::CarState> = frame.cars.iter().map(|c| (c.id, c)).collect();
+            let dt = last_t.map_or(0.0, |last| t - last);
+            last_t = Some(t);
+            for (car, seen) in frame.cars.iter().zip(&frame.visibility) {
+                if let Some((_, hidden)) = moving_since.get_mut(&car.id) {
+                    if !seen.in_view() {
+                        *hidden += dt;
+                    }
+                } else if *seen == kpl_sim::Visibility::Detected && car.speed_mps > 2.0 {
+                    moving_since.insert(car.id, (t, 0.0));
+                    if has_car.contains(&car.id) {
+                        outcome.moving_car_symbol_delay_s.push((0.0, car.name.to_string()));
+                    }
+                }
+            }
             // Cars that moved since their first percept.
             for car in &frame.cars {
                 if car.speed_mps > 2.0 && first_seen.contains_key(&car.id) {
@@ -78,8 +98,11 @@ fn run_driver(mut driver: SimDriver) -> Outcome {
                 let chain = step.engine.chain(&percept.id.to_string());
                 let standing = state.speed_mps < 0.5;
                 let entry = first_seen.entry(car).or_insert((t, standing));
-                if chain.iter().any(|(ty, _)| &**ty == "Car") && has_car.insert(car) {
-                    outcome.car_symbol_delay_s.push(t - entry.0);
+                if chain.iter().any(|(ty, _)| &**ty == "Car")
+                    && has_car.insert(car)
+                    && let Some((since, hidden)) = moving_since.get(&car)
+                {
+                    outcome.moving_car_symbol_delay_s.push((t - since - hidden, state.name.to_string()));
                 }
                 if entry.1 && !moved.contains(&car) && t - entry.0 >= 5.0 {
                     outcome.queued_from_start.insert(car);
@@ -139,15 +162,7 @@ fn sumo_grid_keeps_standing_cars_on_their_lane_and_gives_queued_cars_a_symbol() 
     assert!(standing > 2_000, "{standing} frames of standing cars");
     assert!(now * 100 <= standing, "{now} of {standing} standing frames snapped off their road");
     assert!(now * 10 <= before, "{now} against {before} before lane continuity");
-    let mut delays = outcome.car_symbol_delay_s.clone();
-    delays.sort_by(f64::total_cmp);
-    let median = delays[delays.len() / 2];
-    let late = delays.iter().filter(|&&d| d > 3.0).count();
-    assert!(
-        late * 10 <= delays.len(),
-        "{late} of {} cars waited more than 3 s for a car symbol",
-        delays.len()
-    );
+    let (median, late, max) = moving_cars_get_their_symbol_within_3_s("sumo_grid.kpl", &outcome);
     assert_eq!(outcome.predicted_off_map, 0, "nothing is predicted beyond the border");
     // Identity: world objects and cars switch rarely.
     for ty in ["WorldObject", "Car"] {
@@ -160,15 +175,37 @@ fn sumo_grid_keeps_standing_cars_on_their_lane_and_gives_queued_cars_a_symbol() 
     }
     eprintln!(
         "grid: {cars} vehicles, with a world object {} on-road object {} car {}; switches WorldObject {} OnRoadObject {} Car {}; standing frames {standing}, \
-         off their road {now} (before {before}); car symbol delay median {median:.1} s, over 3 s {late}, max {:.1} s",
+         off their road {now} (before {before}); moving cars' car symbol delay median {median:.1} s, over 3 s {late}, max {max:.1} s",
         score.cars_with("WorldObject"),
         score.cars_with("OnRoadObject"),
         score.cars_with("Car"),
         score.switches("WorldObject"),
         score.switches("OnRoadObject"),
         score.switches("Car"),
-        delays.last().unwrap()
     );
+}
+
+/// Issue 9's target: every moving car has its car symbol within 3 s of its first percept (the
+/// time it was hidden left out: a car that drives under a bridge in its first seconds cannot be
+/// anchored there). Returns the median, the number over 3 s (0) and the longest, and prints the
+/// distribution.
+fn moving_cars_get_their_symbol_within_3_s(spec: &str, outcome: &Outcome) -> (f64, usize, f64) {
+    let mut delays = outcome.moving_car_symbol_delay_s.clone();
+    delays.sort_by(|a, b| a.0.total_cmp(&b.0));
+    assert!(delays.len() >= 80, "{spec}: only {} moving cars got a car symbol", delays.len());
+    let quantile = |q: f64| delays[((delays.len() - 1) as f64 * q) as usize].0;
+    let late: Vec<&(f64, String)> = delays.iter().filter(|(d, _)| *d > 3.0).collect();
+    eprintln!(
+        "{spec}: moving cars' car symbol after their first percept (hidden time left out), {} cars: \
+         median {:.1} s, 90 % {:.1} s, 99 % {:.1} s, longest {:.1} s",
+        delays.len(),
+        quantile(0.5),
+        quantile(0.9),
+        quantile(0.99),
+        quantile(1.0)
+    );
+    assert!(late.is_empty(), "{spec}: cars that waited more than 3 s for a car symbol: {late:?}");
+    (quantile(0.5), late.len(), quantile(1.0))
 }
 
 /// The UAV arrives over the town after two minutes: the cars queued at red lights then are seen
@@ -204,6 +241,7 @@ fn sumo_highway_and_random_network_anchor_their_traffic() {
             score.cars_with("Car")
         );
         assert!(outcome.standing_elsewhere * 100 <= outcome.standing.max(100), "{spec}");
+        moving_cars_get_their_symbol_within_3_s(spec, &outcome);
         assert_eq!(outcome.predicted_off_map, 0, "{spec}");
         for ty in ["WorldObject", "Car"] {
             let switches = score.switches(ty);

@@ -302,6 +302,67 @@ impl Value {
     }
 }
 
+/// Serializes as [`Value::to_json`] would, without building the JSON tree first (the same text
+/// with `serde_json`: a record's keys in the sorted order of a JSON object, the last of equal keys
+/// kept, non-finite floats as `null`). Writers of many values (the `file.jsonl` sink) use it.
+impl serde::Serialize for Value {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        let float = |x: f64| if x.is_finite() { Some(x) } else { None };
+        match self {
+            Value::Bool(b) => serializer.serialize_bool(*b),
+            Value::Int(i) | Value::Duration(i) => serializer.serialize_i64(*i),
+            Value::Float(x) => serializer.serialize_some(&float(*x)),
+            Value::Str(s) => serializer.serialize_str(s),
+            Value::Vec2(v) => {
+                let mut seq = serializer.serialize_seq(Some(2))?;
+                for x in v {
+                    seq.serialize_element(&float(*x))?;
+                }
+                seq.end()
+            }
+            Value::BBox(b) => {
+                let mut seq = serializer.serialize_seq(Some(4))?;
+                for x in [b.x1, b.y1, b.x2, b.y2] {
+                    seq.serialize_element(&float(x))?;
+                }
+                seq.end()
+            }
+            Value::List(items) => {
+                let mut seq = serializer.serialize_seq(Some(items.len()))?;
+                for item in items.iter() {
+                    seq.serialize_element(item)?;
+                }
+                seq.end()
+            }
+            Value::Record(r) => {
+                enum Entry<'a> {
+                    Id(&'a str),
+                    Field(&'a Value),
+                }
+                let mut entries: Vec<(&str, Entry<'_>)> = Vec::with_capacity(r.fields.len() + 1);
+                if let Some(id) = &r.id {
+                    entries.push(("id", Entry::Id(id)));
+                }
+                entries.extend(r.fields.iter().map(|(name, value)| (&**name, Entry::Field(value))));
+                // As a JSON object (a sorted map) holds them: sorted by key, the last of equal keys.
+                entries.sort_by(|a, b| a.0.cmp(b.0));
+                let mut map = serializer.serialize_map(None)?;
+                for (i, (key, entry)) in entries.iter().enumerate() {
+                    if entries.get(i + 1).is_some_and(|next| next.0 == *key) {
+                        continue;
+                    }
+                    match entry {
+                        Entry::Id(id) => map.serialize_entry(key, id)?,
+                        Entry::Field(value) => map.serialize_entry(key, value)?,
+                    }
+                }
+                map.end()
+            }
+        }
+    }
+}
+
 fn f64_json(x: f64) -> serde_json::Value {
     Number::from_f64(x).map_or(serde_json::Value::Null, serde_json::Value::Number)
 }

@@ -402,5 +402,26 @@ fn a_scenario_made_afresh_with_sumo_reads() {
     }
     assert!(seen > 1000, "{seen} vehicle positions");
     assert!(playback.take_problems().is_empty());
+    // The occluders made for it: two bridges, each across roads between the junctions (nothing
+    // of a junction under them) and as wide as 2 s at the recording's median speed (SUMO's
+    // town speed limit is 13.9 m/s).
+    let occluders = kpl_roads::load::read_occluders(&dir.join("grid/occluders.json"), &net).unwrap();
+    assert_eq!(occluders.len(), 2, "{occluders:?}");
+    for occluder in &occluders {
+        let xs = occluder.area.iter().map(|p| p[0]);
+        let ys = occluder.area.iter().map(|p| p[1]);
+        let width = |v: Vec<f64>| {
+            v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
+        };
+        let narrow = width(xs.collect()).min(width(ys.collect()));
+        assert!((8.0..=2.0 * 13.9).contains(&narrow), "{} is {narrow} m wide", occluder.name);
+        for node in net.nodes() {
+            assert!(
+                !kpl_roads::geom::point_in_polygon(node.pos, &occluder.area),
+                "{node:?} under {}",
+                occluder.name
+            );
+        }
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -43,14 +43,17 @@ pub struct SampleLine {
     pub value: serde_json::Value,
 }
 
-/// Encodes a sample as one line (without the line break).
+/// Encodes a sample as one line (without the line break): a [`SampleLine`], written straight from
+/// the value (no JSON tree is built).
 pub fn encode_line(stream: &str, sample: &Sample) -> String {
-    let line = SampleLine {
-        stream: stream.to_string(),
-        valid: sample.valid,
-        available: sample.available,
-        value: sample.value.to_json(),
-    };
+    #[derive(Serialize)]
+    struct Line<'a> {
+        stream: &'a str,
+        valid: Time,
+        available: Time,
+        value: &'a Value,
+    }
+    let line = Line { stream, valid: sample.valid, available: sample.available, value: &sample.value };
     serde_json::to_string(&line).unwrap_or_default()
 }
 
@@ -343,6 +346,62 @@ mod tests {
         let line = encode_line("s", &sample);
         assert_eq!(line, r#"{"stream":"s","valid":100,"available":120,"value":[1.5,-2.0]}"#);
         assert_eq!(decode_line(&line, &ValueType::Vec2).unwrap(), ("s".to_string(), sample));
+    }
+
+    /// Any value, with records whose keys repeat, clash with `id` and come in any order, and
+    /// floats that are not finite.
+    fn any_value() -> impl proptest::strategy::Strategy<Value = Value> {
+        use proptest::prelude::*;
+        let float = prop_oneof![
+            any::<f64>(),
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(-0.0),
+            Just(1e300),
+            Just(0.1)
+        ];
+        let leaf = prop_oneof![
+            any::<bool>().prop_map(Value::Bool),
+            any::<i64>().prop_map(Value::Int),
+            float.clone().prop_map(Value::Float),
+            r#"[a-z"\\é\n]{0,6}"#.prop_map(|s| Value::Str(s.into())),
+            (float.clone(), float.clone()).prop_map(|(x, y)| Value::Vec2([x, y])),
+            (float.clone(), float.clone(), float.clone(), float).prop_map(|(a, b, c, d)| Value::BBox(
+                std::sync::Arc::new(kpl_core::BBox { x1: a, y1: b, x2: c, y2: d })
+            )),
+            any::<i64>().prop_map(Value::Duration),
+        ];
+        leaf.prop_recursive(3, 24, 4, |inner| {
+            prop_oneof![
+                proptest::collection::vec(inner.clone(), 0..4).prop_map(|items| Value::List(items.into())),
+                (
+                    proptest::option::of("[a-z]{0,3}"),
+                    proptest::collection::vec(("id|pos|a|b|[a-z]{1,3}", inner), 0..5)
+                )
+                    .prop_map(|(id, fields)| Value::Record(std::sync::Arc::new(
+                        kpl_core::Record {
+                            id: id.map(Into::into),
+                            fields: fields.into_iter().map(|(name, value)| (name.into(), value)).collect(),
+                        }
+                    ))),
+            ]
+        })
+    }
+
+    proptest::proptest! {
+        /// The line written straight from the value is the text of the value's JSON tree, as
+        /// before (`Value::to_json`), byte for byte.
+        #[test]
+        fn lines_are_written_as_the_json_tree_reads(value in any_value(), valid in 0i64..1_000_000) {
+            let sample = Sample::new(valid, valid + 1, value.clone());
+            let tree = SampleLine {
+                stream: "s".to_string(),
+                valid,
+                available: valid + 1,
+                value: value.to_json(),
+            };
+            proptest::prop_assert_eq!(encode_line("s", &sample), serde_json::to_string(&tree).unwrap());
+        }
     }
 
     #[test]
