@@ -106,9 +106,20 @@ struct Binding {
 
 /// The verdicts (valid time, car, verdict) the monitor's rules give with one progressor per car.
 fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, bool)> {
+    independent_bindings(&["c"], body, states)
+}
+
+/// The same with one progressor per binding of `vars` (one variable: each car; two: each
+/// ordered pair of distinct cars), a binding named by its cars joined with `|`.
+fn independent_bindings(
+    vars: &[&str],
+    body: &str,
+    states: &[Vec<(String, f64)>],
+) -> Vec<(Time, String, bool)> {
     let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Ms);
-    let c = ctx.declare_value("c");
-    assert_eq!(c, 0);
+    for (i, var) in vars.iter().enumerate() {
+        assert_eq!(ctx.declare_value(var), i as u32);
+    }
     let expr = kpl_syntax::parse_formula(body).unwrap();
     let formula = Arc::new(Formula::from_ast(&expr, &mut ctx).unwrap());
     let mut open: BTreeMap<String, Binding> = BTreeMap::new();
@@ -123,18 +134,29 @@ fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, 
     };
     for (i, cars) in states.iter().enumerate() {
         let valid = i as Time * PERIOD;
+        let record = |(id, speed): &(String, f64)| {
+            Value::Record(Arc::new(Record {
+                id: Some(Arc::from(id.as_str())),
+                fields: vec![(Arc::from("speed"), Value::Float(*speed))],
+            }))
+        };
+        let bindings: Vec<(String, SlotState)> = match vars.len() {
+            1 => cars.iter().map(|car| (car.0.clone(), SlotState::new(vec![Some(record(car))]))).collect(),
+            _ => cars
+                .iter()
+                .flat_map(|a| cars.iter().filter(move |b| b.0 != a.0).map(move |b| (a, b)))
+                .map(|(a, b)| {
+                    (format!("{}|{}", a.0, b.0), SlotState::new(vec![Some(record(a)), Some(record(b))]))
+                })
+                .collect(),
+        };
         let gone: Vec<String> =
-            open.keys().filter(|id| !cars.iter().any(|(car, _)| car == *id)).cloned().collect();
+            open.keys().filter(|id| !bindings.iter().any(|(b, _)| b == *id)).cloned().collect();
         for id in gone {
             let binding = open.remove(&id).unwrap();
             close(&id, binding, &mut verdicts);
         }
-        for (id, speed) in cars {
-            let record = Record {
-                id: Some(Arc::from(id.as_str())),
-                fields: vec![(Arc::from("speed"), Value::Float(*speed))],
-            };
-            let state = SlotState::new(vec![Some(Value::Record(Arc::new(record)))]);
+        for (id, state) in bindings {
             let binding = open.entry(id.clone()).or_insert_with(|| Binding {
                 progressor: Progressor::new(formula.clone()),
                 last_valid: None,
@@ -161,15 +183,18 @@ fn independent(body: &str, states: &[Vec<(String, f64)>]) -> Vec<(Time, String, 
 }
 
 fn reported(path: &Path) -> Vec<(Time, String, bool)> {
+    reported_bindings(path, &["c"])
+}
+
+/// The verdicts a monitor over `vars` reported, each binding named as [`independent_bindings`]
+/// names it.
+fn reported_bindings(path: &Path, vars: &[&str]) -> Vec<(Time, String, bool)> {
     let mut verdicts: Vec<(Time, String, bool)> = lines(path)
         .iter()
         .map(|r| {
             let v = &r["value"];
-            (
-                r["valid"].as_i64().unwrap(),
-                v["c"].as_str().unwrap().to_string(),
-                v["verdict"].as_bool().unwrap(),
-            )
+            let ids: Vec<&str> = vars.iter().map(|var| v[*var].as_str().unwrap()).collect();
+            (r["valid"].as_i64().unwrap(), ids.join("|"), v["verdict"].as_bool().unwrap())
         })
         .collect();
     verdicts.sort();
@@ -206,6 +231,54 @@ fn shared_bindings_report_what_independent_progressions_report() {
                     expected.len()
                 );
             }
+        }
+    }
+}
+
+/// A pair monitor (`forall a: Car . forall b: Car . φ`, without a gate: every ordered pair of
+/// distinct cars) on 40 of the cars: the pairs' progressions in the shared group against one
+/// `Progressor` per pair, under the same rules (a pair starts when both cars are present and
+/// closes when either is gone).
+#[test]
+fn shared_pair_bindings_report_what_independent_progressions_report() {
+    const PAIR_MONITORS: [(&str, &str); 2] = [
+        ("faster", "always[0, 1s] a.speed > b.speed"),
+        ("catches_up", "a.speed < b.speed -> eventually[0, 2s] a.speed > b.speed"),
+    ];
+    let dir = common::fresh_dir("bindings", "pairs");
+    let states: Vec<Vec<(String, f64)>> = traffic(3)
+        .into_iter()
+        .map(|cars| cars.into_iter().filter(|(id, _)| id.as_str() < "car040").collect())
+        .collect();
+    write_spec(&dir, &states);
+    let mut spec = String::from(
+        "type Car symbol car { speed: float }\n\
+         source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n",
+    );
+    for (name, body) in PAIR_MONITORS {
+        spec.push_str(&format!("monitor {name} = forall a: Car . forall b: Car . {body}\n"));
+        spec.push_str(&format!("sink record_{name} = file.jsonl({name}, path: \"{name}.jsonl\")\n"));
+    }
+    std::fs::write(dir.join("pairs.kpl"), spec).unwrap();
+    let out = dir.join("out");
+    let spec = dir.join("pairs.kpl");
+    let result =
+        kpl(&["run", "--quiet", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    for (name, body) in PAIR_MONITORS {
+        let expected = independent_bindings(&["a", "b"], body, &states);
+        let got = reported_bindings(&out.join(format!("{name}.jsonl")), &["a", "b"]);
+        let pairs: std::collections::BTreeSet<&String> = expected.iter().map(|(_, pair, _)| pair).collect();
+        assert!(pairs.len() > 500, "{name}: {} pairs decided", pairs.len());
+        assert!(expected.iter().any(|v| v.2) && expected.iter().any(|v| !v.2), "{name}: one-sided");
+        if got != expected {
+            let missing: Vec<_> = expected.iter().filter(|v| !got.contains(v)).take(5).collect();
+            let extra: Vec<_> = got.iter().filter(|v| !expected.contains(v)).take(5).collect();
+            panic!(
+                "{name}: {} verdicts reported, {} expected; missing {missing:?}, extra {extra:?}",
+                got.len(),
+                expected.len()
+            );
         }
     }
 }

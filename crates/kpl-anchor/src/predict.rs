@@ -272,8 +272,7 @@ pub fn previous_lane(network: &RoadNetwork, state: &Record) -> Option<kpl_roads:
         }
         _ => {}
     }
-    let snapped = network.snap_to_lane(position(state)?, None)?;
-    (snapped.lateral_m.abs() < 0.05).then_some(snapped.lane)
+    network.lane_centre_at(position(state)?, 0.05)
 }
 
 #[cfg(test)]

@@ -55,11 +55,34 @@ pub struct ObjectStatus {
 /// `record` with its status attributes set to `status` (replacing any it carried).
 pub fn with_status(mut record: Record, status: ObjectStatus) -> Record {
     record.fields.retain(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE);
-    record.fields.push((Arc::from(MEASURED), Value::Bool(status.measured)));
-    if let Some(since) = status.predicted_since.filter(|_| !status.measured) {
-        record.fields.push((Arc::from(PREDICTED_SINCE), Value::Int(since)));
-    }
+    push_status(&mut record.fields, status);
     record
+}
+
+/// A copy of `record` with its status attributes set to `status`: [`with_status`] of a clone,
+/// made in one allocation (an object's state is copied so at every step).
+pub fn with_status_of(record: &Record, status: ObjectStatus) -> Record {
+    let mut fields = Vec::with_capacity(record.fields.len() + 2);
+    fields.extend(
+        record.fields.iter().filter(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE).cloned(),
+    );
+    push_status(&mut fields, status);
+    Record { id: record.id.clone(), fields }
+}
+
+/// The names of the status attributes, made once: every state's record shares them.
+fn status_names() -> &'static (Arc<str>, Arc<str>) {
+    static NAMES: std::sync::OnceLock<(Arc<str>, Arc<str>)> = std::sync::OnceLock::new();
+    NAMES.get_or_init(|| (Arc::from(MEASURED), Arc::from(PREDICTED_SINCE)))
+}
+
+fn push_status(fields: &mut Vec<(Arc<str>, Value)>, status: ObjectStatus) {
+    let (measured, predicted_since) = status_names();
+    fields.reserve(2);
+    fields.push((measured.clone(), Value::Bool(status.measured)));
+    if let Some(since) = status.predicted_since.filter(|_| !status.measured) {
+        fields.push((predicted_since.clone(), Value::Int(since)));
+    }
 }
 
 /// Whether an object value says it was measured (`measured: true`); a record without the
@@ -80,7 +103,7 @@ pub fn held(value: &Value, time: Time) -> Value {
         _ => time,
     };
     let status = ObjectStatus { measured: false, predicted_since: Some(since) };
-    Value::Record(Arc::new(with_status(record.clone(), status)))
+    Value::Record(Arc::new(with_status_of(record, status)))
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ use kpl_core::{Record, Time, Value};
 
 use crate::predict::PredictionStart;
 use crate::stateful::UnitMemory;
-use crate::status::{ObjectStatus, with_status};
+use crate::status::{ObjectStatus, with_status, with_status_of};
 
 /// Index of a link specification in the engine.
 pub type LinkId = u32;
@@ -151,7 +151,11 @@ impl Object {
     /// ingested object is checked before).
     pub fn set_state_value(&mut self, value: &Value, time: Time, origin: StateOrigin) {
         match value {
-            Value::Record(record) => self.set_state((**record).clone(), time, origin),
+            Value::Record(record) => {
+                self.state_time = time;
+                self.note_origin(time, origin);
+                self.value = Value::Record(Arc::new(with_status_of(record, self.status())));
+            }
             other => {
                 self.state_time = time;
                 self.note_origin(time, origin);
@@ -168,7 +172,7 @@ impl Object {
         }
         self.note_origin(time, StateOrigin { measured: false, predicted: self.predicted });
         if let Value::Record(record) = &self.value {
-            self.value = Value::Record(Arc::new(with_status((**record).clone(), self.status())));
+            self.value = Value::Record(Arc::new(with_status_of(record, self.status())));
         }
     }
 

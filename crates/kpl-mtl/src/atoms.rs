@@ -6,13 +6,116 @@
 //! it. A failure (a missing value, a type error) is kept and becomes the step's error only if the
 //! progression actually uses that atom's value, as `docs/mtl.md` ("Missing values") promises.
 
+use std::sync::Arc;
+
 use crate::error::EvalError;
 use crate::formula::{AtomId, Formula, WORD_ATOMS};
 use crate::residual::Env;
 use crate::state::State;
-use crate::term::{Term, TermEnv};
+use crate::term::{BinOp, Function, Native, SlotId, Term, TermEnv};
 
 use kpl_core::Value;
+
+/// How an atom is read. Most go through the general evaluator ([`TermEnv`]); the distance
+/// comparison of link conditions (`xydist(from.pos, to.pos) < 10.0`), read for every pair at
+/// every state, is compiled to two attribute reads, one `hypot` and one comparison. Whenever the
+/// state holds something else than that path expects (no record, no such attribute, not a
+/// `vec2`), the general evaluator reads the atom, so the value and the errors are the same.
+#[derive(Debug, Clone)]
+pub(crate) enum AtomPlan {
+    General,
+    /// `xydist(a, b) op bound` (or `dist` of two positions), with `a` and `b` positions.
+    Distance {
+        a: PointPath,
+        b: PointPath,
+        op: BinOp,
+        bound: f64,
+    },
+}
+
+/// Where a position is: a name of the state (a `vec2`, or a record's `pos`) or one attribute
+/// of a record of the state (`from.pos`).
+#[derive(Debug, Clone)]
+pub(crate) struct PointPath {
+    slot: SlotId,
+    field: Option<Arc<str>>,
+}
+
+impl PointPath {
+    fn of(term: &Term) -> Option<PointPath> {
+        match term {
+            Term::Slot(slot) => Some(PointPath { slot: *slot, field: None }),
+            // `id` is computed, not an attribute.
+            Term::Field(base, field) if &**field != "id" => match &**base {
+                Term::Slot(slot) => Some(PointPath { slot: *slot, field: Some(field.clone()) }),
+                _ => None,
+            },
+            _ => None,
+        }
+    }
+
+    #[inline]
+    fn read<S: State + ?Sized>(&self, state: &S) -> Option<[f64; 2]> {
+        let mut value = state.value(self.slot)?;
+        if let Some(field) = &self.field {
+            let Value::Record(record) = value else { return None };
+            value = record.get(field)?;
+        }
+        match value {
+            Value::Vec2(p) => Some(*p),
+            // A record stands for its `pos`, as the built-ins read it.
+            Value::Record(record) => record.get("pos")?.as_vec2(),
+            _ => None,
+        }
+    }
+}
+
+impl AtomPlan {
+    /// The plan of an atom of a formula calling `functions`.
+    pub fn of(term: &Term, functions: &[Function]) -> AtomPlan {
+        let Term::Binary(op, lhs, rhs) = term else { return AtomPlan::General };
+        // `bound op distance` is `distance op' bound`, op' the mirrored comparison.
+        let (op, call, bound) = match (op, &**lhs, &**rhs) {
+            (BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge, call, Term::Const(c)) => (*op, call, c),
+            (BinOp::Lt, Term::Const(c), call) => (BinOp::Gt, call, c),
+            (BinOp::Le, Term::Const(c), call) => (BinOp::Ge, call, c),
+            (BinOp::Gt, Term::Const(c), call) => (BinOp::Lt, call, c),
+            (BinOp::Ge, Term::Const(c), call) => (BinOp::Le, call, c),
+            _ => return AtomPlan::General,
+        };
+        let Some(bound) = bound.as_f64().filter(|b| !b.is_nan()) else { return AtomPlan::General };
+        let Term::Call(func, args) = call else { return AtomPlan::General };
+        let native = functions.get(*func as usize).and_then(|f| f.native);
+        match (native, args.as_slice()) {
+            (Some(Native::XyDist | Native::Dist), [a, b]) => match (PointPath::of(a), PointPath::of(b)) {
+                (Some(a), Some(b)) => AtomPlan::Distance { a, b, op, bound },
+                _ => AtomPlan::General,
+            },
+            _ => AtomPlan::General,
+        }
+    }
+
+    /// The atom's value by the plan, or `None` when the general evaluator must read it.
+    #[inline]
+    fn read<S: State + ?Sized>(&self, state: &S) -> Option<bool> {
+        match self {
+            AtomPlan::General => None,
+            AtomPlan::Distance { a, b, op, bound } => {
+                let ([x1, y1], [x2, y2]) = (a.read(state)?, b.read(state)?);
+                let d = (x1 - x2).hypot(y1 - y2);
+                if !d.is_finite() {
+                    return None; // the general evaluator's error
+                }
+                Some(match op {
+                    BinOp::Lt => d < *bound,
+                    BinOp::Le => d <= *bound,
+                    BinOp::Gt => d > *bound,
+                    _ => d >= *bound,
+                })
+            }
+        }
+    }
+}
 
 /// Atom values for one environment of bound objects (first word of atoms only).
 #[derive(Debug, Clone, Copy, Default)]
@@ -159,6 +262,9 @@ fn evaluate<S: State + ?Sized>(
         && let Some(Value::Bool(b)) = state.value(*slot)
     {
         return Ok(*b);
+    }
+    if let Some(value) = formula.plans.get(atom as usize).and_then(|plan| plan.read(state)) {
+        return Ok(value);
     }
     let env = TermEnv {
         state,

@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use kpl_core::Time;
 
+use crate::atoms::AtomPlan;
 use crate::context::Context;
 use crate::error::FormulaError;
 use crate::term::{DomainId, Function, Term};
@@ -177,6 +178,8 @@ pub struct Formula {
     pub(crate) info: Vec<TplInfo>,
     /// The distinct atoms, each read at most once per state.
     pub(crate) atoms: Vec<Term>,
+    /// Per atom, how it is read.
+    pub(crate) plans: Vec<AtomPlan>,
     pub(crate) root: TplId,
     pub(crate) functions: Arc<[Function]>,
     pub(crate) slot_names: Arc<[Arc<str>]>,
@@ -197,10 +200,12 @@ impl Formula {
         let root = compiler.compile(mtl, false, 0)?;
         let Compiler { nodes, atoms, .. } = compiler;
         let info = template_info(&nodes);
+        let plans = atoms.iter().map(|atom| AtomPlan::of(atom, &functions)).collect();
         Ok(Formula {
             nodes,
             info,
             atoms,
+            plans,
             root,
             functions: functions.clone(),
             slot_names: context.slot_names().into(),

@@ -108,6 +108,16 @@ pub struct Function {
     /// Smallest and largest number of arguments (`None`: no upper limit).
     pub arity: (usize, Option<usize>),
     pub body: FunctionBody,
+    /// For the distance built-ins: computed by the evaluator on borrowed arguments, with the same
+    /// result as `body` (which a host's function of the same name replaces, and this with it).
+    pub(crate) native: Option<Native>,
+}
+
+/// Built-ins the evaluator computes itself, without copying arguments or calling `body`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Native {
+    XyDist,
+    Dist,
 }
 
 impl fmt::Debug for Function {
@@ -122,7 +132,11 @@ impl Function {
         arity: (usize, Option<usize>),
         body: impl Fn(&[Value]) -> Result<Value, String> + Send + Sync + 'static,
     ) -> Function {
-        Function { name: Arc::from(name), arity, body: Arc::new(body) }
+        Function { name: Arc::from(name), arity, body: Arc::new(body), native: None }
+    }
+
+    fn native(self, native: Native) -> Function {
+        Function { native: Some(native), ..self }
     }
 
     pub fn accepts(&self, n: usize) -> bool {
@@ -190,14 +204,19 @@ pub fn builtins() -> Vec<Function> {
             let (x, y) = (number(&a[0], "vec2")?, number(&a[1], "vec2")?);
             Ok(Value::Vec2([x, y]))
         }),
-        Function::new("xydist", (2, Some(2)), |a| distance(&a[0], &a[1], "xydist")),
-        Function::new("dist", (2, Some(2)), |a| match (&a[0], &a[1]) {
-            (l, r) if l.as_f64().is_some() && r.as_f64().is_some() => {
-                finite((number(l, "dist")? - number(r, "dist")?).abs(), "dist")
-            }
-            (l, r) => distance(l, r, "dist"),
-        }),
+        Function::new("xydist", (2, Some(2)), |a| distance(&a[0], &a[1], "xydist")).native(Native::XyDist),
+        Function::new("dist", (2, Some(2)), |a| dist(&a[0], &a[1])).native(Native::Dist),
     ]
+}
+
+/// `dist`: `|a - b|` of two numbers, else the distance of two positions.
+fn dist(l: &Value, r: &Value) -> Result<Value, String> {
+    match (l, r) {
+        (l, r) if l.as_f64().is_some() && r.as_f64().is_some() => {
+            finite((number(l, "dist")? - number(r, "dist")?).abs(), "dist")
+        }
+        (l, r) => distance(l, r, "dist"),
+    }
 }
 
 /// `min`/`max`: ints stay ints when all arguments are ints.
@@ -341,6 +360,17 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
         let function = self.functions.get(func as usize).ok_or_else(|| {
             Box::new(EvalError::Function { func: format!("#{func}"), message: "no such function".into() })
         })?;
+        if let (Some(native), [a, b]) = (function.native, args) {
+            // On borrowed arguments: `xydist(from.pos, to.pos)` copies nothing.
+            let (a, b) = (self.eval_ref(a)?, self.eval_ref(b)?);
+            let result = match native {
+                Native::XyDist => distance(&a, &b, "xydist"),
+                Native::Dist => dist(&a, &b),
+            };
+            return result.map_err(|message| {
+                Box::new(EvalError::Function { func: function.name.to_string(), message })
+            });
+        }
         let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
         let result = match args.len() {
             1 => (function.body)(&[arg(0)?]),

@@ -69,6 +69,31 @@ pub fn dist_to_segment(p: Point, a: Point, b: Point) -> f64 {
     dist(p, add(a, scale(sub(b, a), t)))
 }
 
+/// Whether `dist_to_segment(p, a, b) <= r`, with the same answer, computing the exact distance
+/// (a `hypot`) only when the squared distance is too near `r * r` to tell.
+pub fn within_segment(p: Point, a: Point, b: Point, r: f64) -> bool {
+    if r.is_nan() || r < 0.0 {
+        return dist_to_segment(p, a, b) <= r;
+    }
+    let d2 = dist2_to_segment(p, a, b);
+    let r2 = r * r;
+    if d2 > r2 * (1.0 + 1e-9) + 1e-300 {
+        false
+    } else if d2 < r2 * (1.0 - 1e-9) {
+        true
+    } else {
+        dist_to_segment(p, a, b) <= r
+    }
+}
+
+/// The squared distance from `p` to the segment `a`-`b` (no `hypot`: for comparisons that can
+/// afford its rounding, which is about that of one ulp of the distance).
+pub fn dist2_to_segment(p: Point, a: Point, b: Point) -> f64 {
+    let t = project_on_segment(p, a, b);
+    let d = sub(p, add(a, scale(sub(b, a), t)));
+    dot(d, d)
+}
+
 /// Where a point projects onto a polyline.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Projection {
@@ -357,6 +382,25 @@ pub fn point_in_polygon(p: Point, polygon: &[Point]) -> bool {
 mod tests {
     #![allow(clippy::unwrap_used, reason = "tests")]
     use super::*;
+
+    proptest::proptest! {
+        /// The shortcut through the squared distance answers as the exact distance does, also
+        /// for radii at the distance itself and a rounding away from it.
+        #[test]
+        fn within_segment_agrees_with_the_exact_distance(
+            p in proptest::array::uniform2(-1e4f64..1e4),
+            a in proptest::array::uniform2(-1e4f64..1e4),
+            b in proptest::array::uniform2(-1e4f64..1e4),
+            r in 0.0f64..2e4,
+        ) {
+            let d = dist_to_segment(p, a, b);
+            for r in [r, d, d.next_up(), d.next_down(), d * (1.0 + 1e-12), d * (1.0 - 1e-12), 0.0] {
+                proptest::prop_assert_eq!(within_segment(p, a, b, r), d <= r, "r = {}", r);
+            }
+            let d2 = dist2_to_segment(p, a, b);
+            proptest::prop_assert!((d2.sqrt() - d).abs() <= 4.0 * f64::EPSILON * d.max(f64::MIN_POSITIVE));
+        }
+    }
 
     #[test]
     fn polyline_arc_length_and_projection() {

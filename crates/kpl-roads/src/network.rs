@@ -19,9 +19,10 @@
 //! ```
 
 use std::collections::HashMap;
+use std::sync::OnceLock;
 
 use crate::format::{LaneDirection, NetworkFile};
-use crate::geom::{self, Point, Polyline, bounds_of, dist_to_segment, point_in_polygon};
+use crate::geom::{self, Point, Polyline, bounds_of, dist_to_segment, dist2_to_segment, point_in_polygon};
 use crate::index::{Grid, GridBuilder};
 use crate::occluders::{Occluder, Occluders};
 
@@ -243,6 +244,9 @@ pub struct RoadNetwork {
     road_names: HashMap<String, RoadId>,
     node_names: HashMap<String, NodeId>,
     lane_names: HashMap<String, LaneId>,
+    /// Per lane, the lanes that continue it ([`RoadNetwork::continuation`]), worked out the first
+    /// time a snap asks (every car's every step asks, for the lane it was on).
+    continuations: Vec<OnceLock<Continuation>>,
 }
 
 /// A segment of a lane's path, as the lane grid indexes it.
@@ -357,6 +361,7 @@ impl RoadNetwork {
         for node in &nodes {
             node_names.entry(node.name.clone()).or_insert(node.id);
         }
+        let n_lanes = lanes.len();
         let mut lane_names = HashMap::with_capacity(lanes.len());
         for lane in &lanes {
             lane_names.entry(lane.name.clone()).or_insert(lane.id);
@@ -382,6 +387,7 @@ impl RoadNetwork {
             road_names,
             node_names,
             lane_names,
+            continuations: (0..n_lanes).map(|_| OnceLock::new()).collect(),
         }
     }
 
@@ -491,7 +497,7 @@ impl RoadNetwork {
             let segment = &self.lane_segments[item as usize];
             if !found {
                 let half = self.lanes[segment.lane.0 as usize].width_m / 2.0;
-                found = dist_to_segment(pos, segment.a, segment.b) <= half + 1e-9;
+                found = geom::within_segment(pos, segment.a, segment.b, half + 1e-9);
             }
         });
         found
@@ -506,7 +512,7 @@ impl RoadNetwork {
             .filter(|&(road, s)| {
                 let road = &self.roads[road.0 as usize];
                 let (a, b, _) = road.centerline.segment(s as usize);
-                dist_to_segment(pos, a, b) <= road.width_m / 2.0 + 1e-9
+                geom::within_segment(pos, a, b, road.width_m / 2.0 + 1e-9)
             })
             .map(|(road, _)| road)
             .min()
@@ -536,15 +542,37 @@ impl RoadNetwork {
     /// other. So a car standing in a queue, whose velocity says nothing about its heading, stays
     /// on its lane instead of jumping to the oncoming one when noise puts it nearer.
     pub fn snap(&self, pos: Point, hint: &SnapHint) -> Option<LanePosition> {
+        self.snap_within(pos, hint, self.snap_radius_m)
+    }
+
+    /// The lane whose centre line passes within `tolerance_m` of `pos` (nearer than the network's
+    /// snap radius), the nearest: what [`RoadNetwork::snap_to_lane`] without a heading gives when
+    /// its `lateral_m` is within the tolerance, looking only that far (a point that an earlier
+    /// snap put on a lane centre is found in the cell it is in).
+    pub fn lane_centre_at(&self, pos: Point, tolerance_m: f64) -> Option<LaneId> {
+        let snapped = self.snap_within(pos, &SnapHint::default(), tolerance_m.min(self.snap_radius_m))?;
+        (snapped.lateral_m.abs() < tolerance_m).then_some(snapped.lane)
+    }
+
+    /// [`RoadNetwork::snap`] among the lanes within `radius_m` (at most the snap radius).
+    fn snap_within(&self, pos: Point, hint: &SnapHint, radius_m: f64) -> Option<LanePosition> {
+        let radius_m = radius_m.min(self.snap_radius_m);
         let mut best: Option<(f64, LaneId, u32)> = None;
         let wanted = hint.heading.filter(|h| h.is_finite()).map(geom::unit);
-        let continuity =
-            hint.previous.filter(|p| (p.0 as usize) < self.lanes.len()).map(|p| self.continuation(p));
-        self.lane_grid.for_each_near(pos, self.snap_radius_m, |item| {
+        let continuity = hint.previous.and_then(|p| {
+            self.continuations.get(p.0 as usize).map(|c| c.get_or_init(|| self.continuation(p)))
+        });
+        self.lane_grid.for_each_near(pos, radius_m, |item| {
             let segment = &self.lane_segments[item as usize];
-            let d = dist_to_segment(pos, segment.a, segment.b);
             // Penalties are never negative, so a segment already further than the best is out.
-            if d > self.snap_radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
+            let limit = best.map_or(radius_m, |(cost, _, _)| (cost + 1e-12).min(radius_m));
+            // First on the squared distance, which needs no `hypot`: the margin is far above
+            // their rounding, so only segments the exact distance rules out are skipped here.
+            if dist2_to_segment(pos, segment.a, segment.b) > limit * limit * (1.0 + 1e-9) + 1e-300 {
+                return;
+            }
+            let d = dist_to_segment(pos, segment.a, segment.b);
+            if d > radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
                 return;
             }
             let heading_penalty = match wanted {
@@ -552,7 +580,7 @@ impl RoadNetwork {
                 Some(u) => HEADING_PENALTY_M * (1.0 - geom::dot(u, segment.direction)) / 2.0,
                 None => 0.0,
             };
-            let continuity_penalty = continuity.as_ref().map_or(0.0, |c| c.penalty(self, segment.lane));
+            let continuity_penalty = continuity.map_or(0.0, |c| c.penalty(self, segment.lane));
             let candidate = (d + heading_penalty + continuity_penalty, segment.lane, segment.segment);
             let better = match best {
                 None => true,
@@ -643,7 +671,7 @@ impl RoadNetwork {
 }
 
 /// The lanes that continue a previous lane, and the road sides (road, direction) they are on.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Continuation {
     lanes: Vec<LaneId>,
     sides: Vec<(RoadId, LaneDirection)>,

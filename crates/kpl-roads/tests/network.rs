@@ -460,3 +460,27 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+
+    /// `lane_centre_at` (a snap that looks only within the tolerance) answers what snapping
+    /// without a heading answers within the tolerance, on points on lane centres (as an earlier
+    /// snap leaves them), a little off them, and anywhere.
+    #[test]
+    fn lane_centre_at_is_snapping_within_the_tolerance(
+        lane in 0usize..10_000,
+        along in 0.0..1.0f64,
+        off in prop_oneof![Just(0.0), -0.08..0.08f64, -5.0..5.0f64],
+        p in arb_point_near(&TOWN),
+        anywhere in proptest::bool::weighted(0.2),
+    ) {
+        let net = &*TOWN;
+        let lane = &net.lanes()[lane % net.lanes().len()];
+        let at = net.lane_position(lane.id, along * lane.path.length());
+        let left = [-at.heading.sin(), at.heading.cos()];
+        let q = if anywhere { p } else { [at.point[0] + off * left[0], at.point[1] + off * left[1]] };
+        let expected = net.snap_to_lane(q, None).filter(|s| s.lateral_m.abs() < 0.05).map(|s| s.lane);
+        prop_assert_eq!(net.lane_centre_at(q, 0.05), expected, "at {:?}", q);
+    }
+}
