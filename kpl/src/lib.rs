@@ -66,7 +66,7 @@ enum Command {
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
     #[command(
         subcommand,
-        after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out /tmp/cater\n  kpl cater eval --data /tmp/cater --model aapa --perception detector"
+        after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out out/cater\n  kpl cater eval --data out/cater --model aapa --perception detector"
     )]
     Cater(cmd::cater::Command),
     /// Metric temporal logic: evaluate formulas over traces.

@@ -16,7 +16,7 @@ use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out /tmp/rec\n  kpl convert /tmp/rec/percepts.jsonl /tmp/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert /tmp/rec/percepts.mcap /tmp/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
 )]
 pub struct Args {
     /// The recording to read (.jsonl or .mcap).

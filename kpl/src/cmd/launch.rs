@@ -19,7 +19,7 @@ use kpl_core::Time;
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl launch specs/zenoh/two_hosts.kpl --out /tmp/two\n  kpl launch specs/zenoh/two_hosts.kpl --tls --for 10s\n  kpl launch specs/zenoh/two_hosts.kpl --dry-run      # only print each host's command\n\nHosts without endpoints in the deploy section use loopback ports from KPL_ZENOH_PORT_BASE (7447);\nwhen those are taken, launch picks free ones. Outputs go to OUT/HOST, logs to OUT/HOST/kpl.log, the\ncombined summary to OUT/launch.json.\nExit status: 0 every host done, else the first host's failing status (1 failed, 3 incomplete),\n130 / 143 when interrupted by Ctrl-C / SIGTERM, 1 the spec has errors, 2 usage or I/O errors."
+    after_help = "Examples:\n  kpl launch specs/zenoh/two_hosts.kpl --out out/two\n  kpl launch specs/zenoh/two_hosts.kpl --tls --for 10s\n  kpl launch specs/zenoh/two_hosts.kpl --dry-run      # only print each host's command\n\nHosts without endpoints in the deploy section use loopback ports from KPL_ZENOH_PORT_BASE (7447);\nwhen those are taken, launch picks free ones. Outputs go to OUT/HOST, logs to OUT/HOST/kpl.log, the\ncombined summary to OUT/launch.json.\nExit status: 0 every host done, else the first host's failing status (1 failed, 3 incomplete),\n130 / 143 when interrupted by Ctrl-C / SIGTERM, 1 the spec has errors, 2 usage or I/O errors."
 )]
 pub struct Args {
     /// The spec to launch (it needs a deploy section).

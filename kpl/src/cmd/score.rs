@@ -13,7 +13,7 @@ const AFTER_HELP: &str = "\
 Examples:
   kpl run specs/traffic/bridge.kpl --for 60s && kpl score out/bridge
   kpl score out/bridge --stream onroad_car --max-distance 2 --format json
-  kpl score out/bridge/tracks.jsonl --truth tracker.truth --export /tmp/mot
+  kpl score out/bridge/tracks.jsonl --truth tracker.truth --export out/mot
 
 Every object stream of the recording (lists of records with `id` and `pos`: percepts, link
 outputs; a world model is scored per type) is compared with the ground truth (the stream named
