@@ -1,4 +1,4 @@
-//! `kpl bench situations`: the situation monitors of `specs/traffic/sumo_situations.kpl`
+//! `kpl bench situations`: the situation monitors of `specs/traffic/sumo_situations.kpl` in core form
 //! (overtake and tailgating over pairs of cars, speeding per car) on synthetic traffic of N cars at
 //! 10 Hz, run on the simulated clock (one thread, so one core): how many cars are monitored faster
 //! than real time, with the pair monitors gated (only pairs within their `close` distance are
@@ -147,7 +147,9 @@ fn registry(counted: Arc<AtomicU64>) -> Registry {
     registry
 }
 
-/// The spec: the monitors of `specs/traffic/sumo_situations.kpl` that these cars can exercise.
+/// The spec: the monitors of `specs/traffic/sumo_situations.kpl` that these cars can exercise, in
+/// their core form: the spec's guards for cars that leave the map (`eventually[0, 1s] c.measured`,
+/// `eventually[2s, 3s] true`) are left out, as the bench's cars never leave it.
 /// Ungated, `close(...)` is hidden in a disjunction, which keeps the meaning and loses the gate.
 fn spec_text(cars: u32, seconds: u32, gated: bool) -> String {
     let close =
