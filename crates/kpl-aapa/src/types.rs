@@ -205,6 +205,31 @@ pub struct StillBox {
 }
 
 impl Anchor {
+    /// A new anchor first seen at `time`: not moving, not attached, no history; one type vote.
+    pub fn new(symbol: Symbol, object_type: Symbol, bbox: BBox, status: AnchorStatus, time: Time) -> Self {
+        Anchor {
+            symbol,
+            type_votes: vec![(object_type.clone(), 1)],
+            object_type,
+            bbox,
+            confidence: 0.0,
+            status,
+            colour: None,
+            first_seen: time,
+            last_seen: time,
+            velocity: [0.0, 0.0],
+            moving: false,
+            moving_until: None,
+            moving_since: None,
+            full_size: None,
+            last_percept_box: None,
+            partial: false,
+            attachment: None,
+            for_inference: false,
+            still: None,
+        }
+    }
+
     /// Anchored in the paper's sense: confidence at or above `theta_anch`.
     pub fn is_anchored(&self, theta_anch: f64) -> bool {
         self.confidence >= theta_anch
