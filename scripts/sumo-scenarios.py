@@ -84,6 +84,11 @@ class Sumo:
         self.work = work
         self.seed = SEED if seed is None else seed
 
+    def write(self, name, text):
+        """Writes one input file of the simulation into the work folder."""
+        with open(os.path.join(self.work, name), "w") as f:
+            f.write(text)
+
     def tool(self, name):
         return os.path.join(self.home, "bin", name)
 
@@ -141,15 +146,12 @@ VTYPES = """<additional>
 
 
 def highway(s, duration):
-    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
-        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="2000" y="0"/>\n</nodes>\n')
-    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
-        f.write('<edges>\n'
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="2000" y="0"/>\n</nodes>\n')
+    s.write("edges.edg.xml", '<edges>\n'
                 '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="33.33"/>\n'
                 '    <edge id="westbound" from="east" to="west" numLanes="2" speed="33.33"/>\n'
                 '</edges>\n')
-    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
-        f.write(VTYPES)
+    s.write("vtypes.xml", VTYPES)
     s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
     flows = []
     for direction in ["eastbound", "westbound"]:
@@ -157,8 +159,7 @@ def highway(s, duration):
                      'departLane="random" departSpeed="max"/>' % (direction, direction, duration))
         flows.append('    <flow id="%s_trucks" type="truck" route="%s" begin="0" end="%d" vehsPerHour="150" '
                      'departLane="0" departSpeed="max"/>' % (direction, direction, duration))
-    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
-        f.write('<routes>\n    <route id="eastbound" edges="eastbound"/>\n'
+    s.write("routes.rou.xml", '<routes>\n    <route id="eastbound" edges="eastbound"/>\n'
                 '    <route id="westbound" edges="westbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
@@ -173,14 +174,11 @@ OVERTAKE_VTYPES = """<additional>
 
 
 def overtake(s, duration):
-    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
-        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
-    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
-        f.write('<edges>\n'
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
+    s.write("edges.edg.xml", '<edges>\n'
                 '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
                 '</edges>\n')
-    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
-        f.write(OVERTAKE_VTYPES)
+    s.write("vtypes.xml", OVERTAKE_VTYPES)
     s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
     flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="500" '
              'departLane="random" departSpeed="max"/>' % duration,
@@ -191,8 +189,7 @@ def overtake(s, duration):
              # A car that breaks down on the right lane for 30 s: a stopped vehicle outside a queue.
              '    <vehicle id="breakdown" type="car" route="r" depart="60" departLane="0" departSpeed="max">'
              '<stop lane="eastbound_0" endPos="900" duration="30"/></vehicle>']
-    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
-        f.write('<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
@@ -208,22 +205,18 @@ MOTORWAY_VTYPES = """<additional>
 
 def motorway(s, duration):
     """Overtakes on a wider, faster road than `overtake`'s, with another traffic mix."""
-    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
-        f.write('<nodes>\n    <node id="south" x="0" y="0"/>\n    <node id="north" x="600" y="1900"/>\n</nodes>\n')
-    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
-        f.write('<edges>\n'
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="south" x="0" y="0"/>\n    <node id="north" x="600" y="1900"/>\n</nodes>\n')
+    s.write("edges.edg.xml", '<edges>\n'
                 '    <edge id="northbound" from="south" to="north" numLanes="3" speed="33.33"/>\n'
                 '</edges>\n')
-    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
-        f.write(MOTORWAY_VTYPES)
+    s.write("vtypes.xml", MOTORWAY_VTYPES)
     s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
     flows = []
     for name, vtype, per_hour, lane in [("cars", "car", 700, "random"), ("speeders", "speeder", 120, "random"),
                                         ("vans", "van", 200, "random"), ("trucks", "truck", 200, "0")]:
         flows.append('    <flow id="%s" type="%s" route="r" begin="0" end="%d" vehsPerHour="%d" '
                      'departLane="%s" departSpeed="max"/>' % (name, vtype, duration, per_hour, lane))
-    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
-        f.write('<routes>\n    <route id="r" edges="northbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="northbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
@@ -234,19 +227,15 @@ def wrong_way(s, duration):
     west, and two vehicles drive it; the shipped network (what the tracker, the anchoring and the
     truth see) is `eastbound` alone, on which they drive against the lane. They pass through the
     eastbound traffic (vehicles on different edges do not see each other)."""
-    with open(os.path.join(s.work, "nodes.nod.xml"), "w") as f:
-        f.write('<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1200" y="0"/>\n'
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1200" y="0"/>\n'
                 '    <node id="ghost_east" x="1200" y="-1.6"/>\n    <node id="ghost_west" x="0" y="-1.6"/>\n'
                 '</nodes>\n')
     road = '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
     # The ghost's one lane has its centre on eastbound_1's (y = -1.6).
     ghost = '    <edge id="ghost" from="ghost_east" to="ghost_west" numLanes="1" speed="25.0" spreadType="center"/>\n'
-    with open(os.path.join(s.work, "edges.edg.xml"), "w") as f:
-        f.write("<edges>\n" + road + "</edges>\n")
-    with open(os.path.join(s.work, "sim.edg.xml"), "w") as f:
-        f.write("<edges>\n" + road + ghost + "</edges>\n")
-    with open(os.path.join(s.work, "vtypes.xml"), "w") as f:
-        f.write(OVERTAKE_VTYPES)
+    s.write("edges.edg.xml", "<edges>\n" + road + "</edges>\n")
+    s.write("sim.edg.xml", "<edges>\n" + road + ghost + "</edges>\n")
+    s.write("vtypes.xml", OVERTAKE_VTYPES)
     # Both networks in the nodes' own coordinates (netconvert would move each to its own origin).
     for net, edges in [("net.net.xml", "edges.edg.xml"), ("sim.net.xml", "sim.edg.xml")]:
         s.netconvert(net, "-n", "nodes.nod.xml", "-e", edges, "--no-turnarounds", "--offset.disable-normalization")
@@ -256,8 +245,7 @@ def wrong_way(s, duration):
              'departLane="0" departSpeed="max"/>' % duration,
              '    <vehicle id="ghost.0" type="car" route="g" depart="30" departSpeed="20"/>',
              '    <vehicle id="ghost.1" type="car" route="g" depart="110" departSpeed="15"/>']
-    with open(os.path.join(s.work, "routes.rou.xml"), "w") as f:
-        f.write('<routes>\n    <route id="r" edges="eastbound"/>\n    <route id="g" edges="ghost"/>\n'
+    s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n    <route id="g" edges="ghost"/>\n'
                 + "\n".join(flows) + "\n</routes>\n")
     s.simulate("sim.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
