@@ -49,6 +49,14 @@ fn the_page_shows_this_crates_files() {
     }
 }
 
+/// The platform this test runs on, as rustc names it (`host:` of `rustc -vV`).
+fn host_triple() -> String {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".to_string());
+    let out = Command::new(rustc).arg("-vV").output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    text.lines().find_map(|l| l.strip_prefix("host: ")).expect("rustc -vV names its host").trim().to_string()
+}
+
 #[test]
 fn the_pages_cargo_toml_resolves_outside_the_repository() {
     // A crate beside "the clone": the page's `../kpl/` paths point at this workspace.
@@ -60,10 +68,12 @@ fn the_pages_cargo_toml_resolves_outside_the_repository() {
     std::fs::write(krate.join("Cargo.toml"), manifest).unwrap();
     std::fs::copy(here().join("src/lib.rs"), krate.join("src/lib.rs")).unwrap();
     std::fs::copy(here().join("src/main.rs"), krate.join("src/main.rs")).unwrap();
-    // The same versions as the workspace, and no network: resolution only.
+    // The same versions as the workspace, and no network: resolution only. Only this platform's
+    // packages: a build downloads no others, so a fresh `CARGO_HOME` holds no others either.
     std::fs::copy(workspace().join("Cargo.lock"), krate.join("Cargo.lock")).unwrap();
     let out = Command::new(env!("CARGO"))
-        .args(["metadata", "--offline", "--format-version", "1", "--manifest-path"])
+        .args(["metadata", "--offline", "--format-version", "1", "--filter-platform", &host_triple()])
+        .arg("--manifest-path")
         .arg(krate.join("Cargo.toml"))
         .output()
         .unwrap();
