@@ -1,4 +1,5 @@
-//! "Did you mean ...?" hints from the names that exist.
+//! "Did you mean ...?" hints from the names that exist: the one implementation every layer uses
+//! (names in specs, formulas, streams of a recording, plots).
 
 /// The closest candidate to `name`, if one is close enough to be a likely typo.
 pub fn closest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
