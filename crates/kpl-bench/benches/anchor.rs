@@ -1,13 +1,13 @@
 //! Criterion benchmark of one anchoring step (one tracker frame through two link levels, with the
-//! link outputs built), per car, at 100 and 1,000 cars: the workload of `kpl_anchor::scale`,
+//! link outputs built), per car, at 100 and 1,000 cars: the workload of `kpl_bench::anchor`,
 //! after 5 s of warm-up, frames produced outside the timing. `kpl bench anchor` runs the same
 //! workload up to 10,000 cars and reports the real-time factor (docs/performance.md).
-#![allow(clippy::unwrap_used, clippy::expect_used)] // a benchmark fails loudly
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::disallowed_methods)] // a benchmark fails loudly, and times work with the wall clock
 
 use std::time::{Duration, Instant};
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use kpl_anchor::scale::{self, ScaleSetup};
+use kpl_bench::anchor::{self as scale, ScaleSetup};
 
 fn anchor_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("anchor step");

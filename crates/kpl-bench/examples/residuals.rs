@@ -1,12 +1,12 @@
 //! Prints the residual of a Timescales property after each state of its trace, to see what the
-//! progressor keeps: `cargo run -p kpl-mtl --example residuals -- AbsentBR 10 40`.
+//! progressor keeps: `cargo run -p kpl-bench --example residuals -- AbsentBR 10 40`.
 
 #![allow(clippy::print_stdout, clippy::unwrap_used, clippy::expect_used)] // a developer tool
 
 use std::sync::Arc;
 
+use kpl_bench::timescales::Property;
 use kpl_core::{TimeUnit, Value};
-use kpl_mtl::timescales::Property;
 use kpl_mtl::{Context, Formula, Progressor, SlotState};
 
 fn main() {

@@ -9,7 +9,7 @@
 //!   policy to a sink; resident memory is read from `/proc/self/statm` after the first minute and
 //!   at the end.
 
-use std::process::ExitCode;
+use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -20,6 +20,8 @@ use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Unit};
 use kpl_runtime::{ClockKind, Registry, RunConfig, Sample};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
+
+use crate::BenchError;
 
 #[derive(Debug, ClapArgs)]
 #[command(
@@ -42,7 +44,7 @@ pub struct Args {
 
 /// A duration as `kpl run --for` takes it (10min, 90s, ...).
 fn parse_memory_duration(text: &str) -> Result<Duration, String> {
-    super::run::parse_duration(text).map(|us| Duration::from_micros(us.unsigned_abs()))
+    kpl_core::parse_duration(text).map(|us| Duration::from_micros(us.unsigned_abs()))
 }
 
 /// Emits `count` integers as fast as the consumers take them (or `rate` per second, in bursts
@@ -202,7 +204,7 @@ fn resident_kib() -> Option<u64> {
     Some(pages * 4)
 }
 
-fn memory(duration: Duration, rate: u64) -> Result<(), String> {
+fn memory(duration: Duration, rate: u64, out: &mut dyn Write) -> Result<(), BenchError> {
     let counted = Arc::new(AtomicU64::new(0));
     let registry = registry(counted.clone());
     let spec = check(
@@ -236,30 +238,37 @@ fn memory(duration: Duration, rate: u64) -> Result<(), String> {
     let report = kpl_runtime::run(&spec, &registry, &config, None).map_err(|e| e.to_string())?;
     let readings = sampler.join().map_err(|_| "the memory sampler failed".to_string())?;
     let delivered = counted.load(Ordering::Relaxed);
-    println!(
+    writeln!(
+        out,
         "memory: {} s at {rate} samples/s: {delivered} samples delivered to the sink ({:.0}/s)",
         duration.as_secs(),
         delivered as f64 / duration.as_secs_f64()
-    );
+    )?;
     for (t, kib) in &readings {
-        println!("  t = {t:>4} s  resident {kib} KiB");
+        writeln!(out, "  t = {t:>4} s  resident {kib} KiB")?;
     }
     let at_minute = readings.iter().find(|(t, _)| *t >= 60).map(|(_, k)| *k);
     let at_end = readings.iter().rev().find(|(t, _)| *t <= duration.as_secs()).map(|(_, k)| *k);
     if let (Some(minute), Some(end)) = (at_minute, at_end) {
-        println!(
+        writeln!(
+            out,
             "  resident at the end / after the first minute: {:.3} (target <= 1.10)",
             end as f64 / minute as f64
-        );
+        )?;
     }
-    println!("  run ended: {:?}", report.ending);
+    writeln!(out, "  run ended: {:?}", report.ending)?;
     Ok(())
 }
 
-pub fn run(args: Args) -> ExitCode {
-    println!("chain source -> CU -> CU -> CU -> sink, {} samples, best of {}:", args.samples, args.repeat);
-    println!("| runtime | kpl samples/s | bare tokio channels samples/s | ratio (target >= 0.5) |");
-    println!("|---|---:|---:|---:|");
+/// Runs the benchmark and writes its tables to `out`.
+pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
+    writeln!(
+        out,
+        "chain source -> CU -> CU -> CU -> sink, {} samples, best of {}:",
+        args.samples, args.repeat
+    )?;
+    writeln!(out, "| runtime | kpl samples/s | bare tokio channels samples/s | ratio (target >= 0.5) |")?;
+    writeln!(out, "|---|---:|---:|---:|")?;
     for (clock, label) in [
         (ClockKind::Sim, "current-thread (--clock sim)"),
         (ClockKind::Wall, "multi-thread, 2 workers (--clock wall)"),
@@ -272,19 +281,13 @@ pub fn run(args: Args) -> ExitCode {
                     best_kpl = best_kpl.max(k);
                     best_bare = best_bare.max(b);
                 }
-                (Err(e), _) | (_, Err(e)) => {
-                    eprintln!("error: {e}");
-                    return ExitCode::from(1);
-                }
+                (Err(e), _) | (_, Err(e)) => return Err(BenchError::Failed(e)),
             }
         }
-        println!("| {label} | {best_kpl:.0} | {best_bare:.0} | {:.2} |", best_kpl / best_bare);
+        writeln!(out, "| {label} | {best_kpl:.0} | {best_bare:.0} | {:.2} |", best_kpl / best_bare)?;
     }
-    if let Some(duration) = args.memory
-        && let Err(e) = memory(duration, args.rate)
-    {
-        eprintln!("error: {e}");
-        return ExitCode::from(1);
+    if let Some(duration) = args.memory {
+        memory(duration, args.rate, out)?;
     }
-    ExitCode::SUCCESS
+    Ok(())
 }

@@ -1,6 +1,6 @@
-//! `kpl bench situations`: the situation monitors of `specs/traffic/sumo_situations.kpl` in core form
-//! (overtake and tailgating over pairs of cars, speeding per car) on synthetic traffic of N cars at
-//! 10 Hz, run on the simulated clock (one thread, so one core): how many cars are monitored faster
+//! `kpl bench situations`: the situation monitors of `specs/traffic/sumo_situations.kpl`, as the
+//! spec writes them (overtake and tailgating over pairs of cars; speeding, stopped and wrong-way
+//! driving per car), on synthetic traffic of N cars at 10 Hz, run on the simulated clock (one thread, so one core): how many cars are monitored faster
 //! than real time, with the pair monitors gated (only pairs within their `close` distance are
 //! progressed) and, as the baseline measured in the same run, ungated (every ordered pair).
 //! Figures go to `docs/performance.md`.
@@ -9,11 +9,11 @@
 //! the whole run is on that thread), so the real-time factor says whether one core keeps up
 //! however busy the machine is; the wall time is printed beside it.
 //!
-//! The traffic: a straight one-way road with four lanes, a car every 30 m of each lane, lane k
+//! The traffic (every attribute of the spec's `Car`): a straight one-way road with four lanes, a car every 30 m of each lane, lane k
 //! driving at 20 + 3k m/s with a few per cent of spread per car, wrapping around at the road's
 //! end, so faster cars keep passing slower ones on the neighbouring lanes.
 
-use std::process::ExitCode;
+use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
@@ -25,7 +25,8 @@ use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, Sync
 use kpl_runtime::{ClockKind, Registry, RunConfig};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 
-use crate::cmd::bench::CpuClock;
+use crate::BenchError;
+use crate::clock::CpuClock;
 
 #[derive(Debug, ClapArgs)]
 #[command(
@@ -81,6 +82,9 @@ impl Highway {
                         field("speed", Value::Float(speed)),
                         field("speed_limit", Value::Float(25.0)),
                         field("heading", Value::Float(0.0)),
+                        field("lane_heading", Value::Float(0.0)),
+                        field("lane_offset", Value::Float(0.0)),
+                        field("in_junction", Value::Bool(false)),
                         field("measured", Value::Bool(true)),
                     ],
                 }))
@@ -123,7 +127,7 @@ impl Unit for Count {
 }
 
 fn registry(counted: Arc<AtomicU64>) -> Registry {
-    let mut registry = crate::registry::registry();
+    let mut registry = kpl_std::registry();
     registry.add_source(
         Entry::new(EntryKind::Source, "bench.highway", "Synthetic cars on a four-lane road at 10 Hz.")
             .param(Param::optional("cars", ParamType::Int, Value::Int(100), "how many cars"))
@@ -147,26 +151,67 @@ fn registry(counted: Arc<AtomicU64>) -> Registry {
     registry
 }
 
-/// The spec: the monitors of `specs/traffic/sumo_situations.kpl` that these cars can exercise, in
-/// their core form: the spec's guards for cars that leave the map (`eventually[0, 1s] c.measured`,
-/// `eventually[2s, 3s] true`) are left out, as the bench's cars never leave it.
-/// Ungated, `close(...)` is hidden in a disjunction, which keeps the meaning and loses the gate.
-fn spec_text(cars: u32, seconds: u32, gated: bool) -> String {
-    let close =
-        |d: &str| if gated { format!("close(a, b, {d})") } else { format!("(close(a, b, {d}) or false)") };
-    format!(
-        "type Car symbol co {{ pos: vec2, vel: vec2, size: float, road: int, lane: string, lane_pos: float, \
-         lane_length: float, speed: float, speed_limit: float, heading: float }}\n\
-         source cars : list<Car> = bench.highway(cars: {cars}, seconds: {seconds})\n\
-         monitor overtake = forall a: Car . forall b: Car . {} and a.measured and b.measured and behind(a, b) \
-         and (close(a, b, 50.0) and not in_front(a, b)) until[0, 60s] in_front(a, b) \
-         and not (not beside(a, b) until[0, 60s] in_front(a, b))\n\
-         monitor tailgating = forall a: Car . forall b: Car . {} and always[0, 2s] (same_lane(a, b) and behind(a, b) and time_gap(a, b) < 1.0)\n\
-         monitor speeding = forall c: Car . always[0, 2s] (c.speed > c.speed_limit + 3.0)\n\
-         sink out = bench.count(overtake, tailgating, speeding)\n",
-        close("50.0"),
-        close("40.0")
-    )
+/// The shipped spec whose monitors are measured.
+pub const SPEC_PATH: &str = "specs/traffic/sumo_situations.kpl";
+const SHIPPED: &str = include_str!("../../../specs/traffic/sumo_situations.kpl");
+
+/// The spec of a run: the object types and every monitor of [`SPEC_PATH`] as they are written
+/// there, over [`Highway`]'s cars instead of the spec's tracker and links. Ungated, the `close`
+/// conjunct that gates a pair monitor is hidden in a disjunction (`(close(a, b, 50.0) or false)`),
+/// which keeps the meaning and loses the gate.
+pub fn spec_text(cars: u32, seconds: u32, gated: bool) -> Result<String, String> {
+    let parse = kpl_syntax::parse(SHIPPED);
+    if parse.has_errors() {
+        return Err(format!("{SPEC_PATH} does not parse"));
+    }
+    let mut text = String::new();
+    let mut monitors = Vec::new();
+    for item in &parse.spec.items {
+        match item {
+            kpl_syntax::ast::Item::Type(t) => {
+                text.push_str(&SHIPPED[t.span.start as usize..t.span.end as usize]);
+                text.push('\n');
+            }
+            kpl_syntax::ast::Item::Monitor(m) => {
+                let monitor = &SHIPPED[m.span.start as usize..m.span.end as usize];
+                text.push_str(&if gated { monitor.to_string() } else { ungated(monitor) });
+                text.push('\n');
+                monitors.push(m.name.name.clone());
+            }
+            _ => {}
+        }
+    }
+    if monitors.is_empty() {
+        return Err(format!("{SPEC_PATH} has no monitors"));
+    }
+    text.push_str(&format!("source cars : list<Car> = bench.highway(cars: {cars}, seconds: {seconds})\n"));
+    text.push_str(&format!("sink out = bench.count({})\n", monitors.join(", ")));
+    Ok(text)
+}
+
+/// A monitor's text with its first `close(...)` call hidden in `(close(...) or false)`.
+fn ungated(monitor: &str) -> String {
+    let Some(start) = monitor.find("close(") else { return monitor.to_string() };
+    let mut depth = 0;
+    for (i, c) in monitor[start..].char_indices() {
+        match c {
+            '(' => depth += 1,
+            ')' => {
+                depth -= 1;
+                if depth == 0 {
+                    let end = start + i + 1;
+                    return format!(
+                        "{}({} or false){}",
+                        &monitor[..start],
+                        &monitor[start..end],
+                        &monitor[end..]
+                    );
+                }
+            }
+            _ => {}
+        }
+    }
+    monitor.to_string()
 }
 
 /// What one run took: CPU seconds of its thread, wall seconds, and the situations reported.
@@ -179,9 +224,8 @@ struct Timed {
 fn run_once(cars: u32, seconds: u32, gated: bool) -> Result<Timed, String> {
     let counted = Arc::new(AtomicU64::new(0));
     let registry = registry(counted.clone());
-    let parse = kpl_syntax::parse(&spec_text(cars, seconds, gated));
-    let checked = kpl_semantic::check(&parse.spec, registry.signatures());
-    let spec = checked.spec.ok_or_else(|| format!("{:?}", checked.diagnostics))?;
+    let spec = kpl_semantic::check_text(&spec_text(cars, seconds, gated)?, registry.signatures())
+        .map_err(|e| e.to_string())?;
     let config = RunConfig { clock: ClockKind::Sim, ..RunConfig::default() };
     let (start, clock) = (Instant::now(), CpuClock::start());
     kpl_runtime::run(&spec, &registry, &config, None).map_err(|e| e.to_string())?;
@@ -189,61 +233,54 @@ fn run_once(cars: u32, seconds: u32, gated: bool) -> Result<Timed, String> {
     Ok(Timed { cpu, wall, reports: counted.load(Ordering::Relaxed) })
 }
 
-pub fn run(args: Args) -> ExitCode {
+/// Runs the benchmark and writes its table to `out`.
+pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
     let cars = if args.cars.is_empty() { vec![100, 250, 500, 1000, 2000, 4000] } else { args.cars.clone() };
     let seconds = args.seconds.max(1);
-    println!(
+    writeln!(
+        out,
         "situation monitors (overtake, tailgating: pairs; speeding), {seconds} s of traffic at 10 Hz, simulated clock (one thread; {})",
         CpuClock::name()
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:>6} {:>12} {:>10} {:>10} {:>12} {:>10} {:>8} {:>10}",
         "cars", "gated s", "x realtime", "(wall s)", "ungated s", "x realtime", "ratio", "reports"
-    );
+    )?;
     let mut largest = None;
     for &n in &cars {
-        let gated = match run_once(n, seconds, true) {
-            Ok(r) => r,
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(1);
-            }
-        };
+        let gated = run_once(n, seconds, true)?;
         let reports = gated.reports;
         let speed = f64::from(seconds) / gated.cpu;
         if speed > 1.0 {
             largest = Some(n);
         }
         let ungated = if n <= args.ungated_up_to {
-            match run_once(n, seconds, false) {
-                Ok(ungated) => {
-                    if ungated.reports != reports {
-                        eprintln!("error: {n} cars: {reports} reports gated, {} ungated", ungated.reports);
-                        return ExitCode::from(1);
-                    }
-                    Some(ungated.cpu)
-                }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    return ExitCode::from(1);
-                }
+            let ungated = run_once(n, seconds, false)?;
+            if ungated.reports != reports {
+                return Err(BenchError::Failed(format!(
+                    "{n} cars: {reports} reports gated, {} ungated",
+                    ungated.reports
+                )));
             }
+            Some(ungated.cpu)
         } else {
             None
         };
         let cell = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or_else(|| "-".to_string(), f);
-        println!(
+        writeln!(
+            out,
             "{n:>6} {:>12.2} {speed:>10.2} {:>10.2} {:>12} {:>10} {:>8} {reports:>10}",
             gated.cpu,
             gated.wall,
             cell(ungated, &|w| format!("{w:.2}")),
             cell(ungated, &|w| format!("{:.2}", f64::from(seconds) / w)),
             cell(ungated, &|w| format!("{:.1}", w / gated.cpu)),
-        );
+        )?;
     }
     match largest {
-        Some(n) => println!("largest number of cars monitored faster than real time (gated): {n}"),
-        None => println!("no number of cars tried was monitored faster than real time"),
+        Some(n) => writeln!(out, "largest number of cars monitored faster than real time (gated): {n}")?,
+        None => writeln!(out, "no number of cars tried was monitored faster than real time")?,
     }
-    ExitCode::SUCCESS
+    Ok(())
 }

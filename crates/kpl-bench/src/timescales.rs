@@ -17,9 +17,7 @@ use kpl_core::Time;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::context::Context;
-use crate::formula::{Mtl, Window};
-use crate::term::{SlotId, Term};
+use kpl_mtl::{Context, Mtl, SlotId, Term, Window};
 
 /// The ten timed properties.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -332,7 +330,7 @@ mod tests {
     use kpl_core::{TimeUnit, Value};
 
     use super::*;
-    use crate::{Formula, Progressor, SlotState};
+    use kpl_mtl::{Formula, Progressor, SlotState};
 
     fn verdict(property: Property, b: Time, failing_end: bool) -> (Option<bool>, usize) {
         let mut ctx = Context::new(TimeUnit::Ms, TimeUnit::Ms);
