@@ -1,4 +1,4 @@
-//! Anchoring on the stream runtime (`kpl run`): [`register`] adds the signatures of the link
+//! Anchoring on the stream runtime (`kpl run`), the runtime adapter of `kpl-anchor`'s engine: [`register`] adds the signatures of the link
 //! units and prediction models, the `anchor.world_model` unit, and the factory of link processes
 //! to a runtime registry, and `anchor.identify`, through which a running system asks for an
 //! object by description (top-down identification).
@@ -28,18 +28,23 @@ use kpl_runtime::registry::{BuildContext, BuildError};
 use kpl_semantic::hir;
 use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
 
-use crate::engine::{AnchorConfig, Anchoring, FromSnapshot};
-use crate::error::IdentifyError;
-use crate::networks::Networks;
+use kpl_anchor::implementations::Params;
+use kpl_anchor::networks::Networks;
+use kpl_anchor::predict::PredictionModel;
+use kpl_anchor::units::LinkUnit;
+use kpl_anchor::{AnchorConfig, Anchoring, FromSnapshot, IdentifyError, Implementations};
 
-/// Adds anchoring to a runtime registry: the signatures of the link units and prediction models,
-/// `anchor.world_model`, and link processes.
+/// Adds anchoring to a runtime registry: the signatures of the link units and prediction models
+/// (their implementations, [`Implementations::default`] and what [`add_link_unit`] and
+/// [`add_model`] add, are kept in the registry), the traffic relations, `anchor.world_model`,
+/// `anchor.identify`, and link processes.
 pub fn register(registry: &mut kpl_runtime::Registry) {
-    for entry in crate::registry::entries() {
+    for entry in kpl_anchor::registry::entries() {
         registry.add_signature(entry);
     }
-    let relations = crate::relations::functions();
-    for signature in crate::relations::signatures() {
+    registry.extension_mut::<Implementations>();
+    let relations = kpl_anchor::relations::functions();
+    for signature in kpl_anchor::relations::signatures() {
         if let Some(function) = relations.iter().find(|f| *f.name == *signature.name) {
             registry.add_function(signature, function.clone());
         }
@@ -47,6 +52,28 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
     registry.add_unit(world_model_entry(), build_world_model);
     registry.add_unit(identify_entry(), build_identify);
     registry.set_link_processes(build_link);
+}
+
+/// Adds a link unit of a user's crate: its signature (`EntryKind::Link`, for `kpl check`) and how
+/// to build it from a link's parameters, for the link processes of `kpl run`.
+pub fn add_link_unit(
+    registry: &mut kpl_runtime::Registry,
+    entry: Entry,
+    factory: impl Fn(&Params, &mut Networks) -> Result<Arc<dyn LinkUnit>, String> + Send + Sync + 'static,
+) {
+    registry.extension_mut::<Implementations>().add_link_unit(&entry.name, factory);
+    registry.add_signature(entry);
+}
+
+/// Adds a prediction model of a user's crate: its signature (`EntryKind::Predict`) and how to
+/// build it from a `predict` item's parameters.
+pub fn add_model(
+    registry: &mut kpl_runtime::Registry,
+    entry: Entry,
+    factory: impl Fn(&Params, &mut Networks) -> Result<Arc<dyn PredictionModel>, String> + Send + Sync + 'static,
+) {
+    registry.extension_mut::<Implementations>().add_model(&entry.name, factory);
+    registry.add_signature(entry);
 }
 
 fn world_model_entry() -> Entry {
@@ -79,6 +106,8 @@ fn identify_entry() -> Entry {
 struct Shared {
     spec: hir::Spec,
     spec_dir: std::path::PathBuf,
+    /// The link units and prediction models of the registry the run was built from.
+    implementations: Implementations,
     /// The links built for this run.
     links: Vec<String>,
     engine: Option<Anchoring>,
@@ -90,11 +119,13 @@ struct SharedHandle(Arc<Mutex<Shared>>);
 impl SharedHandle {
     fn get(ctx: &mut BuildContext<'_>) -> SharedHandle {
         let (spec, spec_dir) = (ctx.spec, ctx.spec_dir);
+        let implementations = ctx.registry.extension::<Implementations>().cloned().unwrap_or_default();
         ctx.shared
             .get_or_insert_with(|| {
                 SharedHandle(Arc::new(Mutex::new(Shared {
                     spec: spec.clone(),
                     spec_dir: spec_dir.to_path_buf(),
+                    implementations,
                     links: Vec::new(),
                     engine: None,
                 })))
@@ -111,8 +142,8 @@ impl Shared {
     fn engine(&mut self) -> Result<&mut Anchoring, ProcessError> {
         if self.engine.is_none() {
             let config = AnchorConfig {
+                implementations: self.implementations.clone(),
                 networks: Networks::default().with_base_dir(&self.spec_dir),
-                ..AnchorConfig::default()
             };
             let engine = Anchoring::from_spec_links(&self.spec, config, Some(&self.links))
                 .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
@@ -138,8 +169,8 @@ struct Tally {
 }
 
 impl Tally {
-    fn count(&mut self, change: &crate::change::Change) {
-        use crate::change::{Cause, ChangeKind};
+    fn count(&mut self, change: &kpl_anchor::Change) {
+        use kpl_anchor::{Cause, ChangeKind};
         match (change.kind, change.cause) {
             (ChangeKind::Created, Cause::Establish) => self.established += 1,
             (ChangeKind::Linked, Cause::Reestablish) => self.reestablished += 1,
@@ -159,7 +190,7 @@ enum Port {
 }
 
 /// A link process of the runtime: a synchronized unit over its input streams.
-struct LinkProcess {
+struct RuntimeLinkProcess {
     name: String,
     ports: Vec<Port>,
     n_extra: usize,
@@ -171,7 +202,7 @@ struct LinkProcess {
     tally: Tally,
 }
 
-impl LinkProcess {
+impl RuntimeLinkProcess {
     /// Copies the engine's count of per-object instances and what the link achieved into the
     /// run's statistics.
     fn count_instances(&self, engine: &Anchoring) {
@@ -189,7 +220,7 @@ impl LinkProcess {
     }
 }
 
-impl Unit for LinkProcess {
+impl Unit for RuntimeLinkProcess {
     fn synchronized(&self) -> bool {
         true
     }
@@ -256,7 +287,8 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
             }
         })
         .collect();
-    if crate::Implementations::default().link_unit(&link.via.entry).is_none() {
+    let known = ctx.registry.extension::<Implementations>().and_then(|i| i.link_unit(&link.via.entry));
+    if known.is_none() {
         return Err(ctx.error(format!("no implementation of the link unit `{}`", link.via.entry)));
     }
     let shared = SharedHandle::get(ctx);
@@ -270,7 +302,14 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
         Err(_) => return Err(ctx.error("the anchoring engine was poisoned by a panic")),
     }
     let stats = ctx.stats.clone();
-    Ok(Box::new(SyncUnit(LinkProcess { name, ports, n_extra, shared, stats, tally: Tally::default() })))
+    Ok(Box::new(SyncUnit(RuntimeLinkProcess {
+        name,
+        ports,
+        n_extra,
+        shared,
+        stats,
+        tally: Tally::default(),
+    })))
 }
 
 /// `anchor.world_model`: emits the run's world model, at the valid time of each sample of its
@@ -374,6 +413,6 @@ fn build_identify(
     ctx: &mut BuildContext<'_>,
 ) -> Result<Box<dyn kpl_runtime::process::AsyncUnit>, BuildError> {
     let shared = SharedHandle::get(ctx);
-    let functions = kpl_runtime::Registry::with_builtins().signatures().clone();
+    let functions = kpl_semantic::registry::Registry::with_builtin_functions();
     Ok(Box::new(SyncUnit(Identify { shared, functions })))
 }

@@ -5,8 +5,8 @@
 //! symbols anchored to it change.
 //!
 //! ```
-//! use kpl_anchor::driver::SimDriver;
-//! let spec = kpl_anchor::registry::check_text(r#"
+//! use kpl_std::driver::SimDriver;
+//! let spec = kpl_std::check_text(r#"
 //!     type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 //!     type WorldObject   symbol wo { pos: vec2, vel: vec2 }
 //!     source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "crossing", seed: 1, n_cars: 3)
@@ -31,8 +31,7 @@ use kpl_core::{Time, Value};
 use kpl_semantic::hir;
 use kpl_sim::{CarId, Frame, Params, PerceptSource, UavTrackerSim};
 
-use crate::engine::{AnchorConfig, Anchoring, Snapshot, StepOutput};
-use crate::error::{BuildError, StepError};
+use kpl_anchor::{AnchorConfig, Anchoring, BuildError, Snapshot, StepError, StepOutput};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DriverError {

@@ -8,9 +8,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use kpl_anchor::driver::{IdentityScore, SimDriver};
 use kpl_core::Time;
 use kpl_sim::{CarId, PerceptSource};
+use kpl_std::driver::{IdentityScore, SimDriver};
 
 const TYPES: [&str; 3] = ["WorldObject", "OnRoadObject", "Car"];
 
@@ -33,7 +33,7 @@ fn spec_with_seed(seed: u64) -> kpl_semantic::hir::Spec {
     let text = std::fs::read_to_string(path).unwrap();
     assert!(text.contains("seed: 7,"));
     let text = text.replace("seed: 7,", &format!("seed: {seed},"));
-    kpl_anchor::registry::check_text(&text).unwrap()
+    kpl_std::check_text(&text).unwrap()
 }
 
 #[test]

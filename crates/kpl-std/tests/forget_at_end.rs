@@ -54,7 +54,7 @@ fn percept(id: &str, x: f64) -> Value {
 /// The symbols of each anchoring type present after each step, with the car seen from x = 140 m
 /// eastwards from x = 100 m at 14 m/s while `seen(time)` (the road ends at x = 200 m, at 7.1 s).
 fn run(forget_at_end: bool, seen: impl Fn(Time) -> bool) -> Vec<(Time, Vec<String>)> {
-    let spec = kpl_anchor::registry::check_text(&spec(forget_at_end)).unwrap();
+    let spec = kpl_std::check_text(&spec(forget_at_end)).unwrap();
     let mut config = AnchorConfig::default();
     config.networks.insert("bridge", Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap()));
     let mut engine = Anchoring::from_spec(&spec, config).unwrap();

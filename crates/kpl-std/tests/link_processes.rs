@@ -30,7 +30,7 @@ type Recorded = BTreeMap<String, BTreeMap<Time, serde_json::Value>>;
 /// Checks `text` against the runtime's registry and runs it with simulated time for `duration`,
 /// reading relative paths from `dir` and writing there; returns what `path` recorded.
 fn run(text: &str, dir: &Path, duration: Time, path: &str) -> Recorded {
-    let registry = kpl_anchor::registry::runtime_registry();
+    let registry = kpl_std::registry();
     let parse = kpl_syntax::parse(text);
     assert!(!parse.has_errors(), "{:?}", parse.diagnostics);
     let checked = kpl_semantic::check(&parse.spec, registry.signatures());

@@ -14,8 +14,8 @@ use kpl_core::{Time, Value};
 use kpl_runtime::{Ending, RunConfig, RunReport};
 
 fn registry() -> kpl_runtime::Registry {
-    // Built-ins, kpl-std and kpl_anchor::runtime::register, as the `kpl` command builds it.
-    kpl_anchor::registry::runtime_registry()
+    // The registry the `kpl` command runs with.
+    kpl_std::registry()
 }
 
 fn specs_dir() -> PathBuf {

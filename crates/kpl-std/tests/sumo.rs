@@ -9,10 +9,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use kpl_anchor::driver::{IdentityScore, SimDriver};
 use kpl_anchor::views::Status;
 use kpl_core::Value;
 use kpl_sim::{CarId, PerceptSource};
+use kpl_std::driver::{IdentityScore, SimDriver};
 
 fn traffic_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic")
@@ -23,7 +23,7 @@ fn driver(name: &str) -> SimDriver {
 }
 
 fn driver_of(text: &str) -> SimDriver {
-    let spec = kpl_anchor::registry::check_text(text).unwrap();
+    let spec = kpl_std::check_text(text).unwrap();
     SimDriver::from_spec_in(&spec, Default::default(), &traffic_dir()).unwrap()
 }
 

@@ -10,8 +10,6 @@
 //! are printed; docs/anchoring.md reports them).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests fail loudly
 
-mod common;
-
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -101,7 +99,7 @@ fn run(seed: u64) -> Outcome {
     let mut traffic = Traffic::new(&network, params.n_cars, params.speed_sd, rng(seed, 1)).unwrap();
     let mut trackers: Vec<Tracker> =
         (0..2).map(|k| Tracker::new(TrackerConfig::from_params(&params), rng(seed, 2 + k))).collect();
-    let spec = kpl_anchor::registry::check_text(SPEC).unwrap();
+    let spec = kpl_std::check_text(SPEC).unwrap();
     let mut config = AnchorConfig::default();
     config.networks.insert("bridge", network.clone());
     let mut engine = Anchoring::from_spec(&spec, config).unwrap();
