@@ -190,6 +190,9 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
+            if w.anchor.moving && w.anchor.moving_since.is_some() {
+                record_track(&mut w.anchor, time, centre(&observed));
+            }
             w.anchor.bbox =
                 if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
             vote_type(&mut w.anchor, &percept.object_type);
@@ -261,7 +264,11 @@ impl Aapa {
             } else if anchored && p.image.is_some_and(|img| !inside(&w.anchor.bbox, img.width, img.height)) {
                 AnchorStatus::OutOfView
             } else {
-                w.anchor.confidence -= p.conf_minus;
+                let kept = w.anchor.confidence >= ESTABLISHED
+                    && ((time - w.anchor.last_seen) as f64) <= p.extensions.keep_lost * 1e6;
+                if !kept {
+                    w.anchor.confidence -= p.conf_minus;
+                }
                 AnchorStatus::Lost
             };
             if w.anchor.confidence < 0.0 {
@@ -326,6 +333,26 @@ impl Aapa {
         if self.rules_for(action).next().is_none() {
             return;
         }
+        // An action that puts its moving object over another, single object (`_contain(cone,
+        // snitch)`) is decided, when it completes, by where that object is: the anchor of the type
+        // nearest it, among all of the type that are not themselves inside something, whatever the
+        // order of motion suggested (identical objects swap places in the image while they move).
+        // If every one of the type is inside something (or there is none), the container is
+        // inferred over the object (extension `infer_hidden`).
+        if action.phase == ActionPhase::Completed && self.attaches_to_mover(action) && names_single_other(action, work)
+        {
+            let open = open_binding(action, time, bindings);
+            let by_type = action.args.first().is_some_and(|m| !work.iter().any(|w| !w.removed && w.anchor.symbol == *m));
+            let nearest = nearest_to_other(action, work, theta_anch).or_else(|| {
+                let infer = by_type && self.params.extensions.infer_hidden && self.hides_in_mover(action);
+                infer.then(|| infer_container(action, time, work, theta_anch, notes)).flatten()
+            });
+            if let Some(nearest) = nearest {
+                self.bind_nearest(open, &nearest, action, time, work, bindings, notes);
+                self.apply_bound(action, &nearest, time, work, notes);
+                return;
+            }
+        }
         let ambiguous = action.args.first().is_some_and(|arg| {
             !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) && candidates(arg, work).len() > 1
         });
@@ -356,14 +383,7 @@ impl Aapa {
                 });
             }
             ActionPhase::Completed => {
-                let open = bindings
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, b)| {
-                        !b.completed && b.action.name == action.name && b.action.args == action.args
-                    })
-                    .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
-                    .map(|(i, _)| i);
+                let open = open_binding(action, time, bindings);
                 let actor = match open {
                     Some(i) => {
                         let symbol = match bindings[i].bound.clone() {
@@ -414,6 +434,75 @@ impl Aapa {
         for rule in self.rules_for(&bound) {
             apply_rule(rule, &bound, time, work, &self.params, notes);
         }
+    }
+
+    /// Whether an action's rules attach something to its moving object (argument 0 is a parent).
+    fn attaches_to_mover(&self, action: &Action) -> bool {
+        self.rules_for(action)
+            .any(|r| r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0)))
+    }
+
+    /// Whether an action's rules hide something inside its moving object (`_contain`).
+    fn hides_in_mover(&self, action: &Action) -> bool {
+        self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, hides_child: true, .. }))
+        })
+    }
+
+    /// The completing action of binding `open` (if it has one) is decided for `nearest`: its started
+    /// effects go to `nearest` (undone on the anchor they went to, if another); an open action on the
+    /// type that had been given `nearest` by the order of motion gets another candidate.
+    #[allow(clippy::too_many_arguments, reason = "one step of apply_action, on its state")]
+    fn bind_nearest(
+        &self,
+        open: Option<usize>,
+        nearest: &Symbol,
+        action: &Action,
+        time: Time,
+        work: &mut Vec<Work>,
+        bindings: &mut [Binding],
+        notes: &mut Vec<String>,
+    ) {
+        let Some(i) = open else { return };
+        if let Some(j) = bindings.iter().position(|b| b.bound.as_ref() == Some(nearest))
+            && j != i
+            && !(bindings[j].completed && names_single_other(&bindings[j].action, work))
+        {
+            let taken = bound_symbols(bindings);
+            let other = bindings[j]
+                .candidates
+                .iter()
+                .chain(&bindings[i].candidates)
+                .map(|c| c.symbol.clone())
+                .find(|s| s != nearest && !taken.contains(s));
+            notes.push(format!(
+                "action `{}` rebound from `{nearest}` to `{}`: `{nearest}` is nearest `{}`",
+                bindings[j].action.name,
+                other.as_deref().unwrap_or("nothing"),
+                action.args.get(1).map_or("", |a| a.as_ref())
+            ));
+            if !bindings[j].completed {
+                if let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == *nearest) {
+                    stop_moving(&mut w.anchor);
+                }
+                if let Some(other) = &other {
+                    let started = bindings[j].action.clone();
+                    self.apply_bound(&started, other, time, work, notes);
+                }
+            }
+            bindings[j].bound = other;
+        }
+        if bindings[i].bound.as_ref() != Some(nearest) {
+            if let Some(previous) = bindings[i].bound.clone()
+                && let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == previous)
+            {
+                stop_moving(&mut w.anchor);
+            }
+            let started = bindings[i].action.clone();
+            self.apply_bound(&started, nearest, time, work, notes);
+        }
+        bindings[i].bound = Some(nearest.clone());
+        bindings[i].completed = true;
     }
 
     /// An action that names another, single object (`_contain(cone, snitch)`) is decided by where
@@ -736,6 +825,9 @@ fn validate(p: &Params) -> Result<(), AapaError> {
     if !(p.conf_minus > 0.0 && p.conf_minus <= 1.0) {
         return bad("conf_minus", "must be in (0, 1]");
     }
+    if !(p.extensions.keep_lost.is_finite() && p.extensions.keep_lost >= 0.0) {
+        return bad("keep_lost", "must be a number of seconds, 0 or more");
+    }
     let [w, c] = p.extensions.infer_hidden_box;
     if !(w.is_finite() && w > 0.0 && c.is_finite()) {
         return bad("infer_hidden_box", "width must be a positive number and the centre finite");
@@ -762,7 +854,8 @@ fn inside(b: &BBox, width: f64, height: f64) -> bool {
 /// known start and end, the velocity last measured (at time fraction `u0`) fixes the displacement of
 /// the whole move, `D = v T / s'(u0)`, and the anchor advances by `D (s(u) - s(u_prev))`; near
 /// either end of the move (`s'(u0)` small) that estimate is unstable and the constant velocity
-/// model is used instead.
+/// model is used instead. With the fitted profile, the positions seen during the move choose the
+/// profile and the displacement ([`fit_move`]), and the anchor is placed on that path.
 fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: MotionProfile) {
     let ease = |u: f64| {
         let u = u.clamp(0.0, 1.0);
@@ -772,9 +865,23 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
         let end = w.anchor.moving_until.map_or(time, |until| until.min(time));
         let dt = (end - previous_time).max(0) as f64 / 1e6;
         let v = w.anchor.velocity;
-        if !w.aligned && v != [0.0, 0.0] && dt > 0.0 {
+        // A move fitted from where it was seen, once it is out of sight (a one-step prediction for
+        // an object seen last cycle is the measured velocity's, below).
+        let fitted = match (profile, w.anchor.moving_since, w.anchor.moving_until) {
+            (MotionProfile::Fitted, Some(since), Some(until))
+                if !w.aligned && w.previous_centre.is_none() && until > since =>
+            {
+                fit_move(&w.anchor.move_track, since, until)
+            }
+            _ => None,
+        };
+        if let Some(path) = fitted {
+            let target = path.at(end);
+            let now = centre(&w.anchor.bbox);
+            w.anchor.bbox = translate(&w.anchor.bbox, [target[0] - now[0], target[1] - now[1]]);
+        } else if !w.aligned && v != [0.0, 0.0] && dt > 0.0 {
             let mut shift = [v[0] * dt, v[1] * dt];
-            if let (MotionProfile::EaseInOut, Some(since), Some(until)) =
+            if let (MotionProfile::EaseInOut | MotionProfile::Fitted, Some(since), Some(until)) =
                 (profile, w.anchor.moving_since, w.anchor.moving_until)
                 && until > since
             {
@@ -796,6 +903,105 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
     }
 }
 
+/// Positions seen during a move kept at most (a move of CATER's lasts at most 45 frames).
+const MOVE_TRACK_MAX: usize = 120;
+
+/// Notes where a moving object's box centre is seen.
+fn record_track(anchor: &mut Anchor, time: Time, at: [f64; 2]) {
+    if anchor.move_track.len() >= MOVE_TRACK_MAX {
+        // Keep the start, where the path begins.
+        anchor.move_track.remove(1);
+    }
+    anchor.move_track.push([time as f64, at[0], at[1]]);
+}
+
+/// The path of a move fitted to where it was seen.
+#[derive(Debug, Clone, Copy)]
+struct MovePath {
+    from: [f64; 2],
+    displacement: [f64; 2],
+    profile: fn(f64) -> f64,
+    since: Time,
+    until: Time,
+}
+
+impl MovePath {
+    fn at(&self, t: Time) -> [f64; 2] {
+        let u = ((t - self.since) as f64 / (self.until - self.since) as f64).clamp(0.0, 1.0);
+        let s = (self.profile)(u);
+        [self.from[0] + self.displacement[0] * s, self.from[1] + self.displacement[1] * s]
+    }
+}
+
+/// The profiles a move is fitted with; smooth first, which wins unless another fits clearly
+/// better (residual below [`CLEARLY_BETTER`] of smooth's).
+const PROFILES: [fn(f64) -> f64; 4] = [
+    |u| u * u * (3.0 - 2.0 * u),
+    |u| u,
+    |u| u * u,
+    |u| 1.0 - (1.0 - u) * (1.0 - u),
+];
+const CLEARLY_BETTER: f64 = 0.5;
+/// How far (root mean square, pixels plus a share of the move's length) the positions seen may lie
+/// from the best fit for it to be used.
+const FIT_TOLERANCE_PX: f64 = 1.0;
+const FIT_TOLERANCE_SHARE: f64 = 0.03;
+
+/// Fits the positions seen since a move started (`track[0]` is where it started) with each of
+/// [`PROFILES`]: for profile `s`, the displacement `D` minimising `Σ |from + D s(u_i) - x_i|²`. The
+/// fit needs a position seen at least a tenth into the move that has moved a pixel or more.
+fn fit_move(track: &[[f64; 3]], since: Time, until: Time) -> Option<MovePath> {
+    let (&[_, fx, fy], seen) = track.split_first()?;
+    let duration = (until - since) as f64;
+    let u = |t: f64| ((t - since as f64) / duration).clamp(0.0, 1.0);
+    let last = seen.last()?;
+    let moved = ((last[1] - fx).powi(2) + (last[2] - fy).powi(2)).sqrt();
+    if u(last[0]) < 0.1 || moved < 1.0 {
+        return None;
+    }
+    let mut best: Option<(f64, usize, [f64; 2])> = None;
+    let mut smooth_residual = f64::INFINITY;
+    for (k, profile) in PROFILES.iter().enumerate() {
+        let (mut ss, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for p in seen {
+            let s = profile(u(p[0]));
+            ss += s * s;
+            sx += s * (p[1] - fx);
+            sy += s * (p[2] - fy);
+        }
+        if ss <= 1e-9 {
+            continue;
+        }
+        let d = [sx / ss, sy / ss];
+        let residual: f64 = seen
+            .iter()
+            .map(|p| {
+                let s = profile(u(p[0]));
+                (fx + d[0] * s - p[1]).powi(2) + (fy + d[1] * s - p[2]).powi(2)
+            })
+            .sum();
+        if k == 0 {
+            smooth_residual = residual;
+        }
+        let better = match best {
+            None => true,
+            Some((r, _, _)) => residual < r && residual < CLEARLY_BETTER * smooth_residual,
+        };
+        if better {
+            best = Some((residual, k, d));
+        }
+    }
+    let (residual, k, displacement) = best?;
+    // A path that no single profile follows (a lift, a move across and a descent) is not
+    // extrapolated by one.
+    let rms = (residual / seen.len() as f64).sqrt();
+    let length = (displacement[0].powi(2) + displacement[1].powi(2)).sqrt();
+    if rms > FIT_TOLERANCE_PX + FIT_TOLERANCE_SHARE * length {
+        return None;
+    }
+    Some(MovePath { from: [fx, fy], displacement, profile: PROFILES[k], since, until })
+}
+
 /// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen
 /// of it are one box plus the detector's noise. While it is not moving and each new box stays within
 /// [`STILL_PX`] pixels (plus 5 % of its size) of the mean so far, the anchor's box is that mean (of at
@@ -804,7 +1010,7 @@ fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
     let obs = [observed.x1, observed.y1, observed.x2, observed.y2];
     let restart = StillBox { mean: obs, count: 1 };
     let next = match anchor.still {
-        Some(still) if !anchor.moving => {
+        Some(still) if !anchor.moving && !anchor.turning => {
             let m = still.mean;
             let tolerance = STILL_PX + 0.05 * scale(&observed);
             let near = (0..4).all(|k| (obs[k] - m[k]).abs() <= tolerance);
@@ -833,6 +1039,7 @@ fn stop_moving(anchor: &mut Anchor) {
     anchor.moving = false;
     anchor.moving_until = None;
     anchor.moving_since = None;
+    anchor.move_track = Vec::new();
 }
 
 /// Whether two boxes could be the same object seen twice: their scales (square roots of the areas)
@@ -976,6 +1183,52 @@ fn names_single_other(action: &Action, work: &[Work]) -> bool {
     })
 }
 
+/// The open binding an action event completes: the one of the same action and arguments whose
+/// expected end is nearest.
+fn open_binding(action: &Action, time: Time, bindings: &[Binding]) -> Option<usize> {
+    bindings
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| !b.completed && b.action.name == action.name && b.action.args == action.args)
+        .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
+        .map(|(i, _)| i)
+}
+
+/// The single other object an action names besides its moving object, if there is one.
+fn single_other(action: &Action, work: &[Work], theta_anch: f64) -> Option<usize> {
+    action.args.iter().skip(1).find_map(|arg| {
+        let single =
+            work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1;
+        if single { resolve(arg, work, theta_anch) } else { None }
+    })
+}
+
+/// For an action that names a type as its moving object and another, single object: the anchor of
+/// that type (the established ones, if any) nearest that object, among those not inside another
+/// (a contained object comes over nothing). `None` if the moving object is named by symbol.
+fn nearest_to_other(action: &Action, work: &[Work], theta_anch: f64) -> Option<Symbol> {
+    let mover = action.args.first()?;
+    if work.iter().any(|w| !w.removed && w.anchor.symbol == *mover) {
+        return None;
+    }
+    let other = single_other(action, work, theta_anch)?;
+    let target = bottom_centre(&work[other].anchor.bbox);
+    let free = |i: &usize| !work[*i].anchor.attachment.as_ref().is_some_and(|a| a.hidden);
+    let all: Vec<usize> = (0..work.len())
+        .filter(|&i| !work[i].removed && work[i].anchor.object_type == *mover && i != other)
+        .filter(free)
+        .collect();
+    let established: Vec<usize> = all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+    let pool = if established.is_empty() { all } else { established };
+    pool.into_iter()
+        .map(|i| {
+            let p = bottom_centre(&work[i].anchor.bbox);
+            ((p[0] - target[0]).powi(2) + (p[1] - target[1]).powi(2), i)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, i)| work[i].anchor.symbol.clone())
+}
+
 /// For an action that names another, single object: the candidate nearest it.
 fn near_other(
     action: &Action,
@@ -1035,7 +1288,9 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
     if let Some(i) = work.iter().position(|w| !w.removed && &*w.anchor.symbol == arg) {
         return Some(i);
     }
-    (0..work.len()).filter(|&i| !work[i].removed && &*work[i].anchor.object_type == arg).max_by(|&a, &b| {
+    // Among the established anchors of the type when there are any: a false detection of the type
+    // seen a moment ago is not the object that has been there all along (and is now hidden).
+    candidates(arg, work).into_iter().max_by(|&a, &b| {
         let (a, b) = (&work[a].anchor, &work[b].anchor);
         (a.is_anchored(theta_anch), a.last_seen)
             .cmp(&(b.is_anchored(theta_anch), b.last_seen))
@@ -1072,6 +1327,46 @@ fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) 
         return (p.bbox, true);
     }
     (work[pa].anchor.bbox, false)
+}
+
+/// Extension `infer_hidden`, for containers: a containing action completes over a single object,
+/// but every anchor of the container's type is inside another (or there is none): the container is
+/// an object not seen, now over that object. Its anchor is inferred there, the size of another
+/// anchor of its type if there is one (else twice the object's), at θ_anch.
+fn infer_container(
+    action: &Action,
+    time: Time,
+    work: &mut Vec<Work>,
+    theta_anch: f64,
+    notes: &mut Vec<String>,
+) -> Option<Symbol> {
+    let object_type = action.args.first()?.clone();
+    let other = single_other(action, work, theta_anch)?;
+    let child = work[other].anchor.bbox;
+    let size = work
+        .iter()
+        .find(|w| !w.removed && w.anchor.object_type == object_type)
+        .map_or([2.0 * child.width(), 2.0 * child.height()], |w| size(&w.anchor.bbox));
+    let bbox = from_bottom_centre(bottom_centre(&child), size);
+    let used: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+    let symbol = fresh_symbol(&Percept::new("", &object_type, bbox), &used);
+    notes.push(format!(
+        "`{symbol}` ({object_type}) inferred over `{}`: no anchor of its type could have come over it",
+        work[other].anchor.symbol
+    ));
+    work.push(Work {
+        anchor: Anchor {
+            confidence: theta_anch,
+            ..Anchor::new(symbol.clone(), object_type, bbox, AnchorStatus::Occluded, time)
+        },
+        aligned: false,
+        previous_centre: None,
+        previous_confidence: theta_anch,
+        removed: false,
+        box_before: bbox,
+        percept_type: None,
+    });
+    Some(symbol)
 }
 
 /// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
@@ -1225,11 +1520,21 @@ fn apply_rule(
                     work[o].anchor.moving = true;
                     work[o].anchor.moving_until = action.expected_end;
                     work[o].anchor.moving_since = Some(time);
+                    let start = centre(&work[o].anchor.bbox);
+                    work[o].anchor.move_track = vec![[time as f64, start[0], start[1]]];
                 }
             }
             Effect::StopMoving { object } => {
                 if let Some(o) = lookup(*object, work, notes) {
                     stop_moving(&mut work[o].anchor);
+                }
+            }
+            Effect::StartTurning { object } | Effect::StopTurning { object } => {
+                if let Some(o) = lookup(*object, work, notes) {
+                    let anchor = &mut work[o].anchor;
+                    anchor.turning = matches!(effect, Effect::StartTurning { .. });
+                    // The mean of the boxes before (or during) the turn is not the box after it.
+                    anchor.still = None;
                 }
             }
         }

@@ -170,6 +170,9 @@ pub struct Anchor {
     pub moving: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_until: Option<Time>,
+    /// Set while an action turns this object in place (its box changes, its place does not).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub turning: bool,
     /// Width and height when last seen with no other detection overlapping it (partial-box
     /// restoration).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -183,6 +186,10 @@ pub struct Anchor {
     /// When the action moving this object started.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_since: Option<Time>,
+    /// Where this object's box centre was seen during the move in progress: `[time, x, y]`, the
+    /// first where it was when the move started (for [`crate::MotionProfile::Fitted`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub move_track: Vec<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attachment: Option<Attachment>,
     /// `confidence >= theta_inf`: passed on for world state inference (III-B.3).
@@ -220,7 +227,9 @@ impl Anchor {
             velocity: [0.0, 0.0],
             moving: false,
             moving_until: None,
+            turning: false,
             moving_since: None,
+            move_track: Vec::new(),
             full_size: None,
             last_percept_box: None,
             partial: false,

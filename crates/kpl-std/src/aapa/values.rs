@@ -269,7 +269,7 @@ field_names! {
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
     relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
     still = "still", mean = "mean", count = "count", provisional = "provisional",
-    parent_size = "parent_size",
+    parent_size = "parent_size", turning = "turning", move_track = "move_track",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -308,6 +308,8 @@ fn anchor_value(a: &Anchor) -> Value {
         last_percept_box,
         partial,
         moving_since,
+        move_track,
+        turning,
         attachment,
         for_inference,
         type_votes,
@@ -333,6 +335,12 @@ fn anchor_value(a: &Anchor) -> Value {
     }
     if let Some(t) = moving_since {
         fields.push((n.moving_since.clone(), Value::Int(*t)));
+    }
+    if !move_track.is_empty() {
+        fields.push((n.move_track.clone(), Value::List(move_track.iter().map(|p| floats(p)).collect())));
+    }
+    if *turning {
+        fields.push((n.turning.clone(), Value::Bool(true)));
     }
     if let Some(wh) = full_size {
         fields.push((n.full_size.clone(), floats(wh)));
