@@ -150,16 +150,20 @@ impl Aapa {
 
         // 1b. Consecutive frame alignment.
         let cols = work.len();
+        let still = still_anchors(&work, &bindings, p.extensions.still_stays);
         let mut cost = Vec::with_capacity(percepts.len() * cols);
         for percept in percepts {
-            for w in &work {
+            for (w, &still) in work.iter().zip(&still) {
                 if w.anchor.attachment.as_ref().is_some_and(|a| a.hidden) {
                     // Contained: it cannot be what was perceived.
                     cost.push(f64::INFINITY);
                     continue;
                 }
                 let same_type = percept.object_type == w.anchor.object_type;
-                let c = alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch);
+                let mut c = alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch);
+                if still && moved_away(&percept.bbox, &w.anchor.bbox) {
+                    c *= STILL_MOVED_FACTOR;
+                }
                 let tentative = p.extensions.established_first && w.anchor.confidence < ESTABLISHED;
                 cost.push(if tentative { 2.0 * c } else { c });
             }
@@ -191,7 +195,7 @@ impl Aapa {
                 _ => [0.0, 0.0],
             };
             if w.anchor.moving && w.anchor.moving_since.is_some() {
-                record_track(&mut w.anchor, time, centre(&observed));
+                record_track(&mut w.anchor, time, &observed);
             }
             w.anchor.bbox =
                 if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
@@ -243,8 +247,14 @@ impl Aapa {
         // Effects of actions: attachments (III-B.2b) and motion. Actions moving one of several
         // identical objects wait for its motion to tell which (bindings).
         self.decide_bindings(&mut bindings, time, &mut work, &mut notes);
+        // What the actions starting this cycle move (a stack that slides: its contents move too).
+        let starting: HashSet<Symbol> = actions
+            .iter()
+            .filter(|a| a.phase == ActionPhase::Started)
+            .filter_map(|a| a.args.first().cloned())
+            .collect();
         for action in actions {
-            self.apply_action(action, time, &mut work, &mut bindings, &mut notes);
+            self.apply_action(action, &starting, time, &mut work, &mut bindings, &mut notes);
         }
         forget_stale_bindings(&mut bindings, time, &mut notes);
 
@@ -289,7 +299,7 @@ impl Aapa {
         }
 
         // Children follow their parents, parents first.
-        self.follow_parents(&mut work);
+        self.follow_parents(&mut work, time);
 
         // 3. The world state: relations and what is passed on for inference.
         let mut relations = Vec::new();
@@ -324,6 +334,7 @@ impl Aapa {
     fn apply_action(
         &self,
         action: &Action,
+        starting: &HashSet<Symbol>,
         time: Time,
         work: &mut Vec<Work>,
         bindings: &mut Vec<Binding>,
@@ -353,19 +364,27 @@ impl Aapa {
                 return;
             }
         }
-        let ambiguous = action.args.first().is_some_and(|arg| {
-            !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) && candidates(arg, work).len() > 1
-        });
-        if !ambiguous {
-            for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, work, &self.params, notes);
+        let by_type = action.args.first().is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
+        let movers = if by_type { self.movers(action, starting, work) } else { Vec::new() };
+        if movers.len() <= 1 {
+            match movers.first() {
+                // The one object of the type the action can be moving.
+                Some(&i) => {
+                    let symbol = work[i].anchor.symbol.clone();
+                    self.apply_bound(action, &symbol, time, work, notes);
+                }
+                None => {
+                    for rule in self.rules_for(action) {
+                        apply_rule(rule, action, time, work, &self.params, notes);
+                    }
+                }
             }
             return;
         }
         match action.phase {
             ActionPhase::Started => {
                 let taken = bound_symbols(bindings);
-                let candidates = candidates(&action.args[0], work)
+                let candidates = movers
                     .into_iter()
                     .filter(|&i| !taken.contains(&work[i].anchor.symbol))
                     .map(|i| Candidate {
@@ -436,10 +455,66 @@ impl Aapa {
         }
     }
 
+    /// The anchors an action naming its moving object by type can be moving: those of the type
+    /// (the established ones, if any) that are not inside another, since a contained object moves
+    /// only with its container; if all are inside another, those, unless the action puts its mover
+    /// over something or takes it off what it holds (a contained cone is picked up by no one).
+    fn movers(&self, action: &Action, starting: &HashSet<Symbol>, work: &[Work]) -> Vec<usize> {
+        let Some(arg) = action.args.first() else { return Vec::new() };
+        let acts_on_others = self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| {
+                matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0)
+                    || matches!(e, Effect::DetachChildren { parent: 0 })
+            })
+        });
+        let hidden = |i: usize| work[i].anchor.attachment.as_ref().is_some_and(|a| a.hidden);
+        let of_type: Vec<usize> =
+            (0..work.len()).filter(|&i| !work[i].removed && work[i].anchor.object_type == *arg).collect();
+        // An object inside another moves only with it: those whose outermost container is moving or
+        // starting to (a stack that slides), else the free ones of the type.
+        let index = symbol_index(work);
+        let carried: Vec<usize> = of_type
+            .iter()
+            .copied()
+            .filter(|&i| hidden(i))
+            .filter(|&i| {
+                let root = &work[root_of(i, work, &index)].anchor;
+                root.moving || starting.contains(&root.symbol) || starting.contains(&root.object_type)
+            })
+            .collect();
+        let free: Vec<usize> = of_type.iter().copied().filter(|&i| !hidden(i)).collect();
+        let all = if !carried.is_empty() && !acts_on_others {
+            carried
+        } else if free.is_empty() && !acts_on_others {
+            of_type
+        } else {
+            free
+        };
+        let established: Vec<usize> =
+            all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+        if established.is_empty() { all } else { established }
+    }
+
     /// Whether an action's rules attach something to its moving object (argument 0 is a parent).
     fn attaches_to_mover(&self, action: &Action) -> bool {
         self.rules_for(action)
             .any(|r| r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0)))
+    }
+
+    /// The box a parent's children follow: its own, or for a noisy detector's (`average_still`) seen
+    /// carrier in a move that follows one profile, the fitted box (the detector's noise smoothed
+    /// over the move).
+    fn carrier_box(&self, parent: &Work, time: Time) -> BBox {
+        let a = &parent.anchor;
+        if !(self.params.extensions.average_still && a.moving && parent.aligned) {
+            return a.bbox;
+        }
+        match (a.moving_since, a.moving_until) {
+            (Some(since), Some(until)) if until > since => {
+                fit_move(&a.move_track, since, until, SMOOTH_TOLERANCE).map_or(a.bbox, |path| path.bbox(time))
+            }
+            _ => a.bbox,
+        }
     }
 
     /// Whether an action's rules hide something inside its moving object (`_contain`).
@@ -709,6 +784,12 @@ impl Aapa {
                         && old.anchor.first_seen < new.anchor.first_seen
                         && similar_size(&old.anchor.bbox, &new.anchor.bbox)
                         && !has_anchored_ancestor(m, work, &index, p.theta_anch)
+                        // H1 (`still_stays`): an object no action has moved since it was last
+                        // seen is where it was; a detection elsewhere is another (a false one).
+                        && (!p.extensions.still_stays
+                            || old.anchor.moving
+                            || old.anchor.last_moved.is_some_and(|t| t >= old.anchor.last_seen)
+                            || !moved_away(&new.anchor.bbox, &old.anchor.bbox))
                 })
                 .min_by(|&a, &b| {
                     let cost =
@@ -740,7 +821,7 @@ impl Aapa {
 
     /// Places every child that is not seen but maintained by its attachment relative to its
     /// parent; refreshes the geometry of children that are seen.
-    fn follow_parents(&self, work: &mut [Work]) {
+    fn follow_parents(&self, work: &mut [Work], time: Time) {
         let index = symbol_index(work);
         let depth = |mut i: usize| {
             let mut d = 0;
@@ -762,7 +843,7 @@ impl Aapa {
         for i in order {
             let Some(att) = work[i].anchor.attachment.clone() else { continue };
             let Some(&parent) = index.get(&att.parent) else { continue };
-            let parent_box = work[parent].anchor.bbox;
+            let parent_box = self.carrier_box(&work[parent], time);
             let parent_moving = work[parent].anchor.moving;
             let parent_seen_still = work[parent].aligned && !parent_moving;
             let w = &mut work[i];
@@ -777,6 +858,20 @@ impl Aapa {
                 }
                 if parent_moving && let Some(a) = &mut w.anchor.attachment {
                     a.provisional = false;
+                }
+            }
+            if att.settling && !w.aligned {
+                if !parent_moving {
+                    // A noisy detector's parent standing still: the child inside has not moved;
+                    // the geometry is measured again against the parent's averaged box.
+                    let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
+                    geometry.hidden = att.hidden;
+                    geometry.settling = true;
+                    w.anchor.attachment = Some(geometry);
+                    continue;
+                }
+                if let Some(a) = &mut w.anchor.attachment {
+                    a.settling = false;
                 }
             }
             if w.aligned {
@@ -799,7 +894,12 @@ impl Aapa {
                 };
                 let base = bottom_centre(&parent_box);
                 let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
-                w.anchor.bbox = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                let followed = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                if followed != w.anchor.bbox {
+                    // Carried: the boxes seen of it before are not where it is now.
+                    w.anchor.still = None;
+                }
+                w.anchor.bbox = followed;
             }
         }
     }
@@ -871,7 +971,7 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
             (MotionProfile::Fitted, Some(since), Some(until))
                 if !w.aligned && w.previous_centre.is_none() && until > since =>
             {
-                fit_move(&w.anchor.move_track, since, until)
+                fit_move(&w.anchor.move_track, since, until, FIT_TOLERANCE)
             }
             _ => None,
         };
@@ -879,7 +979,12 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
             let target = path.at(end);
             let now = centre(&w.anchor.bbox);
             w.anchor.bbox = translate(&w.anchor.bbox, [target[0] - now[0], target[1] - now[1]]);
-        } else if !w.aligned && v != [0.0, 0.0] && dt > 0.0 {
+        } else if !w.aligned
+            && v != [0.0, 0.0]
+            && dt > 0.0
+            && w.anchor.moving_since.is_none_or(|since| w.anchor.last_seen >= since)
+        {
+            // (Only a velocity measured during this move: one from before it says nothing of it.)
             let mut shift = [v[0] * dt, v[1] * dt];
             if let (MotionProfile::EaseInOut | MotionProfile::Fitted, Some(since), Some(until)) =
                 (profile, w.anchor.moving_since, w.anchor.moving_until)
@@ -907,29 +1012,42 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
 const MOVE_TRACK_MAX: usize = 120;
 
 /// Notes where a moving object's box centre is seen.
-fn record_track(anchor: &mut Anchor, time: Time, at: [f64; 2]) {
+fn record_track(anchor: &mut Anchor, time: Time, b: &BBox) {
     if anchor.move_track.len() >= MOVE_TRACK_MAX {
         // Keep the start, where the path begins.
         anchor.move_track.remove(1);
     }
-    anchor.move_track.push([time as f64, at[0], at[1]]);
+    let [x, y] = centre(b);
+    anchor.move_track.push([time as f64, x, y, b.width(), b.height()]);
 }
 
-/// The path of a move fitted to where it was seen.
+/// The path of a move fitted to how it was seen: the box's centre and size along one profile.
 #[derive(Debug, Clone, Copy)]
 struct MovePath {
-    from: [f64; 2],
-    displacement: [f64; 2],
+    /// Centre x, y, width, height at the start and their change over the whole move.
+    from: [f64; 4],
+    change: [f64; 4],
     profile: fn(f64) -> f64,
     since: Time,
     until: Time,
 }
 
 impl MovePath {
-    fn at(&self, t: Time) -> [f64; 2] {
+    fn state(&self, t: Time) -> [f64; 4] {
         let u = ((t - self.since) as f64 / (self.until - self.since) as f64).clamp(0.0, 1.0);
         let s = (self.profile)(u);
-        [self.from[0] + self.displacement[0] * s, self.from[1] + self.displacement[1] * s]
+        std::array::from_fn(|k| self.from[k] + self.change[k] * s)
+    }
+
+    fn at(&self, t: Time) -> [f64; 2] {
+        let [x, y, ..] = self.state(t);
+        [x, y]
+    }
+
+    /// The box at time `t`.
+    fn bbox(&self, t: Time) -> BBox {
+        let [x, y, w, h] = self.state(t);
+        BBox::new(x - w / 2.0, y - h / 2.0, x + w / 2.0, y + h / 2.0)
     }
 }
 
@@ -943,15 +1061,19 @@ const PROFILES: [fn(f64) -> f64; 4] = [
 ];
 const CLEARLY_BETTER: f64 = 0.5;
 /// How far (root mean square, pixels plus a share of the move's length) the positions seen may lie
-/// from the best fit for it to be used.
-const FIT_TOLERANCE_PX: f64 = 1.0;
-const FIT_TOLERANCE_SHARE: f64 = 0.03;
+/// from the best fit for it to be used to continue a move unseen, and to smooth a detector's boxes
+/// of a carrier that is seen.
+const FIT_TOLERANCE: [f64; 2] = [1.0, 0.03];
+const SMOOTH_TOLERANCE: [f64; 2] = [3.0, 0.06];
 
 /// Fits the positions seen since a move started (`track[0]` is where it started) with each of
-/// [`PROFILES`]: for profile `s`, the displacement `D` minimising `Σ |from + D s(u_i) - x_i|²`. The
-/// fit needs a position seen at least a tenth into the move that has moved a pixel or more.
-fn fit_move(track: &[[f64; 3]], since: Time, until: Time) -> Option<MovePath> {
-    let (&[_, fx, fy], seen) = track.split_first()?;
+/// [`PROFILES`]: for profile `s`, the displacement `D` minimising `Σ |from + D s(u_i) - x_i|²`; the
+/// sizes along the best one likewise. The fit needs a position seen at least a tenth into the move
+/// that has moved a pixel or more, and positions within `tolerance` (`[px, share of the move]`, root
+/// mean square) of the fit.
+fn fit_move(track: &[[f64; 5]], since: Time, until: Time, tolerance: [f64; 2]) -> Option<MovePath> {
+    let (first, seen) = track.split_first()?;
+    let [_, fx, fy, fw, fh] = *first;
     let duration = (until - since) as f64;
     let u = |t: f64| ((t - since as f64) / duration).clamp(0.0, 1.0);
     let last = seen.last()?;
@@ -959,25 +1081,25 @@ fn fit_move(track: &[[f64; 3]], since: Time, until: Time) -> Option<MovePath> {
     if u(last[0]) < 0.1 || moved < 1.0 {
         return None;
     }
-    let mut best: Option<(f64, usize, [f64; 2])> = None;
-    let mut smooth_residual = f64::INFINITY;
-    for (k, profile) in PROFILES.iter().enumerate() {
-        let (mut ss, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    // Least squares of `value - start = D s(u)` for one dimension of the track.
+    let slope = |profile: fn(f64) -> f64, k: usize, start: f64| -> Option<f64> {
+        let (mut ss, mut sv) = (0.0, 0.0);
         for p in seen {
             let s = profile(u(p[0]));
             ss += s * s;
-            sx += s * (p[1] - fx);
-            sy += s * (p[2] - fy);
+            sv += s * (p[k] - start);
         }
-        if ss <= 1e-9 {
-            continue;
-        }
-        let d = [sx / ss, sy / ss];
+        (ss > 1e-9).then(|| sv / ss)
+    };
+    let mut best: Option<(f64, usize, [f64; 2])> = None;
+    let mut smooth_residual = f64::INFINITY;
+    for (k, profile) in PROFILES.iter().enumerate() {
+        let (Some(dx), Some(dy)) = (slope(*profile, 1, fx), slope(*profile, 2, fy)) else { continue };
         let residual: f64 = seen
             .iter()
             .map(|p| {
                 let s = profile(u(p[0]));
-                (fx + d[0] * s - p[1]).powi(2) + (fy + d[1] * s - p[2]).powi(2)
+                (fx + dx * s - p[1]).powi(2) + (fy + dy * s - p[2]).powi(2)
             })
             .sum();
         if k == 0 {
@@ -988,27 +1110,32 @@ fn fit_move(track: &[[f64; 3]], since: Time, until: Time) -> Option<MovePath> {
             Some((r, _, _)) => residual < r && residual < CLEARLY_BETTER * smooth_residual,
         };
         if better {
-            best = Some((residual, k, d));
+            best = Some((residual, k, [dx, dy]));
         }
     }
-    let (residual, k, displacement) = best?;
+    let (residual, k, [dx, dy]) = best?;
     // A path that no single profile follows (a lift, a move across and a descent) is not
     // extrapolated by one.
     let rms = (residual / seen.len() as f64).sqrt();
-    let length = (displacement[0].powi(2) + displacement[1].powi(2)).sqrt();
-    if rms > FIT_TOLERANCE_PX + FIT_TOLERANCE_SHARE * length {
+    let length = (dx * dx + dy * dy).sqrt();
+    if rms > tolerance[0] + tolerance[1] * length {
         return None;
     }
-    Some(MovePath { from: [fx, fy], displacement, profile: PROFILES[k], since, until })
+    let profile = PROFILES[k];
+    let dw = slope(profile, 3, fw).unwrap_or(0.0);
+    let dh = slope(profile, 4, fh).unwrap_or(0.0);
+    Some(MovePath { from: [fx, fy, fw, fh], change: [dx, dy, dw, dh], profile, since, until })
 }
 
 /// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen
 /// of it are one box plus the detector's noise. While it is not moving and each new box stays within
 /// [`STILL_PX`] pixels (plus 5 % of its size) of the mean so far, the anchor's box is that mean (of at
-/// most [`STILL_MAX`] boxes, so it can follow a slow drift); otherwise the mean starts again here.
+/// most [`STILL_MAX`] boxes, so it can follow a slow drift). A box that strays is a detector's
+/// outlier and left out, unless [`STILL_STRAYS`] do in a row (the object did move): then the mean
+/// starts again there.
 fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
     let obs = [observed.x1, observed.y1, observed.x2, observed.y2];
-    let restart = StillBox { mean: obs, count: 1 };
+    let restart = StillBox { mean: obs, count: 1, strays: 0 };
     let next = match anchor.still {
         Some(still) if !anchor.moving && !anchor.turning => {
             let m = still.mean;
@@ -1017,7 +1144,9 @@ fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
             if near {
                 let n = (still.count + 1).min(STILL_MAX);
                 let w = 1.0 / f64::from(n);
-                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n }
+                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n, strays: 0 }
+            } else if still.count >= STILL_STRAYS && still.strays + 1 < STILL_STRAYS {
+                StillBox { strays: still.strays + 1, ..still }
             } else {
                 restart
             }
@@ -1029,13 +1158,57 @@ fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
     BBox::new(x1, y1, x2, y2)
 }
 
+/// Extension `still_stays`: the anchors no action may be moving (H1): established, not moving or
+/// turning, not attached (a child moves with its parent), and not one that an undecided action on
+/// identical objects may be moving.
+fn still_anchors(work: &[Work], bindings: &[Binding], on: bool) -> Vec<bool> {
+    if !on {
+        return vec![false; work.len()];
+    }
+    let undecided: HashSet<&Symbol> = bindings
+        .iter()
+        .filter(|b| b.bound.is_none() && !b.completed)
+        .flat_map(|b| b.candidates.iter().map(|c| &c.symbol))
+        .collect();
+    work.iter()
+        .map(|w| {
+            let a = &w.anchor;
+            !a.moving
+                && !a.turning
+                && a.attachment.is_none()
+                && a.confidence >= ESTABLISHED
+                && !undecided.contains(&a.symbol)
+        })
+        .collect()
+}
+
+/// Extension `still_stays`: whether a percept lies further from an anchor's box than a detector's
+/// noise explains (its centre more than [`STILL_MOVED_PX`] plus a fifth of the box's smaller side
+/// away).
+fn moved_away(percept: &BBox, anchor: &BBox) -> bool {
+    let [a, b] = [centre(percept), centre(anchor)];
+    let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    d > STILL_MOVED_PX + 0.2 * anchor.width().min(anchor.height())
+}
+
+const STILL_MOVED_PX: f64 = 3.0;
+/// How much dearer it is for an object no action moves to take a percept that lies away from it.
+const STILL_MOVED_FACTOR: f64 = 10.0;
+
 /// How far (pixels, plus 5 % of the box's size) a box of a still object may stray from the mean.
 const STILL_PX: f64 = 3.0;
 /// Boxes averaged at most for a still object.
 const STILL_MAX: u32 = 60;
+/// Boxes in a row that must stray from the mean of a still object before it starts again (fewer
+/// are a detector's outliers); also the boxes a mean needs before it is kept against a stray.
+const STILL_STRAYS: u32 = 3;
 
 /// The move an action started is over (or no longer believed): no motion state is left.
 fn stop_moving(anchor: &mut Anchor) {
+    if anchor.moving {
+        // Moved until now (or as long as it was believed to be moving).
+        anchor.last_moved = anchor.moving_until.max(anchor.moving_since).or(anchor.last_moved);
+    }
     anchor.moving = false;
     anchor.moving_until = None;
     anchor.moving_since = None;
@@ -1072,6 +1245,18 @@ fn has_anchored_ancestor(i: usize, work: &[Work], index: &HashMap<Symbol, usize>
     false
 }
 
+/// The outermost ancestor of an anchor in the attachment hierarchy (itself if it has no parent).
+fn root_of(i: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> usize {
+    let mut current = i;
+    for _ in 0..work.len() {
+        match work[current].anchor.attachment.as_ref().and_then(|a| index.get(&a.parent)) {
+            Some(&parent) => current = parent,
+            None => break,
+        }
+    }
+    current
+}
+
 fn is_ancestor(candidate: usize, of: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> bool {
     let mut current = of;
     for _ in 0..work.len() {
@@ -1097,6 +1282,7 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         parent_size: size(parent),
         hidden: false,
         provisional: false,
+        settling: false,
     }
 }
 
@@ -1488,6 +1674,7 @@ fn apply_rule(
                 let mut attachment = geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel);
                 attachment.hidden = *hides_child;
                 attachment.provisional = guessed;
+                attachment.settling = *hides_child && params.extensions.average_still;
                 w.anchor.attachment = Some(attachment);
             }
             Effect::Detach { child, parent } => {
@@ -1520,8 +1707,12 @@ fn apply_rule(
                     work[o].anchor.moving = true;
                     work[o].anchor.moving_until = action.expected_end;
                     work[o].anchor.moving_since = Some(time);
-                    let start = centre(&work[o].anchor.bbox);
-                    work[o].anchor.move_track = vec![[time as f64, start[0], start[1]]];
+                    work[o].anchor.last_moved = Some(time);
+                    // The boxes seen before the move are not where it will stand.
+                    work[o].anchor.still = None;
+                    let b = work[o].anchor.bbox;
+                    let [x, y] = centre(&b);
+                    work[o].anchor.move_track = vec![[time as f64, x, y, b.width(), b.height()]];
                 }
             }
             Effect::StopMoving { object } => {

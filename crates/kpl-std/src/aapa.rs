@@ -372,6 +372,7 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             infer_hidden: boolean(ctx, "infer_hidden")?,
             infer_hidden_box: Extensions::default().infer_hidden_box,
             average_still: boolean(ctx, "average_still")?,
+            still_stays: boolean(ctx, "still_stays")?,
             keep_lost: float(ctx, "keep_lost")?,
         },
     })
@@ -534,6 +535,11 @@ fn anchor_entry() -> Entry {
         "average_still",
         ext.average_still,
         "extension: the box of an object no action moves is the mean of its boxes since it last moved",
+    ))
+    .param(b(
+        "still_stays",
+        ext.still_stays,
+        "extension: an object no action moves takes a percept away from it only at ten times the cost (H1: every move is an action)",
     ))
     .param(f(
         "keep_lost",
