@@ -257,6 +257,9 @@ impl Aapa {
             self.apply_action(action, &starting, time, &mut work, &mut bindings, &mut notes);
         }
         forget_stale_bindings(&mut bindings, time, &mut notes);
+        if p.extensions.merge_duplicates {
+            merge_duplicates(&mut work, &mut bindings, &mut notes);
+        }
 
         // 2. Hypothesis reasoning and confidence for anchors not aligned this cycle.
         let index = symbol_index(&work);
@@ -350,7 +353,10 @@ impl Aapa {
         // order of motion suggested (identical objects swap places in the image while they move).
         // If every one of the type is inside something (or there is none), the container is
         // inferred over the object (extension `infer_hidden`).
-        if action.phase == ActionPhase::Completed && self.attaches_to_mover(action) && names_single_other(action, work)
+        if self.params.extensions.identity_by_place
+            && action.phase == ActionPhase::Completed
+            && self.attaches_to_mover(action)
+            && names_single_other(action, work)
         {
             let open = open_binding(action, time, bindings);
             let by_type = action.args.first().is_some_and(|m| !work.iter().any(|w| !w.removed && w.anchor.symbol == *m));
@@ -365,7 +371,11 @@ impl Aapa {
             }
         }
         let by_type = action.args.first().is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
-        let movers = if by_type { self.movers(action, starting, work) } else { Vec::new() };
+        let movers = match (by_type, self.params.extensions.identity_by_place) {
+            (false, _) => Vec::new(),
+            (true, true) => self.movers(action, starting, work),
+            (true, false) => action.args.first().map_or_else(Vec::new, |arg| candidates(arg, work)),
+        };
         if movers.len() <= 1 {
             match movers.first() {
                 // The one object of the type the action can be moving.
@@ -1125,6 +1135,77 @@ fn fit_move(track: &[[f64; 5]], since: Time, until: Time, tolerance: [f64; 2]) -
     let dw = slope(profile, 3, fw).unwrap_or(0.0);
     let dh = slope(profile, 4, fh).unwrap_or(0.0);
     Some(MovePath { from: [fx, fy, fw, fh], change: [dx, dy, dw, dh], profile, since, until })
+}
+
+/// Extension `merge_duplicates`: two anchors of one type on the same spot (boxes overlapping at an
+/// IoU of [`DUPLICATE_IOU`] or more, of similar size), neither moving nor attached to the other,
+/// are one object anchored twice (a detector that reported it twice, or under another class for a
+/// while): the younger is merged into the older, which keeps the newer sighting, the attachment
+/// (if only the younger had one) and the children.
+fn merge_duplicates(work: &mut [Work], bindings: &mut [Binding], notes: &mut Vec<String>) {
+    for i in 0..work.len() {
+        for j in 0..work.len() {
+            if i == j || work[i].removed || work[j].removed {
+                continue;
+            }
+            let (a, b) = (&work[i].anchor, &work[j].anchor);
+            // `i` the older, `j` the younger.
+            let same = a.object_type == b.object_type
+                && (a.first_seen, &a.symbol) < (b.first_seen, &b.symbol)
+                && !a.moving
+                && !b.moving
+                && !(a.attachment.is_some() && b.attachment.is_some())
+                && a.attachment.as_ref().is_none_or(|t| t.parent != b.symbol)
+                && b.attachment.as_ref().is_none_or(|t| t.parent != a.symbol)
+                && similar_size(&a.bbox, &b.bbox)
+                && iou(&a.bbox, &b.bbox) >= DUPLICATE_IOU;
+            if !same {
+                continue;
+            }
+            let younger = work[j].anchor.clone();
+            let (aligned, percept_type) = (work[j].aligned, work[j].percept_type.clone());
+            work[j].removed = true;
+            let old = &mut work[i];
+            notes.push(format!("`{}` merged into `{}`: one object anchored twice", younger.symbol, old.anchor.symbol));
+            if aligned && !old.aligned {
+                old.anchor.bbox = younger.bbox;
+                old.anchor.status = younger.status;
+                old.anchor.still = younger.still;
+                old.aligned = true;
+                old.percept_type = percept_type;
+            }
+            old.anchor.last_seen = old.anchor.last_seen.max(younger.last_seen);
+            old.anchor.confidence = old.anchor.confidence.max(younger.confidence);
+            if old.anchor.attachment.is_none() {
+                old.anchor.attachment = younger.attachment;
+            }
+            let survivor = old.anchor.symbol.clone();
+            for w in work.iter_mut() {
+                if let Some(att) = &mut w.anchor.attachment
+                    && att.parent == younger.symbol
+                {
+                    att.parent = survivor.clone();
+                }
+            }
+            for b in bindings.iter_mut() {
+                if b.bound.as_ref() == Some(&younger.symbol) {
+                    b.bound = Some(survivor.clone());
+                }
+                b.candidates.retain(|c| c.symbol != younger.symbol);
+            }
+        }
+    }
+}
+
+/// The overlap from which two anchors of one type are one object ([`merge_duplicates`]).
+const DUPLICATE_IOU: f64 = 0.7;
+
+fn iou(a: &BBox, b: &BBox) -> f64 {
+    let w = (a.x2.min(b.x2) - a.x1.max(b.x1)).max(0.0);
+    let h = (a.y2.min(b.y2) - a.y1.max(b.y1)).max(0.0);
+    let inter = w * h;
+    let union = a.width() * a.height() + b.width() * b.height() - inter;
+    if union <= 0.0 { 0.0 } else { inter / union }
 }
 
 /// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen

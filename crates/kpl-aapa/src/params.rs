@@ -100,6 +100,19 @@ pub struct Extensions {
     /// where it stands does not take the percept of its identical twin that moves nearby. Off by
     /// default: it needs every move to be an action (CATER's scenes, not a hand moving freely).
     pub still_stays: bool,
+    /// Two anchors of one type on the same spot (boxes overlapping at an IoU of 0.7 or more, of
+    /// similar size), neither moving nor one attached to the other, are one object anchored twice (a
+    /// detector that reported it twice, or under another class for a few frames): the younger is
+    /// merged into the older. Off by default: objects of one type can share a place (a casing top
+    /// mounted on a casing base); in CATER they cannot.
+    pub merge_duplicates: bool,
+    /// Which of several anchors of a type an action names is decided by where things are: an
+    /// action that puts its moving object over another, single object (`_contain(cone, snitch)`)
+    /// by the anchor of the type nearest that object when it completes (among all of the type, not
+    /// those inside another; if there is none, the container is inferred over the object with
+    /// `infer_hidden`), and a moving object inside a container only with its container (a cone
+    /// inside another is not what `_slide(cone)` moves unless its container moves too).
+    pub identity_by_place: bool,
     /// Seconds for which an established anchor (confidence of at least 0.5) that disappears with
     /// no explanation (not occluded, out of view or attached) keeps its confidence where it was
     /// last seen (H1: objects do not move on their own), before `conf_minus` starts to take it
@@ -141,6 +154,8 @@ impl Default for Extensions {
             infer_hidden_box: [0.42, 0.6],
             average_still: false,
             still_stays: false,
+            merge_duplicates: false,
+            identity_by_place: true,
             keep_lost: 0.0,
         }
     }
@@ -261,13 +276,19 @@ impl Default for Params {
 
 impl Params {
     /// The paper's LA-CATER setting (IV-B) for a 320x240 video, with this implementation's
-    /// extensions, `still_stays` (every move in CATER is an action) and `keep_lost` for the length
-    /// of a CATER video (10 s), and without spatial relations (the benchmark reads only the snitch).
+    /// extensions, `still_stays` (every move in CATER is an action), `merge_duplicates` (no two of
+    /// its objects share a place) and `keep_lost` for the length of a CATER video (10 s), and without
+    /// spatial relations (the benchmark reads only the snitch).
     pub fn cater() -> Params {
         Params {
             image: Some(ImageSize { width: 320.0, height: 240.0 }),
             spatial_relations: false,
-            extensions: Extensions { keep_lost: 10.0, still_stays: true, ..Extensions::default() },
+            extensions: Extensions {
+                keep_lost: 10.0,
+                still_stays: true,
+                merge_duplicates: true,
+                ..Extensions::default()
+            },
             ..Params::default()
         }
     }
@@ -303,6 +324,8 @@ impl Params {
                 infer_hidden_box: Extensions::default().infer_hidden_box,
                 average_still: false,
                 still_stays: false,
+                merge_duplicates: false,
+                identity_by_place: false,
                 keep_lost: 0.0,
             },
             ..Params::cater()

@@ -373,6 +373,8 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             infer_hidden_box: Extensions::default().infer_hidden_box,
             average_still: boolean(ctx, "average_still")?,
             still_stays: boolean(ctx, "still_stays")?,
+            merge_duplicates: boolean(ctx, "merge_duplicates")?,
+            identity_by_place: boolean(ctx, "identity_by_place")?,
             keep_lost: float(ctx, "keep_lost")?,
         },
     })
@@ -540,6 +542,16 @@ fn anchor_entry() -> Entry {
         "still_stays",
         ext.still_stays,
         "extension: an object no action moves takes a percept away from it only at ten times the cost (H1: every move is an action)",
+    ))
+    .param(b(
+        "merge_duplicates",
+        ext.merge_duplicates,
+        "extension: two anchors of one type on the same spot, neither moving, are one object: the younger is merged into the older",
+    ))
+    .param(b(
+        "identity_by_place",
+        ext.identity_by_place,
+        "extension: which of identical objects an action means is decided by where things are (a contain by the object it covers)",
     ))
     .param(f(
         "keep_lost",

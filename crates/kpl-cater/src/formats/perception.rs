@@ -90,13 +90,22 @@ impl PerceptionFile {
         let raw = read_perception_pickle(path)?;
         let classes = opnet_classes().to_vec();
         let mut unknown_class = 0;
+        let mut first_bad = None;
         let mut frames = Vec::with_capacity(raw.len());
-        for detections in raw {
+        for (frame, detections) in raw.into_iter().enumerate() {
             let mut out = Vec::with_capacity(detections.len());
             for (label, bbox) in detections {
                 match u32::try_from(label).ok().filter(|c| (*c as usize) < classes.len()) {
                     Some(class) => out.push(Detection { class, bbox }),
-                    None => unknown_class += 1,
+                    None => {
+                        unknown_class += 1;
+                        first_bad.get_or_insert_with(|| {
+                            format!(
+                                "frame {frame}: label {label} is not one of OPNet's {} class indices",
+                                classes.len()
+                            )
+                        });
+                    }
                 }
             }
             frames.push(out);
@@ -108,16 +117,21 @@ impl PerceptionFile {
             frames,
             dropped: Dropped { unknown_class, bad_box: 0 },
         };
-        file.tidy().map_err(|reason| CaterError::invalid(path, reason))
+        file.tidy_from(first_bad).map_err(|reason| CaterError::invalid(path, reason))
     }
 
     /// Drops (and counts) the detections that name no class of the file or whose box is not a box
     /// (a coordinate that is not a finite number within ±[`super::MAX_COORDINATE`], `x2 < x1` or
     /// `y2 < y1`); refuses the file if more than [`MAX_DROPPED_SHARE`] of its detections go.
-    pub fn tidy(mut self) -> Result<PerceptionFile, String> {
+    pub fn tidy(self) -> Result<PerceptionFile, String> {
+        self.tidy_from(None)
+    }
+
+    /// [`PerceptionFile::tidy`] of a file whose reader already dropped detections (`first_bad`
+    /// says what the first was).
+    fn tidy_from(mut self, mut first_bad: Option<String>) -> Result<PerceptionFile, String> {
         let classes = self.classes.len();
         let mut kept_total = 0usize;
-        let mut first_bad: Option<String> = None;
         for (frame, detections) in self.frames.iter_mut().enumerate() {
             detections.retain(|d| {
                 let [x1, y1, x2, y2] = d.bbox;
