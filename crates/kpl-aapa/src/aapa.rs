@@ -1599,7 +1599,7 @@ fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) 
 /// Extension `infer_hidden`, for containers: a containing action completes over a single object,
 /// but every anchor of the container's type is inside another (or there is none): the container is
 /// an object not seen, now over that object. Its anchor is inferred there, the size of another
-/// anchor of its type if there is one (else twice the object's), at θ_anch.
+/// anchor of its type if there is one (else twice the object's), established (confidence 0.5).
 fn infer_container(
     action: &Action,
     time: Time,
@@ -1621,14 +1621,16 @@ fn infer_container(
         "`{symbol}` ({object_type}) inferred over `{}`: no anchor of its type could have come over it",
         work[other].anchor.symbol
     ));
+    // Established: the action says it is there, as surely as a few sightings would.
+    let confidence = theta_anch.max(ESTABLISHED);
     work.push(Work {
         anchor: Anchor {
-            confidence: theta_anch,
+            confidence,
             ..Anchor::new(symbol.clone(), object_type, bbox, AnchorStatus::Occluded, time)
         },
         aligned: false,
         previous_centre: None,
-        previous_confidence: theta_anch,
+        previous_confidence: confidence,
         removed: false,
         box_before: bbox,
         percept_type: None,
