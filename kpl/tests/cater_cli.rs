@@ -154,3 +154,48 @@ fn bad_videos_are_skipped_and_reported_strict_exits_1_missing_data_exits_2() {
     assert!(String::from_utf8_lossy(&help.stdout).contains("kpl cater eval --data"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A pickle of `n` nested lists as Python's pickle writes it with protocol 2 (`]` n times, `a`
+/// n - 1 times): 4 KB for 2,000 levels.
+fn nested_lists_pickle(n: usize) -> Vec<u8> {
+    let mut p = vec![0x80, 2];
+    p.extend(std::iter::repeat_n(b']', n));
+    p.extend(std::iter::repeat_n(b'a', n - 1));
+    p.push(b'.');
+    p
+}
+
+#[test]
+fn hostile_files_get_a_clear_error_or_a_skip_never_an_abort() {
+    let dir = scratch("hostile");
+    let data = dir.join("data");
+    let output = kpl(&[
+        "cater", "generate", "--videos", "3", "--seed", "4", "--layout", "la-cater", "--out",
+        data.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    // 2,000 nested lists in place of one video's perfect perception: that video is skipped with the
+    // reason, the others are scored.
+    let pickle = data.join("perfect_perception").join("CATER_new_000001.pkl");
+    std::fs::write(&pickle, nested_lists_pickle(2000)).unwrap();
+    let run = |extra: &[&str]| {
+        let mut a = vec!["cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa"];
+        a.extend_from_slice(extra);
+        kpl(&a)
+    };
+    let output = run(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("skipped CATER_new_000001:") && stderr.contains("nested"), "{stderr}");
+    assert!(stderr.contains("evaluated 2 videos (1 skipped)"), "{stderr}");
+    // Files that never end: a size cap, exit 1 (bad data), within a few hundred megabytes read.
+    if Path::new("/dev/zero").exists() {
+        for option in ["--videos", "--params"] {
+            let output = run(&[option, "/dev/zero"]);
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert_eq!(output.status.code(), Some(1), "{option}: {stderr}");
+            assert!(stderr.contains("/dev/zero") && stderr.contains("larger than"), "{option}: {stderr}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
