@@ -1,6 +1,6 @@
 //! The registry `kpl check`, `kpl list` and `kpl run` use: the runtime's built-ins, the standard
 //! processes (`kpl-std`), the anchoring (`kpl-anchor`: link processes, link units, prediction
-//! models), the zenoh sources and sinks, the MCAP recordings (`file.mcap`), and whatever a user's crate adds (`kpl::main_with`).
+//! models), the zenoh sources and sinks, the MCAP recordings (`file.mcap`), the live view (`view.live`), and whatever a user's crate adds (`kpl::main_with`).
 
 use kpl_runtime::Registry;
 
@@ -16,6 +16,7 @@ pub fn registry() -> Registry {
     kpl_std::register(&mut registry);
     kpl_zenoh::register(&mut registry);
     kpl_mcap::register(&mut registry);
+    kpl_view::register(&mut registry);
     kpl_anchor::runtime::register(&mut registry);
     if let Some(extend) = EXTENSION.get() {
         extend(&mut registry);
