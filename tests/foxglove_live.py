@@ -39,7 +39,7 @@ def main(received_path, tracks_path):
         update = SceneUpdate.SceneUpdate.FromString(base64.b64decode(m["data"]))
         # The update replaces what was there before its time (a deletion of everything, stamped
         # with the sample's valid time), then adds the entities, stamped the same.
-        us = lambda t: t.sec * 1_000_000 + t.nsec // 1000
+        us = lambda t: t.seconds * 1_000_000 + t.nanos // 1000
         stamps = {us(d.timestamp) for d in update.deletions} | {us(e.timestamp) for e in update.entities}
         log_us = int(m["log_time"]) // 1000
         if len(stamps) != 1:

@@ -85,7 +85,8 @@ def no_unknown_fields(message, where):
         fail(f"{where}: fields that {message.DESCRIPTOR.full_name} does not have")
     for field, value in message.ListFields():
         if field.type == field.TYPE_MESSAGE:
-            values = value if field.label == field.LABEL_REPEATED else [value]
+            repeated = field.is_repeated if hasattr(field, "is_repeated") else field.label == field.LABEL_REPEATED
+            values = value if repeated else [value]
             for v in values:
                 no_unknown_fields(v, where)
 
@@ -142,7 +143,7 @@ def main(path):
                     fail(f"{channel.topic} at {valid}: {symbol} measured {o.get('measured')} but drawn hollow {hollow}")
                 if not any(t.text.startswith(symbol) for t in entity.texts):
                     fail(f"{channel.topic} at {valid}: {symbol} has no label")
-                if entity.timestamp.sec * 1_000_000 + entity.timestamp.nsec // 1000 != valid:
+                if entity.timestamp.seconds * 1_000_000 + entity.timestamp.nanos // 1000 != valid:
                     fail(f"{channel.topic} at {valid}: entity timestamp {entity.timestamp}")
             report["compared"]["objects"] += len(entities)
         elif schema == "foxglove.PointCloud":

@@ -29,7 +29,11 @@ async function get(path) {
   return response.json();
 }
 
-function seconds(t) { return (t / 1e6).toFixed(1) + ' s'; }
+// Times are shown from the start of what the view holds (a wall-clock run's times are UNIX times).
+function seconds(t) {
+  const start = view.state && view.state.start !== null ? view.state.start : 0;
+  return ((t - start) / 1e6).toFixed(1) + ' s';
+}
 
 function resize() {
   const ratio = window.devicePixelRatio || 1;
@@ -104,7 +108,7 @@ function drawObject(o, colour, level, highlight) {
   }
   if (highlight) {
     ctx.strokeStyle = '#fff'; ctx.lineWidth = 2;
-    ctx.beginPath(); ctx.arc(sx(o.x), sy(o.y), Math.max(l, 14), 0, 2 * Math.PI); ctx.stroke();
+    ctx.beginPath(); ctx.arc(sx(o.x), sy(o.y), Math.max(0.7 * l, 14), 0, 2 * Math.PI); ctx.stroke();
   }
   ctx.fillStyle = colour;
   ctx.font = '11px system-ui, sans-serif';
@@ -154,7 +158,7 @@ function renderLevels() {
     const row = document.createElement('tr');
     row.innerHTML = `<td><input type="checkbox" ${view.hidden.has(level.stream) ? '' : 'checked'}></td>`
       + `<td><span class="swatch" style="background:${level.colour}"></span> ${level.stream}</td>`
-      + [c.objects, c.measured, c.predicted, c.branches, c.symbols, c.reacquired].map((n) => `<td>${n}</td>`).join('');
+      + [c.objects, c.measured, c.predicted, c.branches, c.symbols, c.gaps].map((n) => `<td>${n}</td>`).join('');
     row.querySelector('input').addEventListener('change', (e) => {
       if (e.target.checked) view.hidden.delete(level.stream); else view.hidden.add(level.stream);
       draw();
@@ -165,20 +169,23 @@ function renderLevels() {
   $('points').textContent = points.join(', ');
 }
 
+// Every situation recognised so far; those recognised after the time shown are dimmed.
 function renderSituations() {
   const list = $('situations');
-  const shown = view.situations.filter((s) => view.follow || view.t === null || s.available <= view.t);
-  $('situation-count').textContent = `(${shown.length})`;
+  const shown = view.situations;
+  const t = view.frame ? view.frame.t : null;
+  const known = shown.filter((s) => t === null || s.available <= t).length;
+  $('situation-count').textContent = known === shown.length ? `(${shown.length})` : `(${known} of ${shown.length} by now)`;
   window.kplView.situations = shown.length;
-  if (list.childElementCount === shown.length && !list.dataset.dirty) return;
+  const key = `${shown.length}/${known}/${view.selected}`;
+  if (list.dataset.key === key) return;
+  list.dataset.key = key;
   list.innerHTML = '';
-  delete list.dataset.dirty;
-  shown.forEach((s) => {
-    const index = view.situations.indexOf(s);
+  shown.forEach((s, index) => {
     const item = document.createElement('li');
     item.dataset.start = s.start;
     item.dataset.monitor = s.monitor;
-    item.className = index === view.selected ? 'selected' : '';
+    item.className = (index === view.selected ? 'selected' : '') + (t !== null && s.available > t ? ' later' : '');
     const who = s.objects.map(([k, v]) => `${k}=${v}`).join(' ');
     item.innerHTML = `<b>${s.monitor}</b> ${who} <span class="when">${seconds(s.start)}–${seconds(s.end)}</span>`;
     item.addEventListener('click', () => jump(index));
@@ -191,7 +198,6 @@ async function jump(index) {
   view.follow = false;
   view.playing = false;
   view.t = view.situations[index].start;
-  $('situations').dataset.dirty = '1';
   await showAt(view.t);
 }
 

@@ -119,7 +119,10 @@ pub fn register(registry: &mut Registry) {
                 tracing::info!("view: the page at {}", server.url);
                 Some(server)
             };
-            let wait = ctx.param("wait_for_client").and_then(Value::as_i64).unwrap_or(0);
+            let wait = match ctx.param("wait_for_client") {
+                Some(Value::Duration(us)) => *us,
+                _ => 0,
+            };
             let wait_tenths = if foxglove.is_some() { u64::try_from(wait / 100_000).unwrap_or(0) } else { 0 };
             let channels = roles.iter().filter(|(_, role)| matches!(role, Role::Objects | Role::Points | Role::Verdicts)).count();
             Ok(Box::new(SyncUnit(Live { hub, streams, page, foxglove, wait_tenths, subscribers, channels })))

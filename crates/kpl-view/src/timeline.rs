@@ -62,8 +62,8 @@ pub struct Counters {
     pub branches: u64,
     /// Symbols seen so far (objects this level has made).
     pub symbols: u64,
-    /// Times an object measured again after being only predicted (kept its symbol across a gap).
-    pub reacquired: u64,
+    /// Gaps bridged: an object measured again after being only predicted, its symbol kept.
+    pub gaps: u64,
     /// Samples of the stream so far.
     pub samples: u64,
 }
@@ -88,7 +88,7 @@ struct Track {
     frames: VecDeque<Frame>,
     /// Frames dropped to keep the bound.
     dropped: u64,
-    /// Per symbol: whether it was measured in its last frame (for `reacquired`).
+    /// Per symbol: whether it was measured in its last frame (for `gaps`).
     last_measured: HashMap<String, bool>,
     totals: Counters,
 }
@@ -371,7 +371,7 @@ impl Track {
             match self.last_measured.get_mut(&object.id) {
                 Some(was) => {
                     if object.measured && !*was {
-                        totals.reacquired += 1;
+                        totals.gaps += 1;
                     }
                     *was = object.measured;
                 }
