@@ -55,7 +55,7 @@ fn chromium() -> Option<String> {
     None
 }
 
-fn run_python(python: &str, script: &str, args: &[&Path]) -> Value {
+fn run_python(python: &str, script: &str, args: &[&PathBuf]) -> Value {
     let out = Command::new(python).arg(root().join(script)).args(args).output().unwrap();
     assert!(
         out.status.success(),
