@@ -266,7 +266,7 @@ fn guess_role(value: &Value) -> Option<Role> {
             let record = items.iter().find_map(Value::as_record)?;
             Some(if record.get("measured").is_some() {
                 Role::Objects
-            } else if record.get("pos").and_then(Value::as_vec2).is_some() {
+            } else if record.get("pos").and_then(vec2).is_some() {
                 Role::Points
             } else {
                 Role::Nothing
@@ -353,6 +353,16 @@ fn pose(p: Point, z: f64, angle: f64) -> Pose {
     Pose { position: Some(Vector3 { x: p[0], y: p[1], z }), orientation: Some(yaw(angle)) }
 }
 
+/// A `vec2` value, or a list of two numbers (what untyped JSON gives: a recording read without
+/// its spec).
+pub fn vec2(value: &Value) -> Option<[f64; 2]> {
+    match value {
+        Value::Vec2(v) => Some(*v),
+        Value::List(items) if items.len() == 2 => Some([items[0].as_f64()?, items[1].as_f64()?]),
+        _ => None,
+    }
+}
+
 fn number(record: &Record, name: &str) -> Option<f64> {
     record.get(name).and_then(Value::as_f64).filter(|v| v.is_finite())
 }
@@ -376,8 +386,8 @@ pub struct Drawn {
 impl Drawn {
     /// An object record as drawn (`None` without a position).
     pub fn of(record: &Record, index: usize) -> Option<Drawn> {
-        let pos = record.get("pos").and_then(Value::as_vec2).filter(|p| p.iter().all(|c| c.is_finite()))?;
-        let vel = record.get("vel").and_then(Value::as_vec2).filter(|v| v.iter().all(|c| c.is_finite()));
+        let pos = record.get("pos").and_then(vec2).filter(|p| p.iter().all(|c| c.is_finite()))?;
+        let vel = record.get("vel").and_then(vec2).filter(|v| v.iter().all(|c| c.is_finite()));
         let vel = vel.unwrap_or([0.0, 0.0]);
         let size = number(record, "size").filter(|s| *s > 0.0).unwrap_or(4.5).min(50.0);
         let speed = vel[0].hypot(vel[1]);
@@ -527,7 +537,7 @@ fn points(sample: &Sample) -> PointCloud {
         _ => &[],
     };
     let mut data = Vec::with_capacity(items.len() * 12);
-    for pos in items.iter().filter_map(|v| v.as_record()?.get("pos")?.as_vec2()) {
+    for pos in items.iter().filter_map(|v| vec2(v.as_record()?.get("pos")?)) {
         for c in [pos[0], pos[1], 0.3] {
             data.extend_from_slice(&(c as f32).to_le_bytes());
         }
@@ -800,5 +810,17 @@ mod tests {
         let cloud = <PointCloud as prost::Message>::decode(&out[0].data[..]).unwrap();
         assert_eq!(cloud.point_stride, 12);
         assert_eq!(&cloud.data[..8], [3.0f32.to_le_bytes(), (-4.0f32).to_le_bytes()].concat());
+    }
+
+    #[test]
+    fn untyped_json_records_are_drawn_as_typed_ones() {
+        // A recording read without its spec: positions are lists of two numbers.
+        let json = serde_json::json!([{"id": "co1", "pos": [1.5, 2.0], "vel": [0.0, 3.0], "size": 4.0, "measured": false}]);
+        let value = Value::from_json_untyped(&json).unwrap();
+        assert_eq!(guess_role(&value), Some(Role::Objects));
+        let Value::List(items) = &value else { panic!("{value:?}") };
+        let drawn = Drawn::of(items[0].as_record().unwrap(), 0).unwrap();
+        assert_eq!((drawn.pos, drawn.vel, drawn.measured), ([1.5, 2.0], [0.0, 3.0], false));
+        assert!((drawn.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-12, "along the velocity");
     }
 }

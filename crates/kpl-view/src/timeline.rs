@@ -10,7 +10,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use kpl_core::{Time, Value};
-use kpl_mcap::foxglove::{Drawn, Role, describe_verdict, level_colour};
+use kpl_mcap::foxglove::{Drawn, Role, describe_verdict, level_colour, vec2};
 use kpl_mcap::scene::{Point, Scene};
 use kpl_runtime::Sample;
 use serde::Serialize;
@@ -223,7 +223,7 @@ impl Timeline {
             }
             Role::Points => {
                 let points: Vec<Point> =
-                    items.iter().filter_map(|v| v.as_record()?.get("pos")?.as_vec2()).collect();
+                    items.iter().filter_map(|v| vec2(v.as_record()?.get("pos")?)).collect();
                 track.totals.samples += 1;
                 track.keep(Frame { valid: sample.valid, content: Content::Points(Arc::new(points)) });
             }
