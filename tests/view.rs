@@ -337,11 +337,14 @@ fn kpl_view_serves_a_recording_with_its_scene() {
     // positions as lists).
     let recorded = lines(&out.join("percepts.jsonl"));
     let mut compared = 0;
-    for line in recorded.iter().filter(|l| l["stream"] == "percepts" || l["stream"] == "tracker.truth").step_by(5) {
+    for line in
+        recorded.iter().filter(|l| l["stream"] == "percepts" || l["stream"] == "tracker.truth").step_by(5)
+    {
         let t = line["valid"].as_i64().unwrap();
         let frame = get(&url, &format!("/api/frame?t={t}"));
         assert_eq!(frame["t"], t);
-        let points = frame["points"].as_array().unwrap().iter().find(|p| p["stream"] == line["stream"]).unwrap();
+        let points =
+            frame["points"].as_array().unwrap().iter().find(|p| p["stream"] == line["stream"]).unwrap();
         assert_eq!(
             points["points"].as_array().unwrap().len(),
             line["value"].as_array().unwrap().len(),

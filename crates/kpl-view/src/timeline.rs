@@ -3,8 +3,9 @@
 //! recording is read into it whole. A frame at time `t` is, per stream, its last sample valid at
 //! or before `t`.
 //!
-//! Memory is bounded: each stream keeps at most [`Timeline::FRAMES`] frames (a live run drops the
-//! oldest and counts them), the situations at most [`Timeline::SITUATIONS`].
+//! Memory is bounded: each stream keeps at most [`Timeline::FRAMES`] frames and
+//! [`Timeline::ITEMS`] objects or points in them (a live run drops the oldest frames and counts
+//! them), the situations at most [`Timeline::SITUATIONS`].
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
@@ -80,12 +81,23 @@ struct Frame {
     content: Content,
 }
 
+impl Frame {
+    fn items(&self) -> usize {
+        match &self.content {
+            Content::Objects(objects, _) => objects.len(),
+            Content::Points(points) => points.len(),
+        }
+    }
+}
+
 #[derive(Debug)]
 struct Track {
     name: String,
     role: Role,
     level: usize,
     frames: VecDeque<Frame>,
+    /// Objects or points in `frames`.
+    items: usize,
     /// Frames dropped to keep the bound.
     dropped: u64,
     /// Per symbol: whether it was measured in its last frame (for `gaps`).
@@ -132,6 +144,8 @@ pub struct TrackId(usize);
 impl Timeline {
     /// Frames a stream keeps at most (50 minutes at 10 Hz).
     pub const FRAMES: usize = 30_000;
+    /// Objects or points a stream keeps at most in its frames (some 250 MB).
+    pub const ITEMS: usize = 2_000_000;
     /// Situations kept at most.
     pub const SITUATIONS: usize = 100_000;
     /// Symbols a level remembers for its counters at most.
@@ -164,6 +178,7 @@ impl Timeline {
             role: Role::Unknown,
             level: 0,
             frames: VecDeque::new(),
+            items: 0,
             dropped: 0,
             last_measured: HashMap::new(),
             totals: Counters::default(),
@@ -356,11 +371,14 @@ fn role_name(role: Role) -> &'static str {
 
 impl Track {
     fn keep(&mut self, frame: Frame) {
-        if self.frames.len() >= Timeline::FRAMES {
-            self.frames.pop_front();
+        self.items += frame.items();
+        self.frames.push_back(frame);
+        while self.frames.len() > Timeline::FRAMES || (self.items > Timeline::ITEMS && self.frames.len() > 1)
+        {
+            let Some(old) = self.frames.pop_front() else { break };
+            self.items -= old.items();
             self.dropped += 1;
         }
-        self.frames.push_back(frame);
     }
 
     /// Counts a frame of objects into the totals, and returns the counters as of this frame.
@@ -459,4 +477,49 @@ pub struct State {
     pub other_verdicts: u64,
     pub dropped_situations: u64,
     pub streams: Vec<StreamState>,
+}
+
+#[cfg(test)]
+mod tests {
+    use kpl_core::Record;
+
+    use super::*;
+
+    fn cars(list: &[(&str, bool)]) -> Value {
+        let items: Vec<Value> = list
+            .iter()
+            .map(|(id, measured)| {
+                Value::Record(Arc::new(Record {
+                    id: Some((*id).into()),
+                    fields: vec![
+                        ("pos".into(), Value::Vec2([1.0, 2.0])),
+                        ("measured".into(), Value::Bool(*measured)),
+                    ],
+                }))
+            })
+            .collect();
+        Value::List(items.into())
+    }
+
+    #[test]
+    fn a_frame_is_each_streams_last_sample_at_or_before_its_time_with_counters_as_of_then() {
+        let mut timeline = Timeline::new(Arc::new(Scene::default()), "t", true);
+        let id = timeline.add_stream("cars", Role::Objects);
+        timeline.push(id, &Sample::new(0, 0, cars(&[("co1", true)])));
+        timeline.push(id, &Sample::new(100, 100, cars(&[("co1", false), ("co2", true)])));
+        timeline.push(id, &Sample::new(200, 200, cars(&[("co1", true), ("co2", true)])));
+        let at = |t| timeline.frame(Some(t)).levels[0].clone();
+        assert_eq!(at(50).valid, Some(0));
+        assert_eq!(at(50).objects.len(), 1);
+        let middle = at(150);
+        assert_eq!((middle.valid, middle.counters.objects, middle.counters.predicted), (Some(100), 2, 1));
+        assert_eq!((middle.counters.symbols, middle.counters.gaps), (2, 0));
+        let last = timeline.frame(None).levels[0].clone();
+        assert_eq!(
+            (last.valid, last.counters.gaps, last.counters.samples),
+            (Some(200), 1, 3),
+            "co1 came back"
+        );
+        assert!(timeline.frame(Some(-1)).levels[0].objects.is_empty(), "nothing before the first sample");
+    }
 }
