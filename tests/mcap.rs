@@ -136,3 +136,108 @@ fn a_traffic_run_recorded_to_mcap_reads_converts_and_replays_like_its_json_lines
     let live: Vec<Value> = streams["onroad_car"].clone();
     assert_eq!(from_mcap, live, "replayed and live");
 }
+
+/// A run killed with -9 while it records (issue 21): the MCAP file it leaves reads up to its last
+/// whole chunk, with `kpl convert` and with the `mcap` Python package alike, and holds what the
+/// JSON lines beside it hold, less at most the last chunk's second.
+#[test]
+fn a_run_killed_while_recording_mcap_leaves_a_file_that_reads_up_to_its_last_chunk() {
+    let dir = common::fresh_dir("mcap", "killed");
+    let mut spec = std::fs::read_to_string(root().join("specs/traffic/bridge.kpl")).unwrap();
+    spec.push_str("sink rec_jsonl = file.jsonl(percepts, onroad_car, path: \"rec.jsonl\")\n");
+    spec.push_str("sink rec_mcap = file.mcap(percepts, onroad_car, path: \"rec.mcap\")\n");
+    let spec_path = dir.join("bridge.kpl");
+    std::fs::write(&spec_path, spec).unwrap();
+    let out = dir.join("out");
+    let mut run = common::kpl_command(&[
+        "run",
+        "--quiet",
+        spec_path.to_str().unwrap(),
+        "--clock",
+        "wall",
+        "--for",
+        "60s",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+    .spawn()
+    .unwrap();
+    // Some seconds of recording (the JSON lines flush as they go), then kill -9.
+    let jsonl = out.join("rec.jsonl");
+    for _ in 0..200 {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+        if std::fs::metadata(&jsonl).map_or(0, |m| m.len()) > 60_000 {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    run.kill().unwrap(); // SIGKILL
+    assert!(!run.wait().unwrap().success());
+    let mcap = out.join("rec.mcap");
+
+    // kpl convert reads what the file holds, and says it was cut short.
+    let back = dir.join("back.jsonl");
+    let converted = kpl(&["convert", mcap.to_str().unwrap(), back.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&converted.stderr);
+    assert_eq!(converted.status.code(), Some(1), "{said}");
+    assert!(said.contains("the file is cut short"), "{said}");
+    let recovered = by_stream(&back);
+    let recorded = by_stream(&jsonl);
+    for (stream, samples) in &recorded {
+        let got = recovered.get(stream).map_or(&[][..], Vec::as_slice);
+        let n = got.len().min(samples.len());
+        assert_eq!(&got[..n], &samples[..n], "{stream}: the same samples, in order");
+        let last = |s: &[Value]| s.last().map_or(0, |l| l["available"].as_i64().unwrap());
+        assert!(
+            last(got) >= last(samples) - 2_000_000,
+            "{stream}: {} of {} recorded samples, the last at {} and {}",
+            got.len(),
+            samples.len(),
+            last(got),
+            last(samples)
+        );
+    }
+    assert!(recovered["percepts"].len() >= 20, "{} percepts", recovered["percepts"].len());
+
+    // The mcap Python package reads the same, linearly, until the file ends.
+    if let Some(python) = python("mcap") {
+        let result = Command::new(&python)
+            .arg(root().join("tests/mcap_reader.py"))
+            .arg("--cut")
+            .arg(&mcap)
+            .output()
+            .unwrap();
+        assert!(result.status.success(), "python:\n{}", String::from_utf8_lossy(&result.stderr));
+        let text = String::from_utf8_lossy(&result.stdout);
+        let mut read: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let end = read.pop().unwrap();
+        assert!(end["end"].as_str().unwrap().starts_with("EndOfFile"), "{end}");
+        let mut by: BTreeMap<String, Vec<Value>> = BTreeMap::new();
+        for mut message in read {
+            let stream = message["stream"].as_str().unwrap().to_string();
+            message.as_object_mut().unwrap().remove("stream");
+            by.entry(stream).or_default().push(message);
+        }
+        let strip = |samples: &Vec<Value>| {
+            samples
+                .iter()
+                .map(|s| {
+                    let mut s = s.clone();
+                    s.as_object_mut().unwrap().remove("stream");
+                    s
+                })
+                .collect::<Vec<_>>()
+        };
+        // The same messages; kpl also decompresses what an unfinished last chunk holds (when the
+        // kill came in the middle of writing one), which the package leaves.
+        let unfinished = said.contains("not finished");
+        for (stream, samples) in &recovered {
+            let python_read = by.get(stream).cloned().unwrap_or_default();
+            let ours = strip(samples);
+            assert_eq!(&ours[..python_read.len().min(ours.len())], &python_read[..], "{stream}");
+            if !unfinished {
+                assert_eq!(python_read.len(), ours.len(), "{stream}");
+            }
+        }
+    }
+}

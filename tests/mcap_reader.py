@@ -6,8 +6,16 @@ checks it against the JSON-lines recording of the same run (tests/mcap.rs runs t
 For every stream: the channel's topic is the stream's name, its messages are JSON described by
 the channel's JSON schema (each message is validated against it), the messages have the samples
 of the JSON lines in the same order, with the same valid and available times (also as MCAP's
-publish and log times, in nanoseconds) and the same values. Prints a JSON report (streams with
-their counts, schema names and time ranges) on standard output; exits 1 on the first difference.
+publish and log times, in nanoseconds) and the same values. Channels written for viewers
+(metadata `kpl.view`: Foxglove's schemas, checked by tests/foxglove_mcap.py) are left out. Prints
+a JSON report (streams with their counts, schema names and time ranges) on standard output; exits
+1 on the first difference.
+
+    python tests/mcap_reader.py --cut RECORDING.mcap
+
+reads a file that a killed run left (no summary, no footer) linearly, as far as it goes: prints
+each message of the streams' channels as a JSON line (`stream`, `valid`, `available`, `value`)
+and, last, `{"end": ...}` with how the reading ended.
 """
 
 import json
@@ -15,7 +23,8 @@ import sys
 from collections import defaultdict
 
 import jsonschema
-from mcap.reader import make_reader
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
 
 
 def fail(message):
@@ -40,6 +49,8 @@ def main(mcap_path, jsonl_path):
         report["library"] = header.library
         summary = reader.get_summary()
         for channel in summary.channels.values():
+            if "kpl.view" in channel.metadata:
+                continue
             schema = summary.schemas[channel.schema_id]
             if channel.message_encoding != "json" or schema.encoding != "jsonschema":
                 fail(f"{channel.topic}: {channel.message_encoding} / {schema.encoding}")
@@ -51,6 +62,8 @@ def main(mcap_path, jsonl_path):
             }
         sequences = defaultdict(int)
         for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if "kpl.view" in channel.metadata:
+                continue
             body = json.loads(message.data)
             errors = list(validators[channel.id].iter_errors(body))
             if errors:
@@ -72,5 +85,23 @@ def main(mcap_path, jsonl_path):
     print(json.dumps(report, sort_keys=True))
 
 
+def cut(mcap_path):
+    end = "the end of the file"
+    with open(mcap_path, "rb") as f:
+        reader = NonSeekingReader(f, validate_crcs=True)
+        try:
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
+                if "kpl.view" in channel.metadata:
+                    continue
+                body = json.loads(message.data)
+                print(json.dumps({"stream": channel.topic, **body}, sort_keys=True))
+        except (McapError, EOFError) as e:
+            end = f"{type(e).__name__}: {e}"
+    print(json.dumps({"end": end}))
+
+
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    if sys.argv[1] == "--cut":
+        cut(sys.argv[2])
+    else:
+        main(sys.argv[1], sys.argv[2])

@@ -61,6 +61,8 @@ enum Command {
     Score(cmd::score::Args),
     /// Draw a recorded run as SVG: roads, percepts, anchored objects, ground truth, situations.
     Plot(cmd::plot::Args),
+    /// Show recordings in the browser: the map, each level's objects, situations, a time slider.
+    View(cmd::view::Args),
     /// Score recognised traffic situations against the true ones of the recorded traffic: precision and recall per kind.
     Situations(cmd::situations::Args),
     /// Sample CATER-style videos and score snitch localisation (LA-CATER layout).
@@ -128,6 +130,7 @@ pub fn main() -> ExitCode {
         Command::Keys(args) => cmd::keys::run(args),
         Command::Score(args) => cmd::score::run(args),
         Command::Plot(args) => cmd::plot::run(args),
+        Command::View(args) => cmd::view::run(args),
         Command::Situations(args) => cmd::situations::run(args),
         Command::Cater(command) => cmd::cater::run(command),
         Command::Mtl(command) => cmd::mtl::run(command),
@@ -141,12 +144,12 @@ pub fn main() -> ExitCode {
 }
 
 /// Logs go to stderr; `RUST_LOG` selects what is shown. By default: KPL's warnings, what the hosts
-/// of a deployment say about each other (who is up, who is awaited), and only the errors of zenoh's
+/// of a deployment say about each other (who is up, who is awaited), where a view is served, and only the errors of zenoh's
 /// own crates (their warnings, such as a scouting delay, are about zenoh's internals; `kpl-zenoh`
 /// reports what a user can act on in its own words).
 fn init_tracing() {
     use tracing_subscriber::EnvFilter;
-    const DEFAULT: &str = "warn,kpl_zenoh::transport=info,zenoh=error,zenoh_transport=error,zenoh_link=error,\
+    const DEFAULT: &str = "warn,kpl_zenoh::transport=info,kpl_view=info,zenoh=error,zenoh_transport=error,zenoh_link=error,\
                            zenoh_link_tcp=error,zenoh_link_tls=error,zenoh_config=error,zenoh_runtime=error";
     let ansi = report::colour();
     let builder = tracing_subscriber::fmt().with_ansi(ansi).with_writer(std::io::stderr);

@@ -12,7 +12,9 @@ use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, Sync
 use kpl_runtime::registry::Registry;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 
+use crate::foxglove::{Role, ViewChannels, ViewId, Views};
 use crate::read::{Event, Reader};
+use crate::scene::Scene;
 use crate::write::{Compression, Recorder, StreamId};
 
 struct Replay {
@@ -59,6 +61,9 @@ struct Record {
     /// Each input's stream name and type, in port order.
     streams: Vec<(String, ValueType)>,
     recorder: Option<(Recorder, Vec<StreamId>)>,
+    /// Foxglove's views of the inputs (`foxglove: true`), a view per input in port order.
+    views: Option<(Views, Vec<ViewId>, ViewChannels)>,
+    messages: Vec<crate::foxglove::ViewMessage>,
 }
 
 impl Record {
@@ -81,9 +86,21 @@ impl Unit for Record {
     fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
         let Trigger::Sample(port) = input.trigger else { return Ok(()) };
         let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
-        let (recorder, ids) = self.recorder()?;
+        self.recorder()?;
+        let Some((recorder, ids)) = self.recorder.as_mut() else { return Ok(()) };
         let Some(id) = ids.get(port) else { return Ok(()) };
-        recorder.write(*id, sample).map_err(|e| ProcessError::failed(e.to_string()))
+        let failed = |e: crate::write::WriteError| ProcessError::failed(e.to_string());
+        recorder.write(*id, sample).map_err(failed)?;
+        if let Some((views, view_ids, channels)) = &mut self.views
+            && let Some(view) = view_ids.get(port)
+        {
+            self.messages.clear();
+            views.messages(*view, sample, &mut self.messages);
+            for message in &self.messages {
+                channels.write(recorder, message).map_err(failed)?;
+            }
+        }
+        Ok(())
     }
 
     fn on_end(&mut self, _out: &mut Emitter) -> Result<(), ProcessError> {
@@ -128,6 +145,12 @@ pub fn register(registry: &mut Registry) {
             ParamType::Choice(Compression::NAMES.iter().map(|n| (*n).to_string()).collect()),
             Value::str("zstd"),
             "how chunks are compressed",
+        ))
+        .param(Param::optional(
+            "foxglove",
+            ParamType::Bool,
+            Value::Bool(true),
+            "also write Foxglove's views of the streams (objects, percepts, situations, roads, occluders, camera) for its 3D panel",
         )),
         |ctx| {
             let path = ctx.output_path(ctx.param("path").and_then(Value::as_str).unwrap_or("out.mcap"));
@@ -138,7 +161,21 @@ pub fn register(registry: &mut Registry) {
                 .unwrap_or(Compression::Zstd);
             let streams =
                 ctx.process.inputs.iter().map(|i| (i.stream.name.clone(), i.stream.ty.clone())).collect();
-            Ok(Box::new(SyncUnit(Record { path, compression, streams, recorder: None })))
+            let views = ctx.param("foxglove").and_then(Value::as_bool).unwrap_or(true).then(|| {
+                let scene = Scene::from_spec(ctx.spec, ctx.spec_dir);
+                for problem in &scene.problems {
+                    ctx.stats.warn(format!("the view's scene: {problem}"));
+                }
+                let mut views = Views::new(std::sync::Arc::new(scene));
+                let ids = ctx
+                    .process
+                    .inputs
+                    .iter()
+                    .map(|i| views.add_stream(&i.stream.name, Role::of_stream(ctx.spec, &i.stream)))
+                    .collect();
+                (views, ids, ViewChannels::default())
+            });
+            Ok(Box::new(SyncUnit(Record { path, compression, streams, recorder: None, views, messages: Vec::new() })))
         },
     );
 }

@@ -8,6 +8,10 @@
 //! - [`read::Reader`]: the messages of a file in file order, filtered by stream before they are
 //!   decoded, typed like a JSON-lines replay.
 //! - [`builtins`]: the `file.mcap` sink and replay source.
+//! - [`foxglove`]: the streams as Foxglove's well-known schemas (objects as scene entities,
+//!   percepts as points, verdicts as logs, the [`scene`]'s roads, occluders and camera), written
+//!   beside each stream's own channel so Foxglove's 3D panel draws a recording as it is.
+//! - [`recover`]: what a file cut short by a killed run still holds.
 //!
 //! A recording converts to JSON lines and back without losing anything: the stream's name is the
 //! channel's topic and the sample is the line's `valid`, `available` and `value`.
@@ -40,7 +44,10 @@
 //! ```
 
 pub mod builtins;
+pub mod foxglove;
 pub mod read;
+pub mod recover;
+pub mod scene;
 pub mod schema;
 pub mod write;
 
@@ -53,3 +60,7 @@ pub const SAMPLE_KEY: &str = "kpl.sample";
 pub const SAMPLE_VERSION: &str = "1";
 /// Channel metadata key holding the stream's KPL type (`list<VisionPercept>`).
 pub const TYPE_KEY: &str = "kpl.type";
+/// Channel metadata key that marks a channel KPL writes for viewers beside a stream's own channel
+/// (Foxglove's schemas, [`crate::foxglove`]); the value is the stream it shows. Readers of
+/// samples skip these channels.
+pub const VIEW_KEY: &str = "kpl.view";

@@ -6,13 +6,19 @@
 //! message's publish time and available time its log time (nanoseconds, truncated to
 //! microseconds). Messages are filtered by their channel's topic before they are decoded, then
 //! decoded with the replaying source's type as a JSON-lines replay decodes a line. A message that
-//! does not decode is malformed (counted, the replay goes on); a file that stops being MCAP (cut
-//! short, not MCAP at all, a record over [`RECORD_LIMIT`]) ends the replay after what came before.
+//! does not decode is malformed (counted, the replay goes on). A file cut short (a killed run) is
+//! read on with [`crate::recover::Walker`]: the messages of its whole chunks and what an
+//! unfinished last chunk holds, then one malformed entry says where and why it ended. A file that
+//! is not MCAP at all, or has a record over [`RECORD_LIMIT`], ends the replay after what came
+//! before, with one malformed entry saying so.
+//!
+//! Channels that KPL writes for viewers (metadata [`crate::VIEW_KEY`]: Foxglove's schemas, see
+//! [`crate::foxglove`]) are skipped: the samples are in the stream's own channel.
 
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kpl_core::{Time, Value, ValueType};
@@ -22,7 +28,8 @@ use mcap::records::{MessageHeader, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use serde::Deserialize;
 
-use crate::SAMPLE_KEY;
+use crate::recover::Walker;
+use crate::{SAMPLE_KEY, VIEW_KEY};
 
 /// The largest record (or chunk) a reader accepts, so a hostile file cannot make it allocate
 /// without bound.
@@ -37,6 +44,8 @@ enum Encoding {
     Json,
     /// An encoding this reader does not decode (`cdr`, `protobuf`, ...).
     Other(String),
+    /// A channel KPL wrote for viewers, beside the stream's own: skipped.
+    View,
 }
 
 #[derive(Debug)]
@@ -65,18 +74,28 @@ pub enum Event {
 
 /// An MCAP file being read.
 pub struct Reader {
-    display: String,
+    path: PathBuf,
     file: File,
     reader: LinearReader,
+    records: Records,
+    done: bool,
+    /// After the regular reader stopped on a file that is not whole: the walk that reads on, the
+    /// messages it still has to pass over (those read already), and why the regular reader stopped.
+    salvage: Option<(Walker, u64, String)>,
+}
+
+/// The channels of a file and the messages read so far: what turns records into events.
+#[derive(Debug)]
+struct Records {
+    display: String,
     channels: HashMap<u16, Channel>,
     /// Messages read so far (kept or not), for locations.
     messages: u64,
-    done: bool,
 }
 
 impl std::fmt::Debug for Reader {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Reader").field("path", &self.display).field("messages", &self.messages).finish()
+        f.debug_struct("Reader").field("records", &self.records).finish()
     }
 }
 
@@ -100,17 +119,13 @@ impl Reader {
             .with_validate_chunk_crcs(true)
             .with_record_length_limit(RECORD_LIMIT);
         Ok(Reader {
-            display: path.display().to_string(),
+            path: path.to_path_buf(),
+            salvage: None,
             file,
             reader: LinearReader::new_with_options(options),
-            channels: HashMap::new(),
-            messages: 0,
+            records: Records { display: path.display().to_string(), channels: HashMap::new(), messages: 0 },
             done: false,
         })
-    }
-
-    fn location(&self) -> String {
-        format!("{}: message {}", self.display, self.messages)
     }
 
     /// The next sample of a stream `filter` keeps, decoded with `ty`, or what was wrong; `None` at
@@ -133,18 +148,27 @@ impl Reader {
     /// copies), or what was wrong; `None` at the end of the file.
     pub fn next_raw(&mut self, filter: &mut StreamFilter) -> Option<RawEvent> {
         while !self.done {
+            if self.salvage.is_some() {
+                return self.next_salvaged(filter);
+            }
             let event = match self.reader.next_event() {
                 None => {
                     self.done = true;
                     return None;
                 }
                 Some(Err(e)) => {
-                    self.done = true;
-                    let location = format!("{}: after message {}", self.display, self.messages);
-                    return Some(RawEvent::Malformed {
-                        location,
-                        error: format!("not readable as MCAP: {e}"),
-                    });
+                    // Read on from the start with the walk, past the messages read already: a
+                    // file cut short keeps what its chunks hold.
+                    match Walker::open(&self.path) {
+                        Ok(walker) => {
+                            self.salvage = Some((walker, self.records.messages, e.to_string()));
+                            continue;
+                        }
+                        Err(_) => {
+                            self.done = true;
+                            return Some(self.records.not_mcap(e.to_string()));
+                        }
+                    }
                 }
                 Some(Ok(event)) => event,
             };
@@ -153,66 +177,122 @@ impl Reader {
                     Ok(read) => self.reader.notify_read(read),
                     Err(e) => {
                         self.done = true;
-                        let location = format!("{}: after message {}", self.display, self.messages);
                         return Some(RawEvent::Malformed {
-                            location,
+                            location: self.records.after(),
                             error: format!("cannot read the file: {e}"),
                         });
                     }
                 },
-                LinearReadEvent::Record { opcode: op::CHANNEL, data } => {
-                    match mcap::parse_record(op::CHANNEL, data) {
-                        Ok(Record::Channel(channel)) => {
-                            let encoding = if channel.metadata.contains_key(SAMPLE_KEY) {
-                                Encoding::Sample
-                            } else if channel.message_encoding == "json" {
-                                Encoding::Json
-                            } else {
-                                Encoding::Other(channel.message_encoding.clone())
-                            };
-                            self.channels
-                                .insert(channel.id, Channel { topic: channel.topic.into(), encoding });
-                        }
-                        Ok(_) | Err(_) => {
-                            let location = format!("{}: after message {}", self.display, self.messages);
-                            return Some(RawEvent::Malformed {
-                                location,
-                                error: "a channel record does not parse".into(),
-                            });
-                        }
+                LinearReadEvent::Record { opcode, data } => {
+                    if let Some(event) = self.records.record(opcode, data, filter) {
+                        return Some(event);
                     }
                 }
-                LinearReadEvent::Record { opcode: op::MESSAGE, data } => {
-                    self.messages += 1;
-                    let (header, data) = match mcap::parse_record(op::MESSAGE, data) {
-                        Ok(Record::Message { header, data }) => (header, data),
-                        Ok(_) | Err(_) => {
-                            let error = "the message record does not parse".to_string();
-                            return Some(RawEvent::Malformed { location: self.location(), error });
-                        }
-                    };
-                    let Some(channel) = self.channels.get(&header.channel_id) else {
-                        let error = format!(
-                            "the message is on channel {}, which the file does not declare before it",
-                            header.channel_id
-                        );
-                        return Some(RawEvent::Malformed { location: self.location(), error });
-                    };
-                    if !filter.keep(&channel.topic) {
-                        continue;
-                    }
-                    let stream = channel.topic.clone();
-                    return Some(match decode(&channel.encoding, &stream, &header, &data) {
-                        Ok((valid, available, value)) => {
-                            RawEvent::Message { stream, valid, available, value, location: self.location() }
-                        }
-                        Err(error) => RawEvent::Malformed { location: self.location(), error },
-                    });
-                }
-                LinearReadEvent::Record { .. } => {}
             }
         }
         None
+    }
+
+    /// The next message of the walk that reads on after the regular reader stopped.
+    fn next_salvaged(&mut self, filter: &mut StreamFilter) -> Option<RawEvent> {
+        loop {
+            let (walker, skip, _) = self.salvage.as_mut()?;
+            let Some(record) = walker.next_record() else {
+                self.done = true;
+                let (walker, _, error) = self.salvage.take()?;
+                let end = walker.end().cloned().unwrap_or_default();
+                if end.reason.is_empty() {
+                    return Some(self.records.not_mcap(error));
+                }
+                let location = self.records.after();
+                let unfinished = match end.from_unfinished_chunks {
+                    0 => String::new(),
+                    n => format!(" ({n} of them from a chunk that was not finished)"),
+                };
+                return Some(RawEvent::Malformed {
+                    location,
+                    error: format!(
+                        "the file is cut short (a run killed while writing it?): {}; {} message(s) read{unfinished}",
+                        end.reason, self.records.messages
+                    ),
+                });
+            };
+            if record.opcode == op::MESSAGE && *skip > 0 {
+                *skip -= 1;
+                continue;
+            }
+            if let Some(event) = self.records.record(record.opcode, &record.body, filter) {
+                return Some(event);
+            }
+        }
+    }
+}
+
+impl Records {
+    fn location(&self) -> String {
+        format!("{}: message {}", self.display, self.messages)
+    }
+
+    fn after(&self) -> String {
+        format!("{}: after message {}", self.display, self.messages)
+    }
+
+    fn not_mcap(&self, error: String) -> RawEvent {
+        RawEvent::Malformed { location: self.after(), error: format!("not readable as MCAP: {error}") }
+    }
+
+    /// What a record means to a replay: a channel is noted, a message of a stream the filter
+    /// keeps is returned.
+    fn record(&mut self, opcode: u8, data: &[u8], filter: &mut StreamFilter) -> Option<RawEvent> {
+        match opcode {
+            op::CHANNEL => match mcap::parse_record(op::CHANNEL, data) {
+                Ok(Record::Channel(channel)) => {
+                    let encoding = if channel.metadata.contains_key(VIEW_KEY) {
+                        Encoding::View
+                    } else if channel.metadata.contains_key(SAMPLE_KEY) {
+                        Encoding::Sample
+                    } else if channel.message_encoding == "json" {
+                        Encoding::Json
+                    } else {
+                        Encoding::Other(channel.message_encoding.clone())
+                    };
+                    self.channels.insert(channel.id, Channel { topic: channel.topic.into(), encoding });
+                    None
+                }
+                Ok(_) | Err(_) => Some(RawEvent::Malformed {
+                    location: self.after(),
+                    error: "a channel record does not parse".into(),
+                }),
+            },
+            op::MESSAGE => {
+                self.messages += 1;
+                let (header, data) = match mcap::parse_record(op::MESSAGE, data) {
+                    Ok(Record::Message { header, data }) => (header, data),
+                    Ok(_) | Err(_) => {
+                        let error = "the message record does not parse".to_string();
+                        return Some(RawEvent::Malformed { location: self.location(), error });
+                    }
+                };
+                let Some(channel) = self.channels.get(&header.channel_id) else {
+                    let error = format!(
+                        "the message is on channel {}, which the file does not declare before it",
+                        header.channel_id
+                    );
+                    return Some(RawEvent::Malformed { location: self.location(), error });
+                };
+                if channel.encoding == Encoding::View || !filter.keep(&channel.topic) {
+                    return None;
+                }
+                let stream = channel.topic.clone();
+                Some(match decode(&channel.encoding, &stream, &header, &data) {
+                    Ok((valid, available, value)) => {
+                        RawEvent::Message { stream, valid, available, value, location: self.location() }
+                    }
+                    Err(error) => RawEvent::Malformed { location: self.location(), error },
+                })
+            }
+            _ => None,
+        }
     }
 }
 
@@ -234,6 +314,7 @@ fn decode(
                 serde_json::from_slice(data).map_err(|e| format!("not a JSON message: {e}"))?;
             Ok((kpl_time(header.publish_time), kpl_time(header.log_time), json))
         }
+        Encoding::View => Err(format!("channel `{topic}` is a view of another stream")),
         Encoding::Other(name) => Err(format!(
             "channel `{topic}` has message encoding `{name}`; file.mcap reads JSON messages (docs/streams.md)"
         )),

@@ -5,6 +5,13 @@
 //! The message's MCAP log time is the sample's available time and its publish time the valid
 //! time, in nanoseconds (tools order and seek by them); times before 0 are written as 0 there,
 //! the message itself keeps them exactly.
+//!
+//! A run can be killed at any moment, so the file on disk is always readable up to its last
+//! whole chunk: a chunk is built in memory and written whole (never a placeholder header patched
+//! afterwards, which a killed writer would leave as a chunk of length `u64::MAX`), and a chunk is
+//! closed and flushed to the file once its messages span [`CHUNK_WINDOW`] of available time (or
+//! reach 1 MiB), so a killed run loses at most that much. `read::Reader` reads such a file, and
+//! recovers what an unfinished chunk holds.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -60,6 +67,10 @@ pub enum WriteError {
     Json { path: String, error: serde_json::Error },
 }
 
+/// The available time a chunk spans at most before it is closed and written to the file: what a
+/// run killed with -9 can lose.
+pub const CHUNK_WINDOW: Time = 1_000_000;
+
 /// A stream's channel in a [`Recorder`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StreamId(usize);
@@ -76,6 +87,8 @@ pub struct Recorder {
     writer: mcap::Writer<BufWriter<File>>,
     channels: Vec<Channel>,
     buffer: Vec<u8>,
+    /// The available time of the open chunk's first message.
+    chunk_start: Option<Time>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -108,11 +121,19 @@ impl Recorder {
             .compression(compression.mcap())
             .library(concat!("kpl ", env!("CARGO_PKG_VERSION")))
             // Compress on the writing thread: a sink must not start threads of its own.
-            .compression_threads(0);
+            .compression_threads(0)
+            // Chunks are built in memory and written whole: a killed run leaves whole chunks.
+            .disable_seeking(true);
         let writer = options
             .create(BufWriter::new(file))
             .map_err(|error| WriteError::Mcap { path: display(), error })?;
-        Ok(Recorder { path: path.to_path_buf(), writer, channels: Vec::new(), buffer: Vec::new() })
+        Ok(Recorder {
+            path: path.to_path_buf(),
+            writer,
+            channels: Vec::new(),
+            buffer: Vec::new(),
+            chunk_start: None,
+        })
     }
 
     fn mcap_error(&self, error: mcap::McapError) -> WriteError {
@@ -140,6 +161,49 @@ impl Recorder {
         Ok(StreamId(self.channels.len() - 1))
     }
 
+    /// Adds a channel of messages given already encoded (the views of [`crate::foxglove`]):
+    /// `topic`, its schema (`name`, `encoding`, `data`), the messages' encoding and the channel's
+    /// metadata.
+    pub fn add_channel(
+        &mut self,
+        topic: &str,
+        schema: (&str, &str, &[u8]),
+        message_encoding: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<StreamId, WriteError> {
+        let (name, encoding, data) = schema;
+        let schema_id = self.writer.add_schema(name, encoding, data).map_err(|e| self.mcap_error(e))?;
+        let id = (0..=u16::MAX)
+            .find(|id| !self.channels.iter().any(|c| c.id == *id))
+            .ok_or_else(|| self.mcap_error(mcap::McapError::TooManyChannels))?;
+        self.writer
+            .add_channel_with_id(id, schema_id, topic, message_encoding, &metadata)
+            .map_err(|e| self.mcap_error(e))?;
+        self.channels.push(Channel { id, sequence: 0 });
+        Ok(StreamId(self.channels.len() - 1))
+    }
+
+    /// Writes one message already encoded on a channel of [`Recorder::add_channel`]; its MCAP log
+    /// and publish times are `log_time` and `publish_time` (microseconds).
+    pub fn write_raw(
+        &mut self,
+        stream: StreamId,
+        log_time: Time,
+        publish_time: Time,
+        data: &[u8],
+    ) -> Result<(), WriteError> {
+        let Some(channel) = self.channels.get_mut(stream.0) else { return Ok(()) };
+        channel.sequence = channel.sequence.wrapping_add(1);
+        let header = MessageHeader {
+            channel_id: channel.id,
+            sequence: channel.sequence,
+            log_time: mcap_time(log_time),
+            publish_time: mcap_time(publish_time),
+        };
+        self.writer.write_to_known_channel(&header, data).map_err(|e| self.mcap_error(e))?;
+        self.after_message(log_time)
+    }
+
     /// Writes one sample of a stream.
     pub fn write(&mut self, stream: StreamId, sample: &Sample) -> Result<(), WriteError> {
         self.write_json(stream, sample.valid, sample.available, sample.value.to_json())
@@ -165,7 +229,18 @@ impl Recorder {
             log_time: mcap_time(available),
             publish_time: mcap_time(valid),
         };
-        self.writer.write_to_known_channel(&header, &self.buffer).map_err(|e| self.mcap_error(e))
+        self.writer.write_to_known_channel(&header, &self.buffer).map_err(|e| self.mcap_error(e))?;
+        self.after_message(available)
+    }
+
+    /// Closes the open chunk (and flushes the file) once it spans [`CHUNK_WINDOW`].
+    fn after_message(&mut self, available: Time) -> Result<(), WriteError> {
+        let start = *self.chunk_start.get_or_insert(available);
+        if available.saturating_sub(start) >= CHUNK_WINDOW {
+            self.chunk_start = None;
+            self.writer.flush().map_err(|e| self.mcap_error(e))?;
+        }
+        Ok(())
     }
 
     /// Writes the rest of the file (the last chunk, the summary and the footer) and flushes it.

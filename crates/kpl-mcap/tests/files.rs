@@ -192,7 +192,8 @@ fn files_that_are_not_whole_mcap_end_the_replay_with_a_message() {
         std::fs::write(&path, &bytes).unwrap();
         let (events, _) = read_all(&path, "", &ValueType::Float);
         let Some(Event::Malformed { location, error }) = events.last() else { panic!("{what}: {events:?}") };
-        assert!(error.starts_with("not readable as MCAP"), "{what}: {error}");
+        let expected = if what == "cut short" { "the file is cut short" } else { "not readable as MCAP" };
+        assert!(error.starts_with(expected), "{what}: {error}");
         assert!(location.contains("after message"), "{what}: {location}");
         let good = events.iter().filter(|e| matches!(e, Event::Sample { .. })).count();
         assert_eq!(good + 1, events.len(), "{what}: one message at the end");
@@ -201,4 +202,104 @@ fn files_that_are_not_whole_mcap_end_the_replay_with_a_message() {
         }
     }
     std::fs::remove_file(&path).ok();
+}
+
+/// The speeds of a file read to its end: the samples, and the last event's error if it was not
+/// a sample.
+fn speeds(path: &std::path::Path) -> (Vec<Sample>, Option<String>) {
+    let (events, _) = read_all(path, "", &ValueType::Float);
+    let mut samples = Vec::new();
+    let mut error = None;
+    for event in events {
+        match event {
+            Event::Sample { sample, .. } => samples.push(sample),
+            Event::Malformed { error: e, .. } => {
+                assert!(error.is_none(), "one malformed entry at most: {e}");
+                error = Some(e);
+            }
+        }
+    }
+    (samples, error)
+}
+
+/// A run killed with -9 stops the writer wherever it is: nothing of its memory reaches the file
+/// (here: the recorder is forgotten, neither finished nor dropped). Every chunk closed before
+/// (chunks span at most a second of available time) is on disk and reads back.
+#[test]
+fn a_recorder_that_never_finishes_leaves_its_closed_chunks_readable() {
+    for compression in [Compression::Zstd, Compression::Lz4, Compression::None] {
+        let path = temp(&format!("killed-{compression:?}"));
+        let mut recorder = Recorder::create(&path, compression).unwrap();
+        let speed = recorder.add_stream("speed", &ValueType::Float).unwrap();
+        // 10 samples a second for 20.05 s: 20 chunks of a second are closed, the last 0.05 s not.
+        let n = 201;
+        for i in 0..n {
+            let t = i * 100_000;
+            recorder.write(speed, &Sample::new(t, t, Value::Float(i as f64))).unwrap();
+        }
+        std::mem::forget(recorder);
+        let (samples, error) = speeds(&path);
+        let error = error.expect("a cut-short file says so");
+        assert!(error.starts_with("the file is cut short"), "{compression:?}: {error}");
+        // The chunk closes with the sample a second after its first: 11 samples in the first
+        // chunk (0 s to 1 s), 10 in each after.
+        assert!(samples.len() >= 190 && samples.len() < n as usize, "{compression:?}: {}", samples.len());
+        for (i, sample) in samples.iter().enumerate() {
+            assert_eq!(sample.value, Value::Float(i as f64), "in order, none lost before the cut");
+        }
+        std::fs::remove_file(&path).ok();
+    }
+}
+
+/// A file whose last chunk was never finished by a writer that seeks back to patch its header
+/// (the `mcap` crate's default, and KPL's before): the chunk's length is still `u64::MAX`. The
+/// reader reads the whole chunks, then decompresses what the unfinished one holds.
+#[test]
+fn an_unfinished_chunk_with_a_placeholder_length_is_recovered() {
+    for compression in [Some(mcap::Compression::Zstd), Some(mcap::Compression::Lz4), None] {
+        let path = temp(&format!("placeholder-{compression:?}"));
+        let file = std::fs::File::create(&path).unwrap();
+        let mut writer = mcap::WriteOptions::new()
+            .compression(compression)
+            .chunk_size(Some(64 * 1024))
+            .create(std::io::BufWriter::with_capacity(1024, file))
+            .unwrap();
+        let recorder_like = |writer: &mut mcap::Writer<_>| {
+            let schema = writer.add_schema("float", "jsonschema", b"{}").unwrap();
+            let meta = BTreeMap::from([(kpl_mcap::SAMPLE_KEY.to_string(), "1".to_string())]);
+            let channel = writer.add_channel(schema, "speed", "json", &meta).unwrap();
+            for i in 0..20_000u64 {
+                let body = format!("{{\"valid\":{i},\"available\":{i},\"value\":{i}.5}}");
+                let header = mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: 0,
+                    log_time: i,
+                    publish_time: i,
+                };
+                writer.write_to_known_channel(&header, body.as_bytes()).unwrap();
+            }
+        };
+        recorder_like(&mut writer);
+        // What the writer wrote reached the file, as an OS keeps what a killed process wrote;
+        // what it held in memory is lost.
+        std::mem::forget(writer);
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(
+            bytes.windows(8).any(|w| w == [0xff; 8]),
+            "{compression:?}: a placeholder length is in the file"
+        );
+        let (samples, error) = speeds(&path);
+        let error = error.unwrap();
+        assert!(error.starts_with("the file is cut short"), "{compression:?}: {error}");
+        // A compressor keeps up to a block in memory; uncompressed, the unfinished chunk's
+        // messages are on disk up to the last kilobyte.
+        if compression.is_none() {
+            assert!(error.contains("from a chunk that was not finished"), "{error}");
+        }
+        assert!(samples.len() > 15_000, "{compression:?}: {} of 20000", samples.len());
+        for (i, sample) in samples.iter().enumerate() {
+            assert_eq!(sample.value, Value::Float(i as f64 + 0.5));
+        }
+        std::fs::remove_file(&path).ok();
+    }
 }

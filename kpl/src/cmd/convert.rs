@@ -1,6 +1,9 @@
 //! `kpl convert`: a recording from JSON lines to MCAP and back, losing nothing (docs/streams.md,
 //! "MCAP files"). The stream of a line is the topic of a channel and the line's `valid`,
-//! `available` and `value` are the message, copied as JSON; order is kept.
+//! `available` and `value` are the message, copied as JSON; order is kept. Going to MCAP, the
+//! streams are also written in Foxglove's schemas for its 3D panel (`kpl_mcap::foxglove`; the
+//! roads, occluders and camera of `--spec`), unless `--no-foxglove`. Going from MCAP, a file cut
+//! short by a killed run gives what its chunks hold (`kpl_mcap::recover`).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -9,14 +12,17 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
-use kpl_core::ValueType;
+use kpl_core::{Value, ValueType};
+use kpl_mcap::foxglove::{Role, ViewChannels, ViewId, Views};
 use kpl_mcap::read::{RawEvent, Reader};
+use kpl_mcap::scene::Scene;
 use kpl_mcap::write::{Compression, Recorder, StreamId};
+use kpl_runtime::Sample;
 use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
 )]
 pub struct Args {
     /// The recording to read (.jsonl or .mcap).
@@ -30,6 +36,9 @@ pub struct Args {
     /// How the MCAP chunks are compressed.
     #[arg(long, default_value = "zstd", value_parser = clap::builder::PossibleValuesParser::new(Compression::NAMES))]
     pub compression: String,
+    /// Only the streams' own channels, not their views in Foxglove's schemas.
+    #[arg(long)]
+    pub no_foxglove: bool,
 }
 
 fn extension(path: &Path) -> &str {
@@ -39,15 +48,22 @@ fn extension(path: &Path) -> &str {
 pub fn run(args: Args) -> ExitCode {
     let result = match (extension(&args.input), extension(&args.output)) {
         ("jsonl", "mcap") => {
-            let types = match &args.spec {
-                Some(spec) => match super::check::load_checked(spec) {
-                    Ok(spec) => stream_types(&spec),
+            let (types, scene) = match &args.spec {
+                Some(path) => match super::check::load_checked(path) {
+                    Ok(spec) => {
+                        let scene = Scene::from_spec(&spec, path.parent().unwrap_or(Path::new("")));
+                        for problem in &scene.problems {
+                            eprintln!("warning: the view's scene: {problem}");
+                        }
+                        (stream_types(&spec), scene)
+                    }
                     Err(code) => return code,
                 },
-                None => BTreeMap::new(),
+                None => (BTreeMap::new(), Scene::default()),
             };
             let compression = Compression::from_name(&args.compression).unwrap_or(Compression::Zstd);
-            to_mcap(&args.input, &args.output, &types, compression)
+            let views = (!args.no_foxglove).then(|| Views::new(std::sync::Arc::new(scene)));
+            to_mcap(&args.input, &args.output, &types, compression, views)
         }
         ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
         (from, to) => {
@@ -73,12 +89,15 @@ pub fn run(args: Args) -> ExitCode {
     }
 }
 
-/// The type of every stream a process of the spec consumes, by the name a recording gives it.
-fn stream_types(spec: &kpl_semantic::hir::Spec) -> BTreeMap<String, ValueType> {
+/// The type and view role of every stream a process of the spec consumes, by the name a
+/// recording gives it.
+fn stream_types(spec: &kpl_semantic::hir::Spec) -> BTreeMap<String, (ValueType, Role)> {
     let mut types = BTreeMap::new();
     for process in &spec.processes {
         for input in &process.inputs {
-            types.entry(input.stream.name.clone()).or_insert_with(|| input.stream.ty.clone());
+            types
+                .entry(input.stream.name.clone())
+                .or_insert_with(|| (input.stream.ty.clone(), Role::of_stream(spec, &input.stream)));
         }
     }
     types
@@ -96,12 +115,15 @@ fn skip(location: &str, error: &str) {
 fn to_mcap(
     input: &Path,
     output: &Path,
-    types: &BTreeMap<String, ValueType>,
+    types: &BTreeMap<String, (ValueType, Role)>,
     compression: Compression,
+    mut views: Option<Views>,
 ) -> Result<Converted, String> {
     let file = File::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
-    let mut streams: BTreeMap<String, StreamId> = BTreeMap::new();
+    let mut streams: BTreeMap<String, (StreamId, Option<ViewId>)> = BTreeMap::new();
+    let mut channels = ViewChannels::default();
+    let mut messages = Vec::new();
     let mut converted = Converted { samples: 0, skipped: 0 };
     for (index, line) in BufReader::new(file).lines().enumerate() {
         let location = format!("{}:{}", input.display(), index + 1);
@@ -117,16 +139,28 @@ fn to_mcap(
                 continue;
             }
         };
-        let id = match streams.get(&line.stream) {
-            Some(id) => *id,
+        let (id, view) = match streams.get(&line.stream) {
+            Some(ids) => *ids,
             None => {
-                let ty = types.get(&line.stream).unwrap_or(&ValueType::Any);
-                let id = recorder.add_stream(&line.stream, ty).map_err(|e| e.to_string())?;
-                streams.insert(line.stream, id);
-                id
+                let (ty, role) = types.get(&line.stream).cloned().unwrap_or((ValueType::Any, Role::Unknown));
+                let id = recorder.add_stream(&line.stream, &ty).map_err(|e| e.to_string())?;
+                let view = views.as_mut().map(|v| v.add_stream(&line.stream, role));
+                streams.insert(line.stream.clone(), (id, view));
+                (id, view)
             }
         };
+        if let (Some(views), Some(view)) = (views.as_mut(), view)
+            && let Ok(value) = Value::from_json_untyped(&line.value)
+        {
+            messages.clear();
+            views.messages(view, &Sample::new(line.valid, line.available, value), &mut messages);
+        } else {
+            messages.clear();
+        }
         recorder.write_json(id, line.valid, line.available, line.value).map_err(|e| e.to_string())?;
+        for message in &messages {
+            channels.write(&mut recorder, message).map_err(|e| e.to_string())?;
+        }
         converted.samples += 1;
     }
     recorder.finish().map_err(|e| e.to_string())?;

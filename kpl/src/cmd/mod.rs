@@ -16,3 +16,4 @@ pub mod plot;
 pub mod run;
 pub mod score;
 pub mod situations;
+pub mod view;

@@ -26,7 +26,7 @@ pub enum ClockArg {
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/ticks.kpl --clock wall --for 5s --out out/run\n  kpl run specs/zenoh/endless.kpl --host producer --clock wall --for 3s   # one host only\n\nOutputs of file sinks go under --out (default out/SPEC); the files written are listed at the end,\nwith what the processes achieved (objects anchored, symbols kept across gaps) and a summary per\nstream (produced, delivered, dropped by reason, policy violations), also written to summary.json\nthere (docs/runtime.md describes it field by field). While it runs, a progress line counts the\nsamples of every stream. Ctrl-C and SIGTERM stop the run alike, cleanly: sinks are flushed,\nthe summary is printed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors,\n3 an input from another host was cut short (its host lost) or nothing arrived from another host,\n130 Ctrl-C, 143 SIGTERM."
+    after_help = "Examples:\n  kpl run specs/traffic/bridge.kpl --for 60s\n  kpl run specs/ok/ticks.kpl --clock wall --for 5s --out out/run\n  kpl run specs/zenoh/endless.kpl --host producer --clock wall --for 3s   # one host only\n  kpl run specs/traffic/sumo_situations.kpl --clock wall --for 5s --view 127.0.0.1:0 --foxglove 127.0.0.1:0   # watch it\n\nOutputs of file sinks go under --out (default out/SPEC); the files written are listed at the end,\nwith what the processes achieved (objects anchored, symbols kept across gaps) and a summary per\nstream (produced, delivered, dropped by reason, policy violations), also written to summary.json\nthere (docs/runtime.md describes it field by field). While it runs, a progress line counts the\nsamples of every stream. Ctrl-C and SIGTERM stop the run alike, cleanly: sinks are flushed,\nthe summary is printed.\nExit status: 0 done, 1 the spec has errors or a process failed, 2 usage or I/O errors,\n3 an input from another host was cut short (its host lost) or nothing arrived from another host,\n130 Ctrl-C, 143 SIGTERM."
 )]
 pub struct Args {
     /// The spec to run.
@@ -65,16 +65,39 @@ pub struct Args {
     /// stdout.
     #[arg(long, value_enum, default_value = "text")]
     pub format: report::OutputFormat,
+    /// Show the run in a browser while it goes: serve the page at HOST:PORT (port 0: any free
+    /// one); the address is printed (docs/view.md).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub view: Option<String>,
+    /// Serve the run to Foxglove while it goes: its WebSocket protocol at HOST:PORT, Foxglove's
+    /// schemas, the run's clock as its time (docs/view.md).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub foxglove: Option<String>,
+    /// With --foxglove: before the first sample, wait this long at most for a client to
+    /// subscribe to every stream (so it misses nothing).
+    #[arg(long, value_parser = parse_duration, requires = "foxglove")]
+    pub foxglove_wait: Option<Time>,
 }
 
 /// A duration as `--for` takes it (`60s`, `1.5min`, `250ms`).
 pub(crate) use kpl_core::parse_duration;
 
 pub fn run(args: Args) -> ExitCode {
-    let spec = match super::check::load_checked(&args.spec) {
+    let mut spec = match super::check::load_checked(&args.spec) {
         Ok(spec) => spec,
         Err(code) => return code,
     };
+    if args.view.is_some() || args.foxglove.is_some() {
+        let options = super::view::LiveOptions {
+            http: args.view.clone(),
+            foxglove: args.foxglove.clone(),
+            wait: args.foxglove_wait,
+        };
+        spec = match super::view::attach(&args.spec, &spec, args.host.as_deref(), &options) {
+            Ok(spec) => spec,
+            Err(code) => return code,
+        };
+    }
 
     if let Some(host) = &args.host
         && let Err(message) = check_host(&spec, host)
