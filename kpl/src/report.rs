@@ -16,13 +16,29 @@ pub struct SourceFile {
 }
 
 impl SourceFile {
-    pub fn read(path: &Path) -> std::io::Result<SourceFile> {
+    /// Reads a spec file (`-`: standard input) of at most [`kpl_syntax::MAX_SOURCE_BYTES`]; a
+    /// larger one (or an endless one such as `/dev/zero`) is read no further than that and becomes
+    /// the diagnostic E0005, with no text.
+    pub fn read(path: &Path) -> Result<SourceFile, kpl_core::read::ReadError> {
+        use kpl_core::read::{ReadError, read_capped, read_file};
+        let limit = kpl_syntax::MAX_SOURCE_BYTES;
         let bytes = if path.as_os_str() == "-" {
-            let mut buf = Vec::new();
-            std::io::Read::read_to_end(&mut std::io::stdin(), &mut buf)?;
-            buf
+            read_capped(std::io::stdin().lock(), limit)
+                .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?
+                .ok_or(ReadError::TooLarge { path: path.to_path_buf(), limit: limit as u64 })
         } else {
-            std::fs::read(path)?
+            read_file(path, limit)
+        };
+        let bytes = match bytes {
+            Ok(bytes) => bytes,
+            Err(ReadError::TooLarge { .. }) => {
+                return Ok(SourceFile {
+                    path: path.to_path_buf(),
+                    text: String::new(),
+                    decode_error: Some(kpl_syntax::diagnostics::file_over_limit(limit)),
+                });
+            }
+            Err(error) => return Err(error),
         };
         Ok(match kpl_syntax::decode_source(&bytes) {
             Ok(text) => SourceFile { path: path.to_path_buf(), text: text.to_string(), decode_error: None },
@@ -85,6 +101,10 @@ pub enum OutputFormat {
     Json,
 }
 
+/// How many diagnostics the text format shows in one run; the rest are counted under them (as
+/// compilers cap their errors). `--format json` has every one.
+pub const MAX_SHOWN: usize = 100;
+
 /// Collects diagnostics across files and prints them in the chosen format.
 pub struct Reporter {
     format: DiagnosticFormat,
@@ -93,11 +113,13 @@ pub struct Reporter {
     first_code: Option<&'static str>,
     pub errors: usize,
     pub warnings: usize,
+    /// Diagnostics counted but not shown (text format, past [`MAX_SHOWN`]).
+    hidden: usize,
 }
 
 impl Reporter {
     pub fn new(format: DiagnosticFormat) -> Reporter {
-        Reporter { format, json: Vec::new(), first_code: None, errors: 0, warnings: 0 }
+        Reporter { format, json: Vec::new(), first_code: None, errors: 0, warnings: 0, hidden: 0 }
     }
 
     pub fn report(&mut self, file: &SourceFile, diagnostics: &[Diagnostic]) {
@@ -111,6 +133,7 @@ impl Reporter {
                 self.warnings += 1;
             }
             match self.format {
+                DiagnosticFormat::Text if self.errors + self.warnings > MAX_SHOWN => self.hidden += 1,
                 DiagnosticFormat::Text => {
                     let mut stderr = std::io::stderr().lock();
                     let _ = write!(stderr, "{}", d.render_styled(&name, &file.text, &index, colour()));
@@ -135,6 +158,15 @@ impl Reporter {
                 let plural =
                     |n: usize, word: &str| if n == 1 { format!("1 {word}") } else { format!("{n} {word}s") };
                 let mut stderr = std::io::stderr().lock();
+                if self.hidden > 0 {
+                    let (hidden, word) =
+                        (self.hidden, if self.hidden == 1 { "diagnostic" } else { "diagnostics" });
+                    let _ = writeln!(
+                        stderr,
+                        "... and {hidden} more {word} not shown (the first {MAX_SHOWN} are; `kpl check --format json` lists \
+                         every one)"
+                    );
+                }
                 let _ = writeln!(
                     stderr,
                     "{}, {}",
@@ -154,6 +186,12 @@ impl Reporter {
 pub fn io_error(path: &Path, err: &std::io::Error) {
     let mut stderr = std::io::stderr().lock();
     let _ = writeln!(stderr, "error: cannot read {}: {err}", path.display());
+}
+
+/// Prints a spec file that could not be read (exit code 2).
+pub fn read_error(err: &kpl_core::read::ReadError) {
+    let mut stderr = std::io::stderr().lock();
+    let _ = writeln!(stderr, "error: {err}");
 }
 
 /// When to colour what goes to the terminal (`--color`).

@@ -2,7 +2,8 @@
 //!
 //! Everything above this crate (syntax, semantic analysis, the MTL engine, the runtime, anchoring)
 //! speaks of time as integer microseconds ([`Time`]) and of data as [`Value`]s whose shape is given
-//! by a [`ValueType`]. This crate has no I/O and no clock.
+//! by a [`ValueType`]. This crate has no clock; its only I/O is [`read`]: reading the files users
+//! give with caps on their size and their lines, which every reader of the workspace shares.
 //!
 //! ```
 //! use kpl_core::{TimeUnit, Value};
@@ -11,6 +12,7 @@
 //! assert_eq!(v.as_vec2(), Some([3.0, 4.0]));
 //! ```
 
+pub mod read;
 pub mod suggest;
 mod time;
 mod value;

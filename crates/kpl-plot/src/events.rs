@@ -21,6 +21,7 @@ use std::io::BufRead;
 use std::path::Path;
 
 use kpl_core::Time;
+use kpl_core::read::{LineError, LineReader, MAX_RECORDING_LINE};
 use serde_json::Value as Json;
 
 use crate::error::PlotError;
@@ -59,14 +60,22 @@ pub struct EventReader {
 }
 
 impl EventReader {
-    /// Reads the events of one recorded file (every line; lines over 64 MiB end it with an error).
+    /// Reads the events of one recorded file (every line; a line longer than
+    /// `kpl_core::read::MAX_RECORDING_LINE` ends it with an error naming the line).
     pub fn read(&mut self, path: &Path, reader: impl BufRead) -> Result<(), PlotError> {
         let io = |source| PlotError::Io { path: path.display().to_string(), source };
-        for (i, line) in reader.lines().enumerate() {
-            let line = line.map_err(io)?;
-            if line.len() > 64 << 20 {
-                return Err(io(std::io::Error::other("a line over 64 MiB: is this a JSON-lines recording?")));
-            }
+        let mut lines = LineReader::new(reader, MAX_RECORDING_LINE);
+        let mut i = 0;
+        loop {
+            let line = match lines.next_line() {
+                Ok(Some(line)) => String::from_utf8_lossy(line),
+                Ok(None) => break,
+                Err(LineError::Io { source, .. }) => return Err(io(source)),
+                Err(error) => {
+                    return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidData, error.to_string())));
+                }
+            };
+            i += 1;
             // Cheap test first: most lines of a recording are no events.
             if !line.contains("\"from\"") && !line.contains("\"start\"") {
                 continue;
@@ -92,7 +101,7 @@ impl EventReader {
                     Err(what) => {
                         self.problems += 1;
                         if self.examples.len() < 8 {
-                            self.examples.push(format!("{}:{}: {what}", path.display(), i + 1));
+                            self.examples.push(format!("{}:{i}: {what}", path.display()));
                         }
                     }
                 }

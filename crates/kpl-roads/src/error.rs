@@ -11,9 +11,10 @@ pub enum NetworkError {
     #[error("cannot write road network {path}: {source}")]
     Write { path: PathBuf, source: std::io::Error },
     #[error(
-        "{path} is {size} bytes (decompressed); road network and occluder files are limited to {limit} bytes"
+        "{path} is larger than {} (decompressed), the limit of road network and occluder files; is it the right file?",
+        kpl_core::read::size_in_words(*limit)
     )]
-    TooLarge { path: PathBuf, size: u64, limit: u64 },
+    TooLarge { path: PathBuf, limit: u64 },
     #[error(
         "{path} is neither a KPL road network (JSON) nor a SUMO network (.net.xml): it starts with {start:?}"
     )]

@@ -1,7 +1,8 @@
 //! Reading road networks and occluder files from disk: gzip is recognised by its magic bytes
 //! (whatever the file is called), the format by its first character (`{`: the project's JSON,
-//! `<`: SUMO's XML). Files are limited to [`MAX_FILE_BYTES`] once decompressed, so a hostile or
-//! mistaken file (a gzip bomb, `/dev/zero`) is refused instead of filling memory.
+//! `<`: SUMO's XML), looked at before the rest is read. Files are limited to [`MAX_FILE_BYTES`]
+//! once decompressed (`kpl_core::read`), so a hostile or mistaken file (a gzip bomb, `/dev/zero`)
+//! is refused instead of filling memory.
 //!
 //! ```no_run
 //! use kpl_roads::RoadNetwork;
@@ -37,22 +38,35 @@ pub fn open(path: &Path) -> Result<Box<dyn BufRead + Send>, std::io::Error> {
     })
 }
 
-/// The whole text of a file (gzipped or not), at most [`MAX_FILE_BYTES`].
+/// The whole text of a file (gzipped or not), at most [`MAX_FILE_BYTES`] (read with
+/// `kpl_core::read`, so memory never grows past the limit).
 pub fn read_text(path: &Path) -> Result<String, NetworkError> {
+    let reader = open(path).map_err(|source| NetworkError::Read { path: path.to_path_buf(), source })?;
+    read_rest(path, reader)
+}
+
+fn read_rest(path: &Path, reader: impl Read) -> Result<String, NetworkError> {
     let read_error = |source| NetworkError::Read { path: path.to_path_buf(), source };
-    let reader = open(path).map_err(read_error)?;
-    let mut bytes = Vec::new();
-    reader.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes).map_err(read_error)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(NetworkError::TooLarge {
-            path: path.to_path_buf(),
-            size: bytes.len() as u64,
-            limit: MAX_FILE_BYTES,
-        });
-    }
+    let bytes = kpl_core::read::read_capped(reader, MAX_FILE_BYTES as usize)
+        .map_err(read_error)?
+        .ok_or_else(|| NetworkError::TooLarge { path: path.to_path_buf(), limit: MAX_FILE_BYTES })?;
     String::from_utf8(bytes).map_err(|e| {
         read_error(std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {e}")))
     })
+}
+
+/// The text of a network or occluder file and what it is. The kind is told from the first bytes
+/// before the rest is read, so a file that is neither (`/dev/zero`, a picture) is refused at once.
+fn read_network_text(path: &Path) -> Result<(Kind, String), NetworkError> {
+    let mut reader = open(path).map_err(|source| NetworkError::Read { path: path.to_path_buf(), source })?;
+    let start =
+        reader.fill_buf().map_err(|source| NetworkError::Read { path: path.to_path_buf(), source })?;
+    let start = String::from_utf8_lossy(&start[..start.len().min(512)]).into_owned();
+    if !start.trim_start_matches('\u{feff}').trim().is_empty() {
+        kind_of(path, &start)?;
+    }
+    let text = read_rest(path, reader)?;
+    Ok((kind_of(path, &text)?, text))
 }
 
 /// What a file's text is, from its first character after white space and a byte order mark.
@@ -77,8 +91,8 @@ fn kind_of(path: &Path, text: &str) -> Result<Kind, NetworkError> {
 impl RoadNetwork {
     /// Reads a network: the project's JSON or a SUMO `.net.xml`, either of them gzipped.
     pub fn load(path: &Path) -> Result<RoadNetwork, NetworkError> {
-        let text = read_text(path)?;
-        match kind_of(path, &text)? {
+        let (kind, text) = read_network_text(path)?;
+        match kind {
             Kind::Json => RoadNetwork::from_json_str(&text),
             Kind::Xml => RoadNetwork::from_sumo_str(&text),
         }
@@ -112,8 +126,8 @@ impl RoadNetwork {
 /// network file) or a SUMO polygon file (`<poly>` elements of an additional file, as
 /// `polyconvert` writes them). Road names refer to `net`'s roads.
 pub fn read_occluders(path: &Path, net: &RoadNetwork) -> Result<Vec<Occluder>, NetworkError> {
-    let text = read_text(path)?;
-    match kind_of(path, &text)? {
+    let (kind, text) = read_network_text(path)?;
+    match kind {
         Kind::Json => {
             let file: OccluderFile = serde_json::from_str(&text)?;
             let mut problems: Vec<NetworkProblem> = Vec::new();

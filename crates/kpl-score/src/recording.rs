@@ -17,14 +17,15 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use kpl_core::Time;
+use kpl_core::read::{LineError, LineReader};
 use serde_json::Value as Json;
 
 use crate::error::{ReadError, SelectError};
 use crate::sequence::Pos;
 use crate::time::seconds;
 
-/// The longest line read.
-pub const MAX_LINE_BYTES: usize = 64 << 20;
+/// The longest line read (`kpl_core::read`'s cap on lines of recordings).
+pub const MAX_LINE_BYTES: usize = kpl_core::read::MAX_RECORDING_LINE;
 /// The deepest folder nesting searched for recordings.
 pub const MAX_DEPTH: usize = 16;
 /// Problems kept as examples (all are counted).
@@ -290,26 +291,25 @@ struct RecordingReader {
 }
 
 impl RecordingReader {
-    fn read(&mut self, path: &Path, mut reader: impl BufRead) -> Result<(), ReadError> {
-        let mut buf = Vec::new();
+    fn read(&mut self, path: &Path, reader: impl BufRead) -> Result<(), ReadError> {
+        let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
         let mut line = 0;
         loop {
-            buf.clear();
-            let n = (&mut reader)
-                .take(MAX_LINE_BYTES as u64 + 1)
-                .read_until(b'\n', &mut buf)
-                .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
-            if n == 0 {
-                return Ok(());
-            }
             line += 1;
-            if buf.len() > MAX_LINE_BYTES {
-                return Err(ReadError::LineTooLong { path: path.to_path_buf(), line });
-            }
-            if buf.iter().all(u8::is_ascii_whitespace) {
+            let bytes = match lines.next_line() {
+                Ok(Some(bytes)) => bytes,
+                Ok(None) => return Ok(()),
+                Err(LineError::TooLong { line, .. }) => {
+                    return Err(ReadError::LineTooLong { path: path.to_path_buf(), line: line as usize });
+                }
+                Err(LineError::Io { source, .. }) => {
+                    return Err(ReadError::Io { path: path.to_path_buf(), source });
+                }
+            };
+            if bytes.iter().all(u8::is_ascii_whitespace) {
                 continue;
             }
-            self.line(path, line, &buf);
+            self.line(path, line, bytes);
         }
     }
 

@@ -324,12 +324,21 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
 /// Reads the recognised situations of recorded JSON lines (`file.jsonl` sinks): every line whose
 /// value is a monitor's verdict record with `verdict: true`, `start` and `end`; its kind is the
 /// stream's name, its objects the record's string fields in the order of their names. Other
-/// lines are skipped; a line that is not JSON is counted in the second result.
+/// lines are skipped; a line that is not JSON is counted in the second result. A line longer than
+/// `kpl_core::read::MAX_RECORDING_LINE` ends reading with an error that names it.
 pub fn read_situations(reader: impl BufRead) -> std::io::Result<(Vec<Situation>, usize)> {
     let mut out = Vec::new();
     let mut bad = 0;
-    for line in reader.lines() {
-        let line = line?;
+    let mut lines = kpl_core::read::LineReader::new(reader, kpl_core::read::MAX_RECORDING_LINE);
+    loop {
+        let line = match lines.next_line() {
+            Ok(Some(line)) => String::from_utf8_lossy(line),
+            Ok(None) => break,
+            Err(kpl_core::read::LineError::Io { source, .. }) => return Err(source),
+            Err(error) => {
+                return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, error.to_string()));
+            }
+        };
         // Cheap test first: a recording's object streams are far larger than its situations.
         if !line.contains("\"verdict\"") {
             continue;

@@ -1,5 +1,8 @@
 //! `kpl check` speed on a generated 10,000-line spec: parse, check, and the two together, with
 //! the lexical pre-scan as the baseline measured in the same run (docs/performance.md).
+//! And on specs with many errors (`many_errors`): N and 4N duplicate definitions or unknown
+//! names, parsed, checked and every diagnostic rendered as text and JSON; linear work makes the
+//! 4N case take 4 times as long, quadratic work 16 times.
 //! Run: `cargo bench -p kpl-semantic --bench check`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -53,5 +56,45 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// `n` definitions of one name: `n - 1` duplicates (E0102), each pointing back at the first.
+fn duplicates(n: usize) -> String {
+    "source t : int = timer(period: 100ms)\n".repeat(n)
+}
+
+/// `n` streams over `n` unknown names (E0101), among `2n` names: each unknown name gets a hint
+/// search over every name.
+fn unknown_names(n: usize) -> String {
+    (0..n).map(|i| format!("source t{i} : int = timer(period: 100ms)\nstream s{i} = u{i}\n")).collect()
+}
+
+/// What `kpl check` does with a file: parse, check, and render every diagnostic as text and as
+/// JSON (the command shows the first 100 as text, every one as JSON).
+fn check_and_render(text: &str, registry: &Registry) -> usize {
+    let parse = kpl_syntax::parse(text);
+    let checked = kpl_semantic::check(&parse.spec, registry);
+    let index = kpl_syntax::LineIndex::new(text);
+    checked
+        .diagnostics
+        .iter()
+        .map(|d| d.render("many.kpl", text, &index).len() + d.to_json("many.kpl", text, &index).line)
+        .sum()
+}
+
+fn many_errors(c: &mut Criterion) {
+    let registry = registry();
+    let mut group = c.benchmark_group("many_errors");
+    group.sample_size(10);
+    for (kind, make) in [("duplicates", duplicates as fn(usize) -> String), ("unknown_names", unknown_names)]
+    {
+        for n in [2_000, 8_000] {
+            let text = make(n);
+            let checked = kpl_semantic::check(&kpl_syntax::parse(&text).spec, &registry);
+            assert!(checked.diagnostics.len() >= n - 1, "{kind}: {}", checked.diagnostics.len());
+            group.bench_function(format!("{kind}/{n}"), |b| b.iter(|| check_and_render(&text, &registry)));
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, many_errors);
 criterion_main!(benches);

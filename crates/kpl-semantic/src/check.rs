@@ -94,7 +94,8 @@ pub fn check_text(text: &str, registry: &Registry) -> Result<hir::Spec, SpecErro
 pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
     let mut checker =
         Checker { registry, diagnostics: Vec::new(), types: TypeTable::default(), names: BTreeMap::new() };
-    let result = checker.run(spec);
+    // Hints look at a bounded number of names in all, so many unknown names stay linear.
+    let result = kpl_core::suggest::with_budget(|| checker.run(spec));
     let mut diagnostics = checker.diagnostics;
     let has_errors = diagnostics.iter().any(Diagnostic::is_error);
     if !has_errors {
@@ -263,7 +264,7 @@ impl<'a> Checker<'a> {
         match types::resolve_type_expr(ty, &mut |n| types.get(n).cloned()) {
             Ok(t) => t,
             Err(types::TypeError::Unknown(id)) => {
-                let names: Vec<&str> = self.types.names().collect();
+                let names = kpl_core::suggest::candidates(self.types.names());
                 self.diagnostics.push(diag::unknown_type(id.span, &id.name, &names));
                 ValueType::Any
             }
@@ -274,7 +275,7 @@ impl<'a> Checker<'a> {
         match self.types.get(&id.name) {
             Some(t) => Some(ValueType::Record(t.clone())),
             None => {
-                let names: Vec<&str> = self.types.names().collect();
+                let names = kpl_core::suggest::candidates(self.types.names());
                 self.diagnostics.push(diag::unknown_type(id.span, &id.name, &names));
                 None
             }
@@ -409,7 +410,7 @@ impl<'a> Checker<'a> {
             self.diagnostics.push(diag::not_a_stream(name.span, &name.name, "a type"));
             return;
         }
-        let candidates: Vec<&str> = self.names.keys().map(String::as_str).collect();
+        let candidates = kpl_core::suggest::candidates(self.names.keys().map(String::as_str));
         self.diagnostics.push(diag::unknown_name(name.span, "stream or process", &name.name, &candidates));
     }
 
@@ -729,7 +730,8 @@ impl<'a> Checker<'a> {
                         self.diagnostics.push(diag::stream_placed(name.span, &name.name))
                     }
                     None => {
-                        let candidates: Vec<&str> = drafts.iter().map(|d| d.name.name.as_str()).collect();
+                        let candidates =
+                            kpl_core::suggest::candidates(drafts.iter().map(|d| d.name.name.as_str()));
                         self.diagnostics.push(diag::unknown_placed(name.span, &name.name, &candidates));
                     }
                 }
@@ -1199,7 +1201,10 @@ impl StreamScope for MonitorScope<'_, '_> {
     }
 
     fn stream_names(&self) -> Vec<String> {
-        self.names.keys().cloned().collect()
+        kpl_core::suggest::candidates(self.names.keys().map(String::as_str))
+            .into_iter()
+            .map(str::to_string)
+            .collect()
     }
 }
 

@@ -161,7 +161,7 @@ impl<'a> FormulaChecker<'a> {
                 let record = match self.types.get(&ty.name) {
                     Some(record) => ValueType::Record(record.clone()),
                     None => {
-                        let names: Vec<&str> = self.types.names().collect();
+                        let names = kpl_core::suggest::candidates(self.types.names());
                         self.diagnostics.push(diag::unknown_type(ty.span, &ty.name, &names));
                         ValueType::Any
                     }

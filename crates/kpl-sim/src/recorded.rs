@@ -13,18 +13,20 @@
 //!   "id": "v1", "x": 3.0, "y": -1.6}`) or CSV with a header naming the columns. Positions are
 //!   the vehicle's centre.
 //!
-//! Times must not decrease. Between two recorded times a vehicle present at both is interpolated
+//! Times must not decrease. A vehicle given twice at one time is a problem: its first entry is kept
+//! and the second skipped. Between two recorded times a vehicle present at both is interpolated
 //! (position linearly, heading along the shorter arc); a vehicle is present from the first time it
 //! is recorded to the last. The recording's first time is the playback's start. A malformed
 //! vehicle or row is skipped and reported ([`Playback::take_problems`]); the playback goes on.
 //! Nothing reads the whole file: it is read as the frames need it.
 
 use std::collections::HashMap;
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kpl_core::Time;
+use kpl_core::read::{BreakGuard, LineError, LineReader, size_in_words};
 use kpl_roads::geom::{self, Point};
 use kpl_roads::{LaneId, RoadNetwork, SnapHint};
 use quick_xml::Reader;
@@ -115,7 +117,7 @@ impl VehicleTypes {
     pub fn read(path: &Path) -> Result<VehicleTypes, RecordingError> {
         let error = |message: String| RecordingError::VehicleTypes { path: path.to_path_buf(), message };
         let reader = kpl_roads::load::open(path).map_err(|e| error(e.to_string()))?;
-        let mut reader = Reader::from_reader(GuardedReader::new(reader));
+        let mut reader = guarded_xml(reader);
         let mut types = VehicleTypes::builtin();
         let mut buf = Vec::new();
         loop {
@@ -160,37 +162,14 @@ impl VehicleTypes {
     }
 }
 
-/// A reader that fails when [`MAX_LINE_BYTES`] pass without a line break or an XML tag, so that
-/// a file of one endless line (`/dev/zero`) is an error instead of a buffer that grows forever.
-struct GuardedReader<R> {
-    inner: R,
-    since_break: usize,
-}
-
-impl<R: BufRead> GuardedReader<R> {
-    fn new(inner: R) -> std::io::BufReader<GuardedReader<R>> {
-        std::io::BufReader::with_capacity(1 << 16, GuardedReader { inner, since_break: 0 })
-    }
-}
-
-impl<R: BufRead> Read for GuardedReader<R> {
-    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(out)?;
-        for &b in &out[..n] {
-            if b == b'\n' || b == b'<' || b == b'>' {
-                self.since_break = 0;
-            } else {
-                self.since_break += 1;
-            }
-        }
-        if self.since_break > MAX_LINE_BYTES {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!("more than {MAX_LINE_BYTES} bytes without a line break or a tag"),
-            ));
-        }
-        Ok(n)
-    }
+/// The XML of a recording or a vehicle type file, read as a stream with at most [`MAX_LINE_BYTES`]
+/// between tags (`kpl_core::read`), so that a file of one endless token (`/dev/zero`, a tag that
+/// never closes) is an error instead of a buffer that grows forever.
+fn guarded_xml<R: BufRead>(inner: R) -> Reader<std::io::BufReader<BreakGuard<R>>> {
+    Reader::from_reader(std::io::BufReader::with_capacity(
+        1 << 16,
+        BreakGuard::new(inner, b"<>", MAX_LINE_BYTES),
+    ))
 }
 
 /// One vehicle at one recorded time.
@@ -230,11 +209,13 @@ fn time_us(seconds: f64) -> Option<Time> {
 
 /// SUMO's FCD output.
 struct FcdReader {
-    reader: Reader<std::io::BufReader<GuardedReader<Box<dyn BufRead + Send>>>>,
+    reader: Reader<std::io::BufReader<BreakGuard<Box<dyn BufRead + Send>>>>,
     buf: Vec<u8>,
     types: VehicleTypes,
     /// Types already reported as unknown.
     unknown_types: std::collections::HashSet<String>,
+    /// The vehicles of the timestep being read, to find one given twice.
+    in_step: std::collections::HashSet<Arc<str>>,
     last_time: Option<Time>,
     done: bool,
 }
@@ -311,6 +292,16 @@ impl FcdReader {
     }
 }
 
+/// A vehicle given a second time at one recorded time (SUMO writes each once; a file merged from
+/// two runs or edited by hand may not): the first is kept, the second skipped and reported.
+fn twice(location: String) -> Problem {
+    Problem {
+        location,
+        error: "the vehicle is already in this timestep; this second entry is skipped (the first is kept)"
+            .to_string(),
+    }
+}
+
 /// A compass angle (degrees clockwise from north) as a heading (radians counter-clockwise from east).
 pub fn compass_to_heading(angle_deg: f64) -> f64 {
     (90.0 - angle_deg).to_radians().rem_euclid(std::f64::consts::TAU)
@@ -351,6 +342,7 @@ impl StepReader for FcdReader {
                         continue;
                     };
                     self.last_time = Some(time);
+                    self.in_step.clear();
                     let step_now = Step { time, vehicles: Vec::new() };
                     if matches!(event, Event::Empty(_)) {
                         return Some(step_now);
@@ -361,7 +353,11 @@ impl StepReader for FcdReader {
                     if let Some((current, time_s)) = &mut step {
                         let time_s = time_s.clone();
                         if let Some(obs) = self.vehicle(e, &time_s, problems) {
-                            current.vehicles.push(obs);
+                            if self.in_step.insert(obs.name.clone()) {
+                                current.vehicles.push(obs);
+                            } else {
+                                problems.push(twice(format!("timestep {time_s}, vehicle {:?}", obs.name)));
+                            }
                         }
                     }
                 }
@@ -412,8 +408,7 @@ struct Row {
 
 /// JSON lines or CSV rows, grouped into steps by time.
 struct RowReader {
-    lines: Box<dyn BufRead + Send>,
-    line_number: usize,
+    lines: LineReader<Box<dyn BufRead + Send>>,
     csv_header: Option<Vec<Column>>,
     reported_columns: std::collections::HashSet<String>,
     pending: Option<Row>,
@@ -422,24 +417,32 @@ struct RowReader {
 }
 
 impl RowReader {
+    fn new(lines: Box<dyn BufRead + Send>) -> RowReader {
+        RowReader {
+            lines: LineReader::new(lines, MAX_LINE_BYTES),
+            csv_header: None,
+            reported_columns: Default::default(),
+            pending: None,
+            last_time: None,
+            done: false,
+        }
+    }
+
+    /// The next line, trimmed; `None` at the end, or after a line too long or a read error (a
+    /// problem: the recording ends there).
     fn read_line(&mut self, problems: &mut Vec<Problem>) -> Option<String> {
-        let mut bytes = Vec::new();
-        let n = (&mut self.lines).take(MAX_LINE_BYTES as u64 + 1).read_until(b'\n', &mut bytes);
-        self.line_number += 1;
-        match n {
-            Ok(0) => None,
-            Ok(_) if bytes.len() > MAX_LINE_BYTES && !bytes.ends_with(b"\n") => {
+        match self.lines.next_line() {
+            Ok(line) => line.map(|bytes| String::from_utf8_lossy(bytes).trim().to_string()),
+            Err(error) => {
+                let what = match &error {
+                    LineError::TooLong { limit, .. } => {
+                        format!("longer than {}", size_in_words(*limit as u64))
+                    }
+                    LineError::Io { source, .. } => source.to_string(),
+                };
                 problems.push(Problem {
-                    location: format!("line {}", self.line_number),
-                    error: format!("longer than {MAX_LINE_BYTES} bytes; the recording ends here"),
-                });
-                None
-            }
-            Ok(_) => Some(String::from_utf8_lossy(&bytes).trim().to_string()),
-            Err(e) => {
-                problems.push(Problem {
-                    location: format!("line {}", self.line_number),
-                    error: format!("{e}; the recording ends here"),
+                    location: format!("line {}", error.line()),
+                    error: format!("{what}; the recording ends here"),
                 });
                 None
             }
@@ -447,7 +450,7 @@ impl RowReader {
     }
 
     fn row(&mut self, line: &str, problems: &mut Vec<Problem>) -> Option<Row> {
-        let location = format!("line {}", self.line_number);
+        let location = format!("line {}", self.lines.number());
         let mut fields: Vec<(Column, String, serde_json::Value)> = Vec::new();
         match &self.csv_header {
             Some(header) => {
@@ -552,7 +555,7 @@ impl RowReader {
             if let Some(row) = self.row(&line, problems) {
                 if self.last_time.is_some_and(|last| row.time < last) {
                     problems.push(Problem {
-                        location: format!("line {}", self.line_number),
+                        location: format!("line {}", self.lines.number()),
                         error: "time goes backwards; rows must be sorted by time. The row is skipped"
                             .to_string(),
                     });
@@ -572,13 +575,18 @@ impl StepReader for RowReader {
             Some(row) => row,
             None => self.next_row(problems)?,
         };
+        let mut in_step = std::collections::HashSet::from([first.obs.name.clone()]);
         let mut step = Step { time: first.time, vehicles: vec![first.obs] };
         while let Some(row) = self.next_row(problems) {
             if row.time != step.time {
                 self.pending = Some(row);
                 break;
             }
-            step.vehicles.push(row.obs);
+            if in_step.insert(row.obs.name.clone()) {
+                step.vehicles.push(row.obs);
+            } else {
+                problems.push(twice(format!("line {}, vehicle {:?}", self.lines.number(), row.obs.name)));
+            }
         }
         Some(step)
     }
@@ -594,34 +602,28 @@ fn open_steps(path: &Path, types: VehicleTypes) -> Result<Box<dyn StepReader>, R
     let first = text.trim_start_matches('\u{feff}').trim_start().chars().next();
     Ok(match first {
         Some('<') => Box::new(FcdReader {
-            reader: Reader::from_reader(GuardedReader::new(reader)),
+            reader: guarded_xml(reader),
             buf: Vec::new(),
             types,
             unknown_types: Default::default(),
+            in_step: Default::default(),
             last_time: None,
             done: false,
         }),
-        Some('{') => Box::new(RowReader {
-            lines: reader,
-            line_number: 0,
-            csv_header: None,
-            reported_columns: Default::default(),
-            pending: None,
-            last_time: None,
-            done: false,
-        }),
+        Some('{') => Box::new(RowReader::new(reader)),
         Some(_) => {
-            let mut rows = RowReader {
-                lines: reader,
-                line_number: 0,
-                csv_header: None,
-                reported_columns: Default::default(),
-                pending: None,
-                last_time: None,
-                done: false,
-            };
+            let mut rows = RowReader::new(reader);
             let mut problems = Vec::new();
             let header = rows.read_line(&mut problems).unwrap_or_default();
+            if let Some(problem) = problems.first() {
+                return Err(RecordingError::Format {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "not SUMO FCD (XML) nor JSON lines, and as CSV its header ({}) is {}",
+                        problem.location, problem.error
+                    ),
+                });
+            }
             let columns: Vec<Column> = header.split(',').map(column_of).collect();
             for needed in [Column::Time, Column::Id, Column::X, Column::Y] {
                 if !columns.contains(&needed) {

@@ -165,11 +165,83 @@ fn rows_are_interpolated_between_recorded_times() {
         .to_string();
     assert!(err.contains("empty"), "{err}");
     assert!(Playback::open(&dir, VehicleTypes::builtin(), net.clone()).is_err(), "a directory");
-    // A file that is one endless line ends with an error, not with memory filling up.
+    // A file that is one endless line ends with an error naming the line, not with memory
+    // filling up.
     if Path::new("/dev/zero").exists() {
         let err =
             Playback::open(Path::new("/dev/zero"), VehicleTypes::builtin(), net).unwrap_err().to_string();
-        assert!(err.contains("lacks a column `time`"), "{err}");
+        assert!(err.contains("its header (line 1) is longer than 1 MiB; the recording ends here"), "{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A vehicle twice at one time is counted as a problem, with where; the first entry is kept and
+/// the second skipped (SUMO writes each vehicle once per timestep; two files pasted together do not).
+#[test]
+fn a_vehicle_twice_in_one_timestep_is_counted_and_the_first_kept() {
+    let dir = temp_dir("twice");
+    let fcd = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fcd-export>
+    <timestep time="0.00">
+        <vehicle id="a" x="0.00" y="0.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="10.00" pos="5.00" lane="e_0"/>
+        <vehicle id="b" x="50.00" y="5.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="0.00" pos="5.00" lane="e_0"/>
+        <vehicle id="a" x="99.00" y="99.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="10.00" pos="5.00" lane="e_0"/>
+    </timestep>
+    <timestep time="1.00">
+        <vehicle id="a" x="10.00" y="0.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="10.00" pos="15.00" lane="e_0"/>
+        <vehicle id="a" x="77.00" y="0.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="10.00" pos="15.00" lane="e_0"/>
+        <vehicle id="a" x="78.00" y="0.00" angle="90.00" type="DEFAULT_VEHTYPE" speed="10.00" pos="15.00" lane="e_0"/>
+    </timestep>
+</fcd-export>
+"#;
+    let jsonl = "{\"time\": 0, \"id\": \"a\", \"x\": 0, \"y\": 0}\n\
+                 {\"time\": 0, \"id\": \"b\", \"x\": 50, \"y\": 5}\n\
+                 {\"time\": 0, \"id\": \"a\", \"x\": 99, \"y\": 99}\n\
+                 {\"time\": 1, \"id\": \"a\", \"x\": 10, \"y\": 0}\n\
+                 {\"time\": 1, \"id\": \"a\", \"x\": 77, \"y\": 0}\n\
+                 {\"time\": 1, \"id\": \"a\", \"x\": 78, \"y\": 0}\n";
+    let csv = "time,id,x,y\n0,a,0,0\n0,b,50,5\n0,a,99,99\n1,a,10,0\n1,a,77,0\n1,a,78,0\n";
+    for (name, text) in [("twice.xml", fcd), ("twice.jsonl", jsonl), ("twice.csv", csv)] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let (steps, problems) = kpl_sim::recorded::read_steps(&path, VehicleTypes::builtin()).unwrap();
+        let ids: Vec<Vec<&str>> =
+            steps.iter().map(|s| s.vehicles.iter().map(|v| &*v.name).collect()).collect();
+        assert_eq!(ids, [vec!["a", "b"], vec!["a"]], "{name}");
+        // The first entries are the ones kept (FCD's x is the front bumper: 2.5 m ahead of the centre).
+        let first_x: Vec<f64> = steps.iter().map(|s| s.vehicles[0].pos[0]).collect();
+        let offset = if name.ends_with(".xml") { -2.5 } else { 0.0 };
+        assert_eq!(first_x, [offset, 10.0 + offset], "{name}");
+        let twice: Vec<&kpl_sim::recorded::Problem> =
+            problems.iter().filter(|p| p.error.contains("already in this timestep")).collect();
+        assert_eq!(twice.len(), 3, "{name}: {problems:?}");
+        assert!(twice.iter().all(|p| p.location.contains("vehicle \"a\"")), "{name}: {twice:?}");
+        assert!(twice[0].error.contains("the first is kept"), "{name}: {twice:?}");
+        if name.ends_with(".xml") {
+            assert!(twice[0].location.starts_with("timestep 0.00"), "{twice:?}");
+        } else {
+            let line = if name.ends_with(".csv") { "line 4" } else { "line 3" };
+            assert!(twice[0].location.starts_with(line), "{name}: {twice:?}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// XML that never closes a tag, and vehicle type files that are not XML, end in an error, not in
+/// memory filling up.
+#[test]
+fn endless_xml_is_an_error() {
+    let dir = temp_dir("endless-xml");
+    let path = dir.join("endless.xml");
+    let mut text = String::from("<fcd-export>\n<timestep time=\"0\">\n<vehicle id=\"");
+    text.push_str(&"\n".repeat((1 << 20) + 10));
+    std::fs::write(&path, &text).unwrap();
+    let (steps, problems) = kpl_sim::recorded::read_steps(&path, VehicleTypes::builtin()).unwrap();
+    assert!(steps.iter().all(|s| s.vehicles.is_empty()), "{steps:?}");
+    assert!(problems.iter().any(|p| p.error.contains("more than 1 MiB without `<` or `>`")), "{problems:?}");
+    if Path::new("/dev/zero").exists() {
+        let err = VehicleTypes::read(Path::new("/dev/zero")).unwrap_err().to_string();
+        assert!(err.contains("more than 1 MiB without `<` or `>`"), "{err}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -345,9 +345,9 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
         "" => ActionRule::defaults(),
         file => {
             let path = ctx.input_path(file);
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| ctx.error(format!("cannot read {}: {e}", path.display())))?;
-            serde_json::from_str::<Vec<ActionRule>>(&text)
+            let text = kpl_core::read::read_file(&path, kpl_core::read::MAX_TEXT_FILE)
+                .map_err(|e| ctx.error(e.to_string()))?;
+            serde_json::from_slice::<Vec<ActionRule>>(&text)
                 .map_err(|e| ctx.error(format!("{}: not a list of action rules: {e}", path.display())))?
         }
     };

@@ -301,15 +301,21 @@ struct Excerpt<'s> {
     /// For a window: the 1-based line it comes from, the byte offset in the file where it
     /// starts and its first column.
     window: Option<(usize, usize, usize)>,
-    line_starts: Vec<usize>,
+    /// Where the excerpt's lines start: the file's [`LineIndex`] (built once per file, not once
+    /// per diagnostic, so that rendering many diagnostics of a large file stays linear).
+    line_starts: std::borrow::Cow<'s, [usize]>,
 }
 
 impl<'s> Excerpt<'s> {
-    fn new(name: &'s str, source: &'s str, index: &LineIndex, line: usize, column: usize) -> Excerpt<'s> {
+    fn new(name: &'s str, source: &'s str, index: &'s LineIndex, line: usize, column: usize) -> Excerpt<'s> {
         let line_text = index.line_text(source, line);
-        if line_text.chars().count() <= LONG_LINE {
-            let line_starts = codespan_reporting::files::line_starts(source).collect();
-            return Excerpt { name, text: source.into(), window: None, line_starts };
+        if line_text.chars().nth(LONG_LINE).is_none() {
+            return Excerpt {
+                name,
+                text: source.into(),
+                window: None,
+                line_starts: index.line_starts.as_slice().into(),
+            };
         }
         let first_col = column.saturating_sub(WINDOW / 2).max(1);
         let line_start = line_text.as_ptr() as usize - source.as_ptr() as usize;
@@ -319,7 +325,7 @@ impl<'s> Excerpt<'s> {
             name,
             text: shown.into(),
             window: Some((line, line_start + skip, first_col)),
-            line_starts: vec![0],
+            line_starts: vec![0].into(),
         }
     }
 

@@ -17,6 +17,17 @@ pub fn file_too_large(len: usize, max: usize) -> Diagnostic {
         .with_hint(format!("spec files may be at most {} MiB; split the spec", max >> 20))
 }
 
+/// A file larger than `max` read from disk or a pipe: read no further than that, so its length is
+/// not known (`/dev/zero` has none).
+pub fn file_over_limit(max: usize) -> Diagnostic {
+    Diagnostic::error(FILE_TOO_LARGE, Span::default(), format!("file is larger than {} MiB", max >> 20))
+        .with_label("not read past this limit")
+        .with_hint(format!(
+            "spec files may be at most {} MiB; is it the right file? Split a larger spec",
+            max >> 20
+        ))
+}
+
 pub fn nesting_too_deep(span: Span, max: usize) -> Diagnostic {
     Diagnostic::error(NESTING, span, format!("brackets nest more than {max} deep"))
         .with_label("too deep")

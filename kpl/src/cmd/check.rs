@@ -10,13 +10,13 @@ use crate::report::{self, DiagnosticFormat, Reporter, SourceFile};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl check specs/traffic/bridge.kpl\n  kpl check specs/ok specs/traffic\n  kpl check --format json specs/warn/unset_attribute.kpl > diagnostics.json\n\nEach diagnostic has a code; `kpl explain CODE` tells more about it.\nExit status: 0 when every spec is valid (warnings allowed), 1 when a spec has errors, 2 for usage or I/O errors."
+    after_help = "Examples:\n  kpl check specs/traffic/bridge.kpl\n  kpl check specs/ok specs/traffic\n  kpl check --format json specs/warn/unset_attribute.kpl > diagnostics.json\n\nEach diagnostic has a code; `kpl explain CODE` tells more about it. As text, the first 100\ndiagnostics are shown and the others counted; --format json has every one.\nExit status: 0 when every spec is valid (warnings allowed), 1 when a spec has errors, 2 for usage or I/O errors."
 )]
 pub struct Args {
     /// Spec files, or directories to search for `.kpl` files (`-` reads standard input).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// How to print diagnostics.
+    /// How to print diagnostics (text: the first 100, and how many more).
     #[arg(long, value_enum, default_value = "text")]
     pub format: DiagnosticFormat,
 }
@@ -40,7 +40,7 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
 /// stop with (1: the spec has errors, 2: it cannot be read).
 pub fn load_checked(path: &Path) -> Result<kpl_semantic::hir::Spec, ExitCode> {
     let file = SourceFile::read(path).map_err(|err| {
-        report::io_error(path, &err);
+        report::read_error(&err);
         ExitCode::from(2)
     })?;
     let (diagnostics, spec) = check_file(&file);
@@ -66,7 +66,7 @@ pub(crate) fn for_each_file(
         match SourceFile::read(path) {
             Ok(file) => each(path, file),
             Err(err) => {
-                report::io_error(path, &err);
+                report::read_error(&err);
                 io_failed = true;
             }
         }

@@ -7,11 +7,12 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
+use kpl_core::read::{LineReader, MAX_RECORDING_LINE};
 use kpl_core::{Value, ValueType};
 use kpl_mcap::foxglove::{Role, ViewChannels, ViewId, Views};
 use kpl_mcap::read::{RawEvent, Reader};
@@ -120,18 +121,43 @@ fn to_mcap(
     mut views: Option<Views>,
 ) -> Result<Converted, String> {
     let file = File::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
+    if file.metadata().is_ok_and(|m| m.is_dir()) {
+        return Err(format!("cannot read {}: it is a directory (give a JSON lines file)", input.display()));
+    }
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
     let mut streams: BTreeMap<String, (StreamId, Option<ViewId>)> = BTreeMap::new();
     let mut channels = ViewChannels::default();
     let mut messages = Vec::new();
     let mut converted = Converted { samples: 0, skipped: 0 };
-    for (index, line) in BufReader::new(file).lines().enumerate() {
-        let location = format!("{}:{}", input.display(), index + 1);
-        let line = line.map_err(|e| format!("cannot read {location}: {e}"))?;
+    let mut lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
+    let mut number = 0u64;
+    loop {
+        number += 1;
+        let location = format!("{}:{number}", input.display());
+        // A line too long (`/dev/zero` has no line break) ends the conversion: the file is not a
+        // recording. What was converted before it is kept in the MCAP file.
+        let line = match lines.next_line() {
+            Ok(Some(line)) => line,
+            Ok(None) => break,
+            Err(error) => {
+                recorder.finish().map_err(|e| e.to_string())?;
+                return Err(format!(
+                    "cannot read {}: {error}; the {} sample(s) before it are in {}",
+                    input.display(),
+                    converted.samples,
+                    output.display()
+                ));
+            }
+        };
+        let Ok(line) = std::str::from_utf8(line) else {
+            skip(&location, "the line is not UTF-8 text");
+            converted.skipped += 1;
+            continue;
+        };
         if line.trim().is_empty() {
             continue;
         }
-        let line = match read_line(&line) {
+        let line = match read_line(line) {
             Ok(line) => line,
             Err(error) => {
                 skip(&location, &error);

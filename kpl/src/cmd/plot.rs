@@ -61,8 +61,8 @@ pub struct Args {
     /// The part of the world to draw, metres: `X0,Y0,X1,Y1` (default: what is drawn, 15 m around).
     #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_view, allow_hyphen_values = true)]
     view: Option<([f64; 2], [f64; 2])>,
-    /// Width of the picture in pixels.
-    #[arg(long, value_name = "PX", default_value_t = 1000.0)]
+    /// Width of the picture in pixels, 100 to 20000.
+    #[arg(long, value_name = "PX", default_value = "1000", value_parser = parse_width)]
     width: f64,
     /// No symbol labels.
     #[arg(long)]
@@ -195,14 +195,38 @@ fn parse_time(text: &str) -> Result<Time, String> {
     Ok(micros.round() as Time)
 }
 
+/// The narrowest and the widest picture drawn, pixels: narrower leaves no room for the legend and
+/// the timeline, wider is more than a browser shows (and `1e9` was once accepted silently).
+const WIDTH_PX: std::ops::RangeInclusive<f64> = 100.0..=20_000.0;
+
+/// A width in pixels within [`WIDTH_PX`].
+fn parse_width(text: &str) -> Result<f64, String> {
+    let width: f64 = text.trim().parse().map_err(|_| format!("`{text}` is not a number of pixels"))?;
+    if !WIDTH_PX.contains(&width) {
+        return Err(format!(
+            "{text} px is out of range: the picture is {} to {} pixels wide",
+            WIDTH_PX.start(),
+            WIDTH_PX.end()
+        ));
+    }
+    Ok(width)
+}
+
+/// The farthest coordinate of a view, metres (SUMO's projected coordinates stay far below).
+const MAX_COORDINATE_M: f64 = 1e8;
+
 /// `X0,Y0,X1,Y1` in metres, with X0 < X1 and Y0 < Y1.
 fn parse_view(text: &str) -> Result<([f64; 2], [f64; 2]), String> {
     let numbers: Result<Vec<f64>, _> = text.split(',').map(|n| n.trim().parse::<f64>()).collect();
     match numbers.as_deref() {
-        Ok(&[x0, y0, x1, y1]) if [x0, y0, x1, y1].iter().all(|v| v.is_finite()) && x0 < x1 && y0 < y1 => {
+        Ok(&[x0, y0, x1, y1])
+            if [x0, y0, x1, y1].iter().all(|v| v.abs() <= MAX_COORDINATE_M) && x0 < x1 && y0 < y1 =>
+        {
             Ok(([x0, y0], [x1, y1]))
         }
-        _ => Err(format!("`{text}` is not X0,Y0,X1,Y1 with X0 < X1 and Y0 < Y1 (metres)")),
+        _ => Err(format!(
+            "`{text}` is not X0,Y0,X1,Y1 with X0 < X1 and Y0 < Y1 (metres, at most {MAX_COORDINATE_M:e} from 0)"
+        )),
     }
 }
 
@@ -220,5 +244,15 @@ mod tests {
         );
         assert_eq!(parse_view("-10,-5,10,5"), Ok(([-10.0, -5.0], [10.0, 5.0])));
         assert!(parse_view("10,0,0,5").is_err() && parse_view("1,2,3").is_err());
+        assert!(parse_view("0,0,1e300,1").is_err() && parse_view("NaN,0,1,1").is_err());
+        assert_eq!(parse_width("1000"), Ok(1000.0));
+        assert_eq!(parse_width("100"), Ok(100.0));
+        for bad in ["0", "-5", "1e9", "99.9", "20001", "NaN", "inf", "wide"] {
+            assert!(parse_width(bad).is_err(), "{bad}");
+        }
+        assert_eq!(
+            parse_width("0").unwrap_err(),
+            "0 px is out of range: the picture is 100 to 20000 pixels wide"
+        );
     }
 }

@@ -39,10 +39,10 @@ pub struct Args {
     #[arg(long = "stream", value_name = "STREAM")]
     streams: Vec<String>,
     /// Gating distance, metres: a true object and a hypothesis farther apart are never matched.
-    #[arg(long, value_name = "METRES", default_value_t = kpl_score::DEFAULT_MAX_DISTANCE)]
+    #[arg(long, value_name = "METRES", default_value_t = kpl_score::DEFAULT_MAX_DISTANCE, value_parser = parse_metres)]
     max_distance: f64,
     /// The distance at which HOTA's similarity reaches zero, metres (default: twice --max-distance).
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", value_parser = parse_metres)]
     hota_zero_distance: Option<f64>,
     /// Leave out states that were only predicted (records with `measured: false`).
     #[arg(long)]
@@ -164,6 +164,21 @@ pub fn run(args: Args) -> ExitCode {
     if scored.report.failed.is_empty() { ExitCode::SUCCESS } else { ExitCode::from(1) }
 }
 
+/// The largest distance option accepted, metres: a gate wider than a country matches anything
+/// with anything, and is a mistake of units.
+const MAX_METRES: f64 = 1e6;
+
+/// A distance in metres: positive, at most [`MAX_METRES`].
+pub(super) fn parse_metres(text: &str) -> Result<f64, String> {
+    let metres: f64 = text.trim().parse().map_err(|_| format!("`{text}` is not a number of metres"))?;
+    if !(metres > 0.0 && metres <= MAX_METRES) {
+        return Err(format!(
+            "{text} m is out of range: a distance is more than 0 and at most {MAX_METRES:e} m"
+        ));
+    }
+    Ok(metres)
+}
+
 /// Writes each stream's files into a folder named after it.
 fn export(dir: &Path, streams: &[ScoredStream]) -> Result<(), String> {
     let mut used = std::collections::HashSet::new();
@@ -189,4 +204,22 @@ fn folder_name(stream: &str) -> String {
         .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' })
         .collect();
     if name.chars().all(|c| c == '.') { name.replace('.', "_") + "_" } else { name }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances_are_positive_and_bounded() {
+        assert_eq!(parse_metres("2.5"), Ok(2.5));
+        assert_eq!(parse_metres("1e6"), Ok(1e6));
+        for bad in ["0", "-1", "1e9", "NaN", "inf", "far"] {
+            assert!(parse_metres(bad).is_err(), "{bad}");
+        }
+        assert_eq!(
+            parse_metres("0").unwrap_err(),
+            "0 m is out of range: a distance is more than 0 and at most 1e6 m"
+        );
+    }
 }

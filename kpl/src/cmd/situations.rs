@@ -54,11 +54,12 @@ pub struct Args {
     #[arg(long, value_name = "STREAM")]
     truth: Option<String>,
     /// Gating distance of the mapping, metres.
-    #[arg(long, value_name = "METRES", default_value_t = kpl_score::DEFAULT_MAX_DISTANCE)]
+    #[arg(long, value_name = "METRES", default_value_t = kpl_score::DEFAULT_MAX_DISTANCE, value_parser = super::score::parse_metres)]
     max_distance: f64,
-    /// How far apart in time a recognised and a true situation may be and still overlap, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
-    slack: f64,
+    /// How far apart in time a recognised and a true situation may be and still overlap, seconds
+    /// (0 to a day).
+    #[arg(long, value_name = "SECONDS", default_value = "2", value_parser = parse_slack)]
+    slack: kpl_core::Time,
     /// How to print the scores.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
@@ -100,9 +101,7 @@ pub fn run(args: Args) -> ExitCode {
 }
 
 fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
-    let slack = (args.slack.is_finite() && args.slack >= 0.0)
-        .then(|| (args.slack * 1e6).round() as kpl_core::Time)
-        .ok_or((2, format!("--slack must be a number of seconds, not {}", args.slack)))?;
+    let slack = args.slack;
     let config = Config::new(args.max_distance).map_err(|e| (2, e.to_string()))?;
     let beside = |name: &str| args.traffic.parent().map_or_else(|| PathBuf::from(name), |dir| dir.join(name));
     let network_path = args.network.clone().unwrap_or_else(|| beside("net.xml.gz"));
@@ -183,6 +182,19 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         return Err((2, format!("standard output: {e}")));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The longest --slack, seconds: a day (a longer one lets any two situations of a recording
+/// overlap, and times near the ends of 64 bits would overflow).
+const MAX_SLACK_S: f64 = 86_400.0;
+
+/// A slack in seconds, from 0 to [`MAX_SLACK_S`], as microseconds.
+fn parse_slack(text: &str) -> Result<kpl_core::Time, String> {
+    let seconds: f64 = text.trim().parse().map_err(|_| format!("`{text}` is not a number of seconds"))?;
+    if !(0.0..=MAX_SLACK_S).contains(&seconds) {
+        return Err(format!("{text} s is out of range: the slack is 0 to {MAX_SLACK_S} s"));
+    }
+    Ok((seconds * 1e6).round() as kpl_core::Time)
 }
 
 /// The traffic's vehicles on the network: road, lane, centre along the lane, the lane's limit
@@ -316,4 +328,19 @@ fn table(scores: &[KindScore], entering: usize, left_out: usize, params: &TruthP
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_slack_is_from_zero_to_a_day() {
+        assert_eq!(parse_slack("2"), Ok(2_000_000));
+        assert_eq!(parse_slack("0"), Ok(0));
+        assert_eq!(parse_slack("0.5"), Ok(500_000));
+        for bad in ["-1", "1e300", "86401", "NaN", "inf", "soon"] {
+            assert!(parse_slack(bad).is_err(), "{bad}");
+        }
+    }
 }

@@ -14,15 +14,17 @@
 //! 64-bit microseconds is malformed, not wrapped).
 //!
 //! Hostile paths are refused or bounded: a directory is refused when the run starts; a line is at
-//! most [`MAX_LINE`] bytes (a longer one, such as `/dev/zero` gives, ends the replay as a failure
-//! of the process, so memory stays bounded); so does a read error; and
+//! most [`MAX_RECORDING_LINE`] bytes (a longer one, such as `/dev/zero` gives, ends the replay as a
+//! failure of the process naming the line, so memory stays bounded; `kpl_core::read`); so does a
+//! read error; and
 //! the replay yields to the run between lines, so a file of nothing but bad lines neither blocks
 //! Ctrl-C nor starves the other processes.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::io::{BufReader, BufWriter, Write};
 use std::path::PathBuf;
 
+use kpl_core::read::{LineReader, MAX_RECORDING_LINE};
 use kpl_core::{Time, Value, ValueType};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 use serde::{Deserialize, Serialize};
@@ -113,60 +115,14 @@ struct Replay {
     clock: ClockKind,
 }
 
-/// The longest line replay reads: a longer one is not a sample line (`/dev/zero` has no line
-/// breaks at all), and reading on would hold it all in memory.
-pub const MAX_LINE: usize = 16 << 20;
-
 /// How many lines replay reads without emitting before it lets the other tasks run.
 const LINES_PER_YIELD: usize = 256;
-
-/// One line of a replayed file.
-#[derive(Debug, PartialEq, Eq)]
-pub(crate) enum Line<'a> {
-    Text(&'a str),
-    NotUtf8,
-    /// Longer than the limit: the rest of the file is not read.
-    TooLong,
-    End,
-}
-
-/// Reads lines of at most `limit` bytes, reusing one buffer.
-pub(crate) struct LineReader<R> {
-    reader: R,
-    buffer: Vec<u8>,
-    limit: usize,
-}
-
-impl<R: BufRead> LineReader<R> {
-    pub(crate) fn new(reader: R, limit: usize) -> LineReader<R> {
-        LineReader { reader, buffer: Vec::new(), limit }
-    }
-
-    /// The next line without its line break (`\n` or `\r\n`).
-    pub(crate) fn next_line(&mut self) -> std::io::Result<Line<'_>> {
-        self.buffer.clear();
-        let limit = u64::try_from(self.limit).unwrap_or(u64::MAX).saturating_add(1);
-        let read = (&mut self.reader).take(limit).read_until(b'\n', &mut self.buffer)?;
-        if read == 0 {
-            return Ok(Line::End);
-        }
-        if self.buffer.last() == Some(&b'\n') {
-            self.buffer.pop();
-            if self.buffer.last() == Some(&b'\r') {
-                self.buffer.pop();
-            }
-        } else if self.buffer.len() > self.limit {
-            return Ok(Line::TooLong);
-        }
-        Ok(std::str::from_utf8(&self.buffer).map_or(Line::NotUtf8, Line::Text))
-    }
-}
 
 impl Source for Replay {
     fn run<'a>(&'a mut self, ctx: &'a mut SourceContext) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
             let Some(reader) = self.reader.take() else { return Ok(()) };
-            let mut lines = LineReader::new(reader, MAX_LINE);
+            let mut lines = LineReader::new(reader, MAX_RECORDING_LINE);
             let display = self.path.display().to_string();
             let mut times = ReplayTimes::new(self.clock);
             let mut number = 0usize;
@@ -183,22 +139,15 @@ impl Source for Replay {
                 }
                 let location = format!("{display}:{number}");
                 let line = match lines.next_line() {
-                    Ok(Line::Text(line)) => line,
-                    Ok(Line::End) => break,
-                    Ok(Line::NotUtf8) => {
-                        ctx.malformed(&location, "the line is not UTF-8 text")?;
-                        continue;
+                    Ok(Some(line)) => line,
+                    Ok(None) => break,
+                    Err(error) => {
+                        return Err(ProcessError::failed(format!("cannot replay {display}: {error}")));
                     }
-                    Ok(Line::TooLong) => {
-                        return Err(ProcessError::failed(format!(
-                            "cannot replay {location}: no line break within {} MiB (not a JSON lines file?); \
-                             the rest of the file is not read",
-                            MAX_LINE >> 20
-                        )));
-                    }
-                    Err(e) => {
-                        return Err(ProcessError::failed(format!("cannot read {location}: {e}")));
-                    }
+                };
+                let Ok(line) = std::str::from_utf8(line) else {
+                    ctx.malformed(&location, "the line is not UTF-8 text")?;
+                    continue;
                 };
                 if line.trim().is_empty() {
                     continue;
@@ -389,24 +338,6 @@ mod tests {
             };
             proptest::prop_assert_eq!(encode_line("s", &sample), serde_json::to_string(&tree).unwrap());
         }
-    }
-
-    #[test]
-    fn lines_are_bounded() {
-        let text = "one\r\ntwo\n\nthree-is-long\nlast";
-        let mut lines = LineReader::new(BufReader::new(text.as_bytes()), 8);
-        assert_eq!(lines.next_line().unwrap(), Line::Text("one"));
-        assert_eq!(lines.next_line().unwrap(), Line::Text("two"));
-        assert_eq!(lines.next_line().unwrap(), Line::Text(""));
-        assert_eq!(lines.next_line().unwrap(), Line::TooLong);
-        // An endless stream without line breaks (as /dev/zero) is cut at the limit: the reader
-        // holds at most the limit and one buffer.
-        let mut zeros = LineReader::new(BufReader::new(std::io::repeat(0)), 1 << 20);
-        assert_eq!(zeros.next_line().unwrap(), Line::TooLong);
-        assert!(zeros.buffer.capacity() <= 4 << 20, "{}", zeros.buffer.capacity());
-        let mut invalid = LineReader::new(BufReader::new(&b"\xff\xfe\n"[..]), 8);
-        assert_eq!(invalid.next_line().unwrap(), Line::NotUtf8);
-        assert_eq!(invalid.next_line().unwrap(), Line::End);
     }
 
     #[test]
