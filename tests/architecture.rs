@@ -76,7 +76,7 @@ fn engines_know_nothing_of_the_runtime_tokio_or_zenoh() {
     only("kpl-syntax", &["kpl-core"]);
     only("kpl-semantic", &["kpl-core", "kpl-syntax"]);
     only("kpl-mtl", &["kpl-core", "kpl-syntax"]);
-    only("kpl-roads", &[]);
+    only("kpl-roads", &["kpl-core"]);
     only("kpl-anchor", &["kpl-core", "kpl-syntax", "kpl-semantic", "kpl-mtl", "kpl-roads"]);
     // zenoh in one crate.
     for (krate, deps) in &graph {

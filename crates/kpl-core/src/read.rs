@@ -3,6 +3,9 @@
 //! claims to be (`/dev/zero`, a gzip bomb, a binary file without line breaks) ends in a clear error
 //! naming the file (and the line) instead of filling the memory.
 //!
+//! - [`open`]: a file to read, refusing a directory (which opens on Unix, and then every read
+//!   fails). Every reader of a user's file opens it here (a test of the workspace checks that
+//!   nothing else opens files for reading), and then reads it with one of:
 //! - [`read_capped`] / [`read_file`]: a whole file of at most a given size. A regular file larger
 //!   than the cap is refused before anything is read; a stream (a pipe, `/dev/zero`, a
 //!   decompressor) is read up to one byte past the cap. Memory never grows past the cap (the
@@ -69,6 +72,32 @@ impl ReadError {
     }
 }
 
+impl From<ReadError> for std::io::Error {
+    /// The error without the path (for callers that name the file themselves).
+    fn from(error: ReadError) -> std::io::Error {
+        match error {
+            ReadError::Io { source, .. } => source,
+            ReadError::Directory { .. } => {
+                std::io::Error::new(std::io::ErrorKind::InvalidInput, "it is a directory")
+            }
+            ReadError::TooLarge { limit, .. } => std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("larger than {} (is it the right file?)", size_in_words(limit)),
+            ),
+        }
+    }
+}
+
+/// Opens the file at `path` for reading; a directory is refused.
+pub fn open(path: &Path) -> Result<std::fs::File, ReadError> {
+    let io = |source| ReadError::Io { path: path.to_path_buf(), source };
+    let file = std::fs::File::open(path).map_err(io)?;
+    if file.metadata().map_err(io)?.is_dir() {
+        return Err(ReadError::Directory { path: path.to_path_buf() });
+    }
+    Ok(file)
+}
+
 /// Everything `reader` gives, if that is at most `limit` bytes (`Ok(None)`: there is more). The
 /// buffer grows by doubling but never past `limit + 1` bytes.
 pub fn read_capped(mut reader: impl Read, limit: usize) -> std::io::Result<Option<Vec<u8>>> {
@@ -105,11 +134,8 @@ fn read_capped_into(
 /// file larger than `limit` is refused without reading it.
 pub fn read_file(path: &Path, limit: usize) -> Result<Vec<u8>, ReadError> {
     let io = |source| ReadError::Io { path: path.to_path_buf(), source };
-    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut file = open(path)?;
     let meta = file.metadata().map_err(io)?;
-    if meta.is_dir() {
-        return Err(ReadError::Directory { path: path.to_path_buf() });
-    }
     let too_large = || ReadError::TooLarge { path: path.to_path_buf(), limit: limit as u64 };
     // A regular file says how long it is; devices and pipes say 0 and are read to the cap.
     let mut out = Vec::new();

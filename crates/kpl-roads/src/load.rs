@@ -10,7 +10,6 @@
 //! println!("{} roads", net.roads().len());
 //! ```
 
-use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
@@ -25,10 +24,7 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 
 /// Opens a file for reading, decompressing it on the fly when it starts with gzip's magic bytes.
 pub fn open(path: &Path) -> Result<Box<dyn BufRead + Send>, std::io::Error> {
-    let file = File::open(path)?;
-    if file.metadata()?.is_dir() {
-        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "it is a directory"));
-    }
+    let file = kpl_core::read::open(path)?;
     let mut reader = BufReader::with_capacity(1 << 16, file);
     let gzipped = reader.fill_buf()?.starts_with(&[0x1f, 0x8b]);
     Ok(if gzipped {

@@ -143,8 +143,8 @@ impl Recording {
         files.retain(|f| seen.insert(std::fs::canonicalize(f).unwrap_or_else(|_| f.clone())));
         let mut reader = RecordingReader::default();
         for file in &files {
-            let f =
-                std::fs::File::open(file).map_err(|source| ReadError::Io { path: file.clone(), source })?;
+            let f = kpl_core::read::open(file)
+                .map_err(|e| ReadError::Io { path: file.clone(), source: e.into() })?;
             reader.read(file, BufReader::new(f))?;
         }
         Ok(reader.finish(files))

@@ -374,7 +374,7 @@ pub fn read_situations(reader: impl BufRead) -> std::io::Result<(Vec<Situation>,
 
 /// Reads [`read_situations`] from a file (gzipped or not is not detected: plain JSON lines).
 pub fn read_situations_file(path: &Path) -> std::io::Result<(Vec<Situation>, usize)> {
-    read_situations(std::io::BufReader::new(std::fs::File::open(path)?))
+    read_situations(std::io::BufReader::new(kpl_core::read::open(path)?))
 }
 
 /// The scores of one kind of situation.

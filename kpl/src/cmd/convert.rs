@@ -120,10 +120,7 @@ fn to_mcap(
     compression: Compression,
     mut views: Option<Views>,
 ) -> Result<Converted, String> {
-    let file = File::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
-    if file.metadata().is_ok_and(|m| m.is_dir()) {
-        return Err(format!("cannot read {}: it is a directory (give a JSON lines file)", input.display()));
-    }
+    let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
     let mut streams: BTreeMap<String, (StreamId, Option<ViewId>)> = BTreeMap::new();
     let mut channels = ViewChannels::default();

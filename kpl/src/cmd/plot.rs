@@ -109,7 +109,7 @@ fn plot(args: &Args) -> Result<(), (u8, String)> {
     let mut plot = Plot::from_recording(&recording, &options).map_err(|e| (1, e.to_string()))?;
     let mut events = EventReader::default();
     for file in recording.files() {
-        let reader = std::fs::File::open(file).map_err(|e| (2, format!("{}: {e}", file.display())))?;
+        let reader = kpl_core::read::open(file).map_err(|e| (2, e.to_string()))?;
         events.read(file, std::io::BufReader::new(reader)).map_err(|e| (2, e.to_string()))?;
     }
     let events = events.finish();

@@ -240,15 +240,14 @@ pub(super) fn register(registry: &mut Registry) {
         ),
         |ctx| {
             let ReplaySetup { path, filter, ty, clock } = ReplaySetup::from_context(ctx);
-            let file =
-                File::open(&path).map_err(|e| ctx.error(format!("cannot open {}: {e}", path.display())))?;
-            // A directory opens on Unix, and then every read fails.
-            if file.metadata().is_ok_and(|m| m.is_dir()) {
-                return Err(ctx.error(format!(
+            // A directory opens on Unix, and then every read fails: refused here.
+            let file = kpl_core::read::open(&path).map_err(|e| match e {
+                kpl_core::read::ReadError::Directory { .. } => ctx.error(format!(
                     "cannot replay {}: it is a directory (give a JSON lines file)",
                     path.display()
-                )));
-            }
+                )),
+                e => ctx.error(format!("cannot open {}: {}", path.display(), std::io::Error::from(e))),
+            })?;
             Ok(Box::new(Replay { path, reader: Some(BufReader::new(file)), filter, ty, clock }))
         },
     );
