@@ -37,6 +37,8 @@ fn eval_json(data: &Path, model: &str, perception: &str, out: &Path) -> serde_js
         table.contains("Mean IoU ±SEM") && table.contains("Mean L2 ±SEM") && table.contains(model),
         "{table}"
     );
+    // Which perception and which options were used.
+    assert!(table.contains("perception: ") && table.contains("options: "), "{table}");
     serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap()
 }
 
@@ -196,6 +198,42 @@ fn hostile_files_get_a_clear_error_or_a_skip_never_an_abort() {
             assert_eq!(output.status.code(), Some(1), "{option}: {stderr}");
             assert!(stderr.contains("/dev/zero") && stderr.contains("larger than"), "{option}: {stderr}");
         }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn la_caters_perfect_perception_pickles_are_found_and_never_averaged() {
+    // LA-CATER's layout as it comes: `--data` alone finds perfect_perception/, and its exact
+    // boxes are scored exactly on the visible frames (no averaging of boxes that are exact).
+    let dir = scratch("la-cater");
+    let data = dir.join("data");
+    let output = kpl(&[
+        "cater", "generate", "--videos", "4", "--seed", "6", "--layout", "la-cater", "--out", data.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let json = dir.join("perfect.json");
+    let output = kpl(&[
+        "cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa", "--json", json.to_str().unwrap(),
+    ]);
+    let table = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(table.contains("perfect_perception") && table.contains("average_still off for exact boxes (4 videos)"), "{table}");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["iou"]["visible"]["mean"], 100.0, "{}", report["iou"]);
+    assert_eq!(report["noisy_videos"], 0);
+    // Given as --pickles without --perception, the boxes are measured: exact, so not averaged;
+    // the detector's pickles are not exact, so averaged.
+    for (sub, noisy) in [("perfect_perception", 0), ("od_perception", 4)] {
+        let pickles = data.join(sub);
+        let output = kpl(&[
+            "cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa", "--pickles",
+            pickles.to_str().unwrap(), "--json", json.to_str().unwrap(),
+        ]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        assert_eq!(report["noisy_videos"], noisy, "{sub}");
+        assert!(report["perception_source"].as_str().unwrap().contains("measured"), "{sub}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -44,7 +44,10 @@ fn run(aapa: &Aapa, frames: usize, mut scene: impl FnMut(usize) -> (Vec<Percept>
 }
 
 fn cater() -> Aapa {
-    Aapa::new(Params::cater()).unwrap()
+    let mut p = Params::cater();
+    p.extensions.merge_duplicates = false;
+    p.extensions.identity_by_place = false;
+    Aapa::new(p).unwrap()
 }
 
 /// Where the best anchor of a type is (its box centre).
