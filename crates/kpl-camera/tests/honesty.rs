@@ -15,6 +15,8 @@
 //! `cargo test -p kpl-camera --test honesty -- --nocapture` prints the figures docs/camera.md
 //! and docs/anchoring.md report.
 
+#![allow(clippy::unwrap_used, reason = "tests")]
+
 use kpl_camera::{
     Attitude, Camera, Distortion, Georeferencer, Gimbal, GroundEstimate, Intrinsics, Pose, PoseNoise,
 };
