@@ -43,3 +43,5 @@ pub use homography::{Fit, Homography, HomographyError};
 pub use intrinsics::Intrinsics;
 pub use pose::{Attitude, Gimbal, Pose};
 pub use uncertainty::{Georeferencer, GroundEstimate, PoseNoise};
+/// The 2 x 2 matrix of covariances (nalgebra's).
+pub type Matrix2 = nalgebra::Matrix2<f64>;

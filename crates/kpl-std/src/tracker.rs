@@ -109,10 +109,18 @@ macro_rules! FILE_PARAMS {
 
 /// The parameters, with the run's seed mixed in, and the seed of the simulated traffic.
 fn params(ctx: &BuildContext<'_>) -> Result<(Params, u64), kpl_runtime::registry::BuildError> {
+    params_where(ctx, |_| true)
+}
+
+/// [`params`] from the call's parameters whose names `keep` (the camera mode's own are left to it).
+pub(crate) fn params_where(
+    ctx: &BuildContext<'_>,
+    keep: impl Fn(&str) -> bool,
+) -> Result<(Params, u64), kpl_runtime::registry::BuildError> {
     let call = ctx.call().ok_or_else(|| ctx.error("no parameters"))?;
     let spec_dir = ctx.spec_dir.to_path_buf();
     let mut args: Vec<(String, Value)> = Vec::new();
-    for (name, value) in &call.params {
+    for (name, value) in call.params.iter().filter(|(name, _)| keep(name)) {
         match (name.as_str(), value) {
             (FILE_PARAMS!(), Value::Str(s)) if !s.is_empty() => {
                 args.push((name.clone(), Value::str(&spec_dir.join(&**s).to_string_lossy())))
@@ -147,6 +155,23 @@ fn param_type(name: &str) -> ParamType {
     }
 }
 
+/// A simulator parameter as a registry parameter (its type, default and description).
+pub(crate) fn param_from_info(info: &kpl_sim::ParamInfo) -> Param {
+    let ty = param_type(info.ty);
+    let ty = if info.name == "scenario" {
+        ParamType::Choice(vec!["crossing".into(), "bridge".into(), "grid_town".into()])
+    } else if info.name == "flight" {
+        ParamType::Choice(vec!["hover".into(), "circle".into()])
+    } else {
+        ty
+    };
+    let default = serde_json::from_str::<serde_json::Value>(&info.default)
+        .ok()
+        .and_then(|j| Value::from_json_untyped(&j).ok())
+        .unwrap_or_else(|| Value::str(""));
+    Param::optional(info.name, ty, default, info.doc)
+}
+
 pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
     let mut entry = Entry::new(
         EntryKind::Source,
@@ -164,17 +189,7 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
         "ground truth per frame: every vehicle (id, pos, vel, heading, speed, road, lane, node, length, width), `visible`, and `seen_as` the percept that sees it",
     );
     for info in Params::describe() {
-        let ty = param_type(info.ty);
-        let ty = if info.name == "scenario" {
-            ParamType::Choice(vec!["crossing".into(), "bridge".into(), "grid_town".into()])
-        } else {
-            ty
-        };
-        let default = serde_json::from_str::<serde_json::Value>(&info.default)
-            .ok()
-            .and_then(|j| Value::from_json_untyped(&j).ok())
-            .unwrap_or_else(|| Value::str(""));
-        entry = entry.param(Param::optional(info.name, ty, default, info.doc));
+        entry = entry.param(param_from_info(&info));
     }
     registry.add_source(entry, |ctx| {
         let (params, traffic_seed) = params(ctx)?;

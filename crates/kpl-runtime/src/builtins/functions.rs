@@ -35,6 +35,18 @@ pub(super) fn register(registry: &mut Registry) {
         "distance between two positions (or objects' `pos`), or |a - b| of two numbers",
     ));
     registry.add_builtin_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
+    registry.add_builtin_function(Function::new(
+        "iou",
+        vec![Any, Any],
+        Float,
+        "intersection over union of two boxes in pixels ([left, top, width, height], a box, or two objects' `box`)",
+    ));
+    registry.add_builtin_function(Function::new(
+        "box_dist",
+        vec![Any, Any],
+        Float,
+        "distance in pixels between the centres of two boxes (as iou takes them)",
+    ));
 }
 
 #[cfg(test)]
