@@ -135,7 +135,7 @@ impl Report {
             .collect();
         if !unfiltered.is_empty() {
             notes.push(format!(
-                "--measured-only: {} say nothing about which states were measured (no `measured` field), so every \
+                "only measured states are scored, but {} say nothing about which states were measured (no `measured` field), so every \
                  state of theirs was scored",
                 unfiltered.join(", ")
             ));

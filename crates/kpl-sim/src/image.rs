@@ -29,9 +29,10 @@
 //!   objects.
 //! - **Velocity**: the box centre's velocity in pixels per second, the track's smoothed
 //!   difference of centres (a tracker's constant-velocity estimate; 0 at a track's first frame).
-//! - **False positives**: a Poisson number with mean `false_positive_rate / rate_hz` per frame,
-//!   each a car-sized box (4.5 m x 1.8 m x 1.5 m, at a random heading) under a random pixel
-//!   of the image that sees the ground, living a geometric number of frames with mean
+//! - **False positives**: as the world tracker's (`false_positive_rate` over the whole scene,
+//!   `false_positive_on_road` of them on a road lane, the others off the roads anywhere in the
+//!   network's bounds, only those the camera sees kept), each a car-sized cuboid (4.5 m x 1.8 m x
+//!   1.5 m, at a random heading), living a geometric number of frames with mean
 //!   `false_positive_duration_s`.
 
 use std::collections::HashMap;
@@ -124,14 +125,12 @@ const POSE_NOISE: usize = 8;
 /// A car-sized false positive on the ground, metres.
 const FALSE_POSITIVE_SIZE_M: [f64; 3] = [4.5, 1.8, 1.5];
 
-/// Bounded tries to place a false positive on a pixel that sees the ground.
-const FALSE_POSITIVE_TRIES: usize = 10;
+/// Bounded tries to place a false positive where the camera sees it (the world tracker's count).
+const FALSE_POSITIVE_TRIES: usize = 20;
 
 /// Smoothing of a track's pixel velocity: the weight of the newest centre difference.
 const VELOCITY_SMOOTHING: f64 = 0.5;
 
-/// The furthest a false positive is placed from the camera (horizontally), metres.
-const MAX_GROUND_RANGE_M: f64 = 5000.0;
 
 impl CameraParams {
     /// Name, type, default and description of every parameter, in declaration order.
@@ -295,6 +294,7 @@ pub struct SharedSettings {
     pub dropout: f64,
     pub max_gap_frames: u32,
     pub false_positive_rate: f64,
+    pub false_positive_on_road: f64,
     pub false_positive_duration_s: f64,
 }
 
@@ -458,6 +458,7 @@ impl ImageTracker {
     /// and the pose. `elapsed` is the time since the start, `dt_s` since the last frame.
     pub fn observe(
         &mut self,
+        network: &RoadNetwork,
         cars: &[CarState],
         occluders: &Occluders,
         elapsed: Time,
@@ -543,7 +544,7 @@ impl ImageTracker {
             self.tracks.insert(car.id, track);
         }
         self.switch_ids(&mut percepts);
-        self.false_positives_frame(&camera, dt_s, &mut percepts);
+        self.false_positives_frame(network, &camera, dt_s, &mut percepts);
         (ImageObservation { percepts, reported_pose, true_pose, boxes }, visibility)
     }
 
@@ -600,7 +601,13 @@ impl ImageTracker {
         }
     }
 
-    fn false_positives_frame(&mut self, camera: &Camera, dt_s: f64, percepts: &mut Vec<ImagePercept>) {
+    fn false_positives_frame(
+        &mut self,
+        network: &RoadNetwork,
+        camera: &Camera,
+        dt_s: f64,
+        percepts: &mut Vec<ImagePercept>,
+    ) {
         self.false_positives.retain_mut(|fp| {
             fp.frames_left -= 1;
             fp.frames_left > 0
@@ -615,18 +622,29 @@ impl ImageTracker {
         };
         let mean_frames = (self.shared.false_positive_duration_s / dt_s).max(1.0);
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
+        let (lo, hi) = network.bounds();
         for _ in 0..n_new {
+            // As the world tracker places them: on a road lane or off the roads anywhere in the
+            // scene, kept only where the camera sees them.
+            let on_road = self.rng.random::<f64>() < self.shared.false_positive_on_road;
             let mut placed = None;
             for _ in 0..FALSE_POSITIVE_TRIES {
-                let pixel = [self.rng.random_range(0.0..w), self.rng.random_range(0.0..h)];
-                let Ok(g) = camera.ground_point(pixel, 0.0) else { continue };
-                let c = camera.pose().position;
-                if (g[0] - c[0]).hypot(g[1] - c[1]) > MAX_GROUND_RANGE_M {
-                    continue;
-                }
+                let g = if on_road {
+                    let u: f64 = self.rng.random();
+                    match network.road_lane_position_at_fraction(u) {
+                        Some(p) => p.point,
+                        None => break,
+                    }
+                } else {
+                    let p = [self.rng.random_range(lo[0]..=hi[0]), self.rng.random_range(lo[1]..=hi[1])];
+                    if network.on_road(p) {
+                        continue;
+                    }
+                    p
+                };
                 let heading = self.rng.random_range(0.0..std::f64::consts::TAU);
-                if let Some(b) = Self::footprint_box(camera, g, heading, FALSE_POSITIVE_SIZE_M)
-                    .and_then(|b| b.clipped(w, h))
+                if let Some(b) = Self::footprint_box(camera, g, heading, FALSE_POSITIVE_SIZE_M).and_then(|b| b.clipped(w, h))
+                    && camera.sees([g[0], g[1], 0.0])
                 {
                     placed = Some(b);
                     break;

@@ -114,7 +114,7 @@ impl UavTrackerSim {
     /// The camera mode: the same traffic watched by a UAV camera whose image tracker reports
     /// boxes in pixels ([`crate::image`]); `params` gives the traffic, the seed, the rate, the
     /// occluders and what the world tracker shares (`dropout`, `max_gap_frames`,
-    /// `false_positive_rate`, `false_positive_duration_s`).
+    /// `false_positive_rate`, `false_positive_on_road`, `false_positive_duration_s`).
     pub fn with_camera(
         params: &Params,
         camera: &CameraParams,
@@ -126,6 +126,7 @@ impl UavTrackerSim {
             dropout: params.dropout,
             max_gap_frames: params.max_gap_frames,
             false_positive_rate: params.false_positive_rate,
+            false_positive_on_road: params.false_positive_on_road,
             false_positive_duration_s: params.false_positive_duration_s,
         };
         let tracker =
@@ -264,7 +265,7 @@ impl UavTrackerSim {
                 (percepts, visibility, None)
             }
             Observer::Camera(tracker) => {
-                let (image, visibility) = tracker.observe(&cars, &self.occluders, elapsed, dt_s);
+                let (image, visibility) = tracker.observe(&self.network, &cars, &self.occluders, elapsed, dt_s);
                 (Vec::new(), visibility, Some(image))
             }
         };

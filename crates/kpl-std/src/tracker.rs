@@ -76,8 +76,8 @@ impl Source for Tracker {
 }
 
 /// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
-/// (the camera could see it: in the footprint and not occluded) and `seen_as` (the percept that
-/// shows it, "" when none).
+/// (the camera could see it: in the footprint and not occluded), `in_view` (in the footprint,
+/// occluded or not) and `seen_as` (the percept that shows it, "" when none).
 fn truth(frame: &Frame, prefix: &str) -> Value {
     let mut seen_as = std::collections::BTreeMap::new();
     for p in &frame.percepts {
@@ -92,6 +92,8 @@ fn truth(frame: &Frame, prefix: &str) -> Value {
         .map(|(car, visibility)| {
             let mut record = car.to_record();
             record.fields.push(("visible".into(), Value::Bool(visibility.in_view())));
+            // In the camera's footprint, occluded or not (`kpl score --in-view-only`).
+            record.fields.push(("in_view".into(), Value::Bool(*visibility != kpl_sim::Visibility::OutOfView)));
             let seen = seen_as.get(&car.id).cloned().unwrap_or_default();
             record.fields.push(("seen_as".into(), Value::str(&seen)));
             Value::Record(Arc::new(record))

@@ -27,7 +27,8 @@ with Z twice the gate). Branch objects of predictions split at junctions (record
 With --gt, the ground truth is a data set's file (MOTChallenge's gt.txt, VisDrone, UA-DETRAC XML,
 COCO JSON; frame f at (f - first) / fps) and every stream of boxes (records with `box`: [left,
 top, width, height] in pixels) is scored by IoU as MOTChallenge's evaluation scores it (--iou,
-0.5). See docs/scoring.md.
+0.5), on what each stream measured (records with `measured: false`, predicted states, are left
+out as a tracker's file has none; --predicted scores them too). See docs/scoring.md.
 Exit status: 0 every stream scored, 1 the recording cannot be scored as asked (no ground truth,
 an unknown stream, times that do not match), 2 usage or I/O errors.";
 
@@ -86,6 +87,10 @@ pub struct Args {
     /// more (the default with --gt: 0.5, MOTChallenge's).
     #[arg(long, value_name = "THRESHOLD", conflicts_with_all = ["max_distance", "hota_zero_distance"])]
     iou: Option<f64>,
+    /// With --gt: score predicted states too (records with `measured: false`); by default a run is
+    /// scored against a data set's ground truth as a tracker's output is, on what it measured.
+    #[arg(long, requires = "gt", conflicts_with = "measured_only")]
+    predicted: bool,
     /// Leave out true objects out of the sensor's view (records with `in_view: false`) and the
     /// hypotheses closest to them within the gate: neither misses nor false positives.
     #[arg(long)]
@@ -159,7 +164,7 @@ pub fn run(args: Args) -> ExitCode {
                 MissingArg::Empty => Missing::Empty,
                 MissingArg::Skip => Missing::Skip,
             },
-            measured_only: args.measured_only,
+            measured_only: args.measured_only || (args.gt.is_some() && !args.predicted),
             score_branches: args.branches,
             boxes: iou.is_some(),
             whole_truth: args.gt.is_some(),
