@@ -50,6 +50,7 @@ fn engines_know_nothing_of_the_runtime_tokio_or_zenoh() {
         "kpl-semantic",
         "kpl-mtl",
         "kpl-roads",
+        "kpl-camera",
         "kpl-sim",
         "kpl-aapa",
         "kpl-anchor",

@@ -24,11 +24,35 @@
 //! z = H x + v with H = [I 0] and v ~ N(0, r I); with a velocity measurement too, z = x + v
 //! with v ~ N(0, diag(r, r, r_v, r_v)). A measurement older than the filter's time (links step
 //! independently) is applied at the filter's time.
+//!
+//! **A percept's own covariance.** When the linked-from object carries `pos_cov`, `[σ_xx, σ_xy,
+//! σ_yy]` in m² (what `camera.georeference` propagates from the pixel and pose noise), that
+//! matrix is the position measurement's covariance R instead of `position_noise_m² I`: a far,
+//! oblique percept (a long ellipse along the line of sight) moves the estimate less, and mostly
+//! across the line of sight. A `pos_cov` that is not three finite numbers of a positive definite
+//! matrix is refused (the unit's error; the object keeps its state).
 
 use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Time, Value};
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
+
+/// The position covariance a record carries (`pos_cov`: `[σ_xx, σ_xy, σ_yy]`), if any; an
+/// error when it is there but not a positive definite covariance.
+pub fn position_covariance(record: &Record) -> Result<Option<Matrix2<f64>>, String> {
+    let Some(value) = record.get("pos_cov") else { return Ok(None) };
+    let bad = || format!("`pos_cov` must be [σ_xx, σ_xy, σ_yy] of a positive definite covariance (m²), found {value}");
+    let Value::List(items) = value else { return Err(bad()) };
+    let numbers: Option<Vec<f64>> = items.iter().map(Value::as_f64).collect();
+    match numbers.as_deref() {
+        Some([xx, xy, yy])
+            if [*xx, *xy, *yy].iter().all(|v| v.is_finite()) && *xx > 0.0 && *yy > 0.0 && xx * yy - xy * xy > 0.0 =>
+        {
+            Ok(Some(Matrix2::new(*xx, *xy, *xy, *yy)))
+        }
+        _ => Err(bad()),
+    }
+}
 
 use crate::records::{fill, position, value_position, velocity};
 use crate::stateful::UnitCall;
@@ -60,11 +84,21 @@ impl CvFilter {
     /// A filter started at `pos` (variance `pos_var` per axis) with velocity `vel` (variance
     /// `vel_var` per axis).
     pub fn new(pos: [f64; 2], vel: [f64; 2], pos_var: f64, vel_var: f64, time: Time) -> CvFilter {
-        CvFilter {
-            x: Vector4::new(pos[0], pos[1], vel[0], vel[1]),
-            p: Matrix4::from_diagonal(&Vector4::new(pos_var, pos_var, vel_var, vel_var)),
-            time,
-        }
+        CvFilter::with_position_covariance(pos, vel, Matrix2::identity() * pos_var, vel_var, time)
+    }
+
+    /// A filter started at `pos` with covariance `pos_cov` and velocity `vel` (variance `vel_var`
+    /// per axis).
+    pub fn with_position_covariance(
+        pos: [f64; 2],
+        vel: [f64; 2],
+        pos_cov: Matrix2<f64>,
+        vel_var: f64,
+        time: Time,
+    ) -> CvFilter {
+        let mut p = Matrix4::from_diagonal(&Vector4::new(0.0, 0.0, vel_var, vel_var));
+        p.fixed_view_mut::<2, 2>(0, 0).copy_from(&pos_cov);
+        CvFilter { x: Vector4::new(pos[0], pos[1], vel[0], vel[1]), p, time }
     }
 
     pub fn position(&self) -> [f64; 2] {
@@ -100,8 +134,12 @@ impl CvFilter {
     /// Takes in a position measurement `z` with variance `r` per axis (Joseph form, so the
     /// covariance stays symmetric and positive).
     pub fn update(&mut self, z: [f64; 2], r: f64) -> Result<(), FilterError> {
+        self.update_with_covariance(z, Matrix2::identity() * r)
+    }
+
+    /// Takes in a position measurement `z` with covariance `noise` (Joseph form).
+    pub fn update_with_covariance(&mut self, z: [f64; 2], noise: Matrix2<f64>) -> Result<(), FilterError> {
         let h = Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
-        let noise = Matrix2::identity() * r;
         let innovation = Vector2::new(z[0], z[1]) - h * self.x;
         let s = h * self.p * h.transpose() + noise;
         let s_inv = s.try_inverse().ok_or(FilterError::Singular)?;
@@ -126,7 +164,19 @@ impl CvFilter {
         v: [f64; 2],
         r_v: f64,
     ) -> Result<(), FilterError> {
-        let noise = Matrix4::from_diagonal(&Vector4::new(r, r, r_v, r_v));
+        self.update_with_velocity_covariance(z, Matrix2::identity() * r, v, r_v)
+    }
+
+    /// [`CvFilter::update_with_velocity`] with the position's covariance a matrix.
+    pub fn update_with_velocity_covariance(
+        &mut self,
+        z: [f64; 2],
+        pos_cov: Matrix2<f64>,
+        v: [f64; 2],
+        r_v: f64,
+    ) -> Result<(), FilterError> {
+        let mut noise = Matrix4::from_diagonal(&Vector4::new(0.0, 0.0, r_v, r_v));
+        noise.fixed_view_mut::<2, 2>(0, 0).copy_from(&pos_cov);
         let innovation = Vector4::new(z[0], z[1], v[0], v[1]) - self.x;
         let s = self.p + noise;
         let s_inv = s.try_inverse().ok_or(FilterError::Singular)?;
@@ -207,13 +257,15 @@ impl Kalman {
     /// second source the `other` object closest to the estimate within the gate.
     fn filter(&self, call: &UnitCall<'_>, pos: [f64; 2]) -> Result<CvFilter, String> {
         let r = self.params.position_noise_m.powi(2);
+        // The percept's own covariance when it carries one (a georeferenced percept).
+        let r_pos = position_covariance(call.from)?.unwrap_or_else(|| Matrix2::identity() * r);
         let mut filter = match call.memory.get::<CvFilter>() {
             Some(previous) => {
                 let mut filter = previous.clone();
                 filter.predict(call.time, self.params.acceleration_noise);
                 match (self.params.velocity_noise_mps, velocity(call.from)) {
-                    (Some(sd), Some(vel)) => filter.update_with_velocity(pos, r, vel, sd * sd),
-                    _ => filter.update(pos, r),
+                    (Some(sd), Some(vel)) => filter.update_with_velocity_covariance(pos, r_pos, vel, sd * sd),
+                    _ => filter.update_with_covariance(pos, r_pos),
                 }
                 .map_err(|e| e.to_string())?;
                 filter
@@ -225,7 +277,7 @@ impl Kalman {
                     (Some(sd), Some(_)) => sd.min(self.params.initial_velocity_sd_mps),
                     _ => self.params.initial_velocity_sd_mps,
                 };
-                CvFilter::new(pos, vel, r, vel_sd * vel_sd, call.time)
+                CvFilter::with_position_covariance(pos, vel, r_pos, vel_sd * vel_sd, call.time)
             }
         };
         if let (Some(fuse), Some(Some(other))) = (self.fuse, call.inputs.first()) {
@@ -326,6 +378,22 @@ mod tests {
         assert!((f.p[(0, 0)] - 0.5).abs() < 1e-12);
         let mut exact = CvFilter::new([0.0, 0.0], [0.0, 0.0], 0.0, 0.0, 0);
         assert_eq!(exact.update([1.0, 1.0], 0.0), Err(FilterError::Singular));
+    }
+
+    #[test]
+    fn a_percepts_covariance_weighs_it_per_direction() {
+        // The estimate has variance 1 on each axis; a measurement 2 m off on each axis, trusted
+        // along x (variance 1) and hardly along y (variance 99), moves it 1 m in x and 0.02 m in y.
+        let mut f = CvFilter::new([0.0, 0.0], [0.0, 0.0], 1.0, 1.0, 0);
+        f.update_with_covariance([2.0, 2.0], Matrix2::new(1.0, 0.0, 0.0, 99.0)).unwrap();
+        assert!((f.position()[0] - 1.0).abs() < 1e-12 && (f.position()[1] - 0.02).abs() < 1e-12, "{:?}", f.position());
+        // A record's `pos_cov`.
+        let numbers = |v: &[f64]| Value::List(v.iter().map(|x| Value::Float(*x)).collect::<Vec<_>>().into());
+        let record = |cov: Value| Record { id: None, fields: vec![("pos_cov".into(), cov)] };
+        assert_eq!(position_covariance(&record(numbers(&[4.0, 1.0, 2.0]))), Ok(Some(Matrix2::new(4.0, 1.0, 1.0, 2.0))));
+        assert!(position_covariance(&record(numbers(&[1.0, 2.0, 1.0]))).is_err(), "not positive definite");
+        assert!(position_covariance(&record(numbers(&[1.0, 0.0]))).is_err());
+        assert_eq!(position_covariance(&Record::default()), Ok(None));
     }
 
     #[test]

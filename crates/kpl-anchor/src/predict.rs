@@ -58,8 +58,9 @@ fn seconds(from: Time, to: Time) -> f64 {
     (to.saturating_sub(from)).max(0) as f64 / 1e6
 }
 
-/// `constant_velocity`: `pos + vel * dt`, `vel` unchanged. A state without a vec2 `pos` and
-/// `vel` stays as it is.
+/// `constant_velocity`: `pos + vel * dt`, `vel` unchanged; a `box` in pixels (`[left, top,
+/// width, height]`, an object in the image plane whose `pos` is the box's centre) moves with
+/// it. A state without a vec2 `pos` and `vel` stays as it is.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ConstantVelocity;
 
@@ -72,10 +73,18 @@ impl PredictionModel for ConstantVelocity {
         let dt = seconds(start.time, time);
         match (position(&start.state), velocity(&start.state)) {
             (Some(p), Some(v)) => {
-                out.push(with_fields(
-                    &start.state,
-                    &[("pos", Value::Vec2(geom::add(p, geom::scale(v, dt))))],
-                ));
+                let moved = geom::scale(v, dt);
+                let mut fields = vec![("pos", Value::Vec2(geom::add(p, moved)))];
+                if let Some(Value::List(b)) = start.state.get("box")
+                    && b.len() == 4
+                    && let (Some(left), Some(top)) = (b[0].as_f64(), b[1].as_f64())
+                {
+                    let mut shifted: Vec<Value> = b.to_vec();
+                    shifted[0] = Value::Float(left + moved[0]);
+                    shifted[1] = Value::Float(top + moved[1]);
+                    fields.push(("box", Value::List(shifted.into())));
+                }
+                out.push(with_fields(&start.state, &fields));
             }
             _ => out.push((*start.state).clone()),
         }
@@ -307,6 +316,14 @@ mod tests {
         let out = predict(&Stationary, state([1.0, 2.0], [3.0, -1.0]), 2.0);
         assert_eq!(out[0].get("pos"), Some(&Value::vec2(1.0, 2.0)));
         assert_eq!(out[0].get("vel"), Some(&Value::vec2(0.0, 0.0)));
+        // In the image plane the box moves with its centre.
+        let numbers =
+            |v: [f64; 4]| Value::List(v.iter().map(|x| Value::Float(*x)).collect::<Vec<_>>().into());
+        let mut track = (*state([15.0, 25.0], [10.0, -5.0])).clone();
+        track.fields.push(("box".into(), numbers([10.0, 20.0, 10.0, 10.0])));
+        let out = predict(&ConstantVelocity, Arc::new(track), 0.5);
+        assert_eq!(out[0].get("pos"), Some(&Value::vec2(20.0, 22.5)));
+        assert_eq!(out[0].get("box"), Some(&numbers([15.0, 17.5, 10.0, 10.0])));
     }
 
     #[test]

@@ -188,9 +188,45 @@ fn distance(a: &Value, b: &Value, func: &str) -> Result<Value, String> {
     finite((x1 - x2).hypot(y1 - y2), func)
 }
 
+/// A box in pixels as `[left, top, right, bottom]`: from a list of four numbers `[left, top,
+/// width, height]` (MOTChallenge's convention, what trackers' files give), a `box` value
+/// (`[x1, y1, x2, y2]`), or a record with either as its `box` attribute.
+fn pixel_box(v: &Value, func: &str) -> Result<[f64; 4], String> {
+    match v {
+        Value::List(items) if items.len() == 4 => {
+            let n: Vec<f64> = items.iter().map(|x| number(x, func)).collect::<Result<_, _>>()?;
+            Ok([n[0], n[1], n[0] + n[2], n[1] + n[3]])
+        }
+        Value::BBox(b) => Ok([b.x1, b.y1, b.x2, b.y2]),
+        Value::Record(r) => match r.get("box") {
+            Some(b) => pixel_box(b, func),
+            None => Err(format!("{func} needs boxes, found a record without a `box`")),
+        },
+        other => Err(format!(
+            "{func} needs boxes ([left, top, width, height], a box, or an object's `box`), found {}",
+            other.kind()
+        )),
+    }
+}
+
+/// Intersection over union of two boxes as py-motmetrics' `boxiou` computes it (0 without
+/// overlap or area).
+fn iou(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let w = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+    let h = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+    let intersection = w * h;
+    if intersection == 0.0 {
+        return 0.0;
+    }
+    let area = |r: [f64; 4]| (r[2] - r[0]).max(0.0) * (r[3] - r[1]).max(0.0);
+    let union = area(a) + area(b) - intersection;
+    if union > 0.0 { intersection / union } else { 0.0 }
+}
+
 /// The built-in functions: `abs`, `sqrt`, `min`, `max`, `floor`, `ceil`, `norm` (length of a
 /// vec2), `vec2(x, y)`, `dist` and `xydist` (Euclidean distance of two vec2 positions, or of two
-/// records' `pos`; `dist` of two numbers is `|a - b|`).
+/// records' `pos`; `dist` of two numbers is `|a - b|`), and for boxes in pixels `iou(a, b)`
+/// (intersection over union) and `box_dist(a, b)` (the distance of their centres).
 pub fn builtins() -> Vec<Function> {
     vec![
         Function::new("abs", (1, Some(1)), |a| match &a[0] {
@@ -215,6 +251,15 @@ pub fn builtins() -> Vec<Function> {
         }),
         Function::new("xydist", (2, Some(2)), |a| distance(&a[0], &a[1], "xydist")).native(Native::XyDist),
         Function::new("dist", (2, Some(2)), |a| dist(&a[0], &a[1])).native(Native::Dist),
+        Function::new("iou", (2, Some(2)), |a| {
+            Ok(Value::Float(iou(pixel_box(&a[0], "iou")?, pixel_box(&a[1], "iou")?)))
+        }),
+        Function::new("box_dist", (2, Some(2)), |a| {
+            let (p, q) = (pixel_box(&a[0], "box_dist")?, pixel_box(&a[1], "box_dist")?);
+            let centre = |r: [f64; 4]| [(r[0] + r[2]) / 2.0, (r[1] + r[3]) / 2.0];
+            let (c, d) = (centre(p), centre(q));
+            finite((c[0] - d[0]).hypot(c[1] - d[1]), "box_dist")
+        }),
     ]
 }
 
@@ -573,5 +618,26 @@ mod tests {
         let max = f.iter().find(|f| &*f.name == "max").unwrap();
         assert_eq!((max.body)(&[Value::Int(1), Value::Int(7), Value::Int(3)]), Ok(Value::Int(7)));
         assert_eq!((max.body)(&[Value::Int(1), Value::Float(0.5)]), Ok(Value::Float(1.0)));
+    }
+
+    #[test]
+    fn builtins_compare_boxes() {
+        let f = builtins();
+        let call = |name: &str, args: &[Value]| (f.iter().find(|f| &*f.name == name).unwrap().body)(args);
+        let list = |v: [f64; 4]| Value::List(v.iter().map(|x| Value::Float(*x)).collect::<Vec<_>>().into());
+        // [left, top, width, height]: overlap 2 x 1 = 2, union 8 + 8 - 2.
+        let (a, b) = (list([0.0, 0.0, 4.0, 2.0]), list([2.0, 1.0, 4.0, 2.0]));
+        assert_eq!(call("iou", &[a.clone(), b.clone()]), Ok(Value::Float(2.0 / 14.0)));
+        assert_eq!(call("iou", &[a.clone(), list([4.0, 0.0, 4.0, 2.0])]), Ok(Value::Float(0.0)));
+        // A `box` value is [x1, y1, x2, y2]; an object stands for its `box`.
+        let bbox = Value::bbox(kpl_core::BBox::new(2.0, 1.0, 6.0, 3.0));
+        let object = Value::Record(std::sync::Arc::new(kpl_core::Record {
+            id: Some("t1".into()),
+            fields: vec![("box".into(), b.clone())],
+        }));
+        assert_eq!(call("iou", &[a.clone(), bbox]), Ok(Value::Float(2.0 / 14.0)));
+        assert_eq!(call("iou", &[object, a.clone()]), Ok(Value::Float(2.0 / 14.0)));
+        assert_eq!(call("box_dist", &[a.clone(), b]), Ok(Value::Float(5f64.sqrt())));
+        assert!(call("iou", &[a, Value::Int(3)]).unwrap_err().contains("needs boxes"));
     }
 }

@@ -34,9 +34,23 @@ pub enum Missing {
 }
 
 /// How to align.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AlignOptions {
     pub missing: Missing,
+    /// Compare boxes (`box`, in pixels) instead of positions: every record of both sides needs
+    /// one.
+    pub boxes: bool,
+    /// Score every time of the ground truth, also before the stream's first snapshot and after
+    /// its last (as frames in which the stream saw nothing): a tracker's file scored against a
+    /// data set's ground truth.
+    pub whole_truth: bool,
+    /// Leave out the true objects the sensor could not see (records with `in_view: false`) and
+    /// the hypotheses closest to them within `ignore_gate` (closest first, each once; a
+    /// hypothesis closer to a true object in view is not left out): what lies outside a
+    /// camera's view is neither a miss nor a false positive.
+    pub in_view_only: bool,
+    /// The gate of `in_view_only`: metres, or `1 - IoU` for boxes.
+    pub ignore_gate: f64,
     /// Leave out the objects whose `measured` is false (states that were only predicted).
     pub measured_only: bool,
     /// Score branch objects (records with `branch_of`) as tracks of their own; by default they
@@ -94,6 +108,72 @@ pub struct Alignment {
     pub measured: MeasuredFilter,
     #[serde(flatten)]
     pub branches: BranchFilter,
+    /// With [`AlignOptions::in_view_only`]: what was left out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub out_of_view: Option<OutOfView>,
+}
+
+/// True objects out of the sensor's view and the hypotheses at them, left out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct OutOfView {
+    pub truth: usize,
+    pub hypotheses: usize,
+}
+
+/// Leaves out the true objects out of view and the hypotheses at them.
+#[derive(Debug, Default)]
+struct Ignored {
+    truth: usize,
+    hypotheses: usize,
+}
+
+impl Ignored {
+    fn frame(
+        &mut self,
+        truths: &mut Vec<&RecordedObject>,
+        hypotheses: &mut Vec<&RecordedObject>,
+        options: &AlignOptions,
+    ) {
+        if truths.iter().all(|t| t.in_view != Some(false)) {
+            return;
+        }
+        let distance = |t: &RecordedObject, h: &RecordedObject| match (options.boxes, t.bbox, h.bbox) {
+            (true, Some(a), Some(b)) => {
+                let iou = crate::sequence::iou(a, b);
+                if iou > 0.0 { 1.0 - iou } else { f64::INFINITY }
+            }
+            _ => crate::sequence::distance(t.pos, h.pos),
+        };
+        let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+        for (i, t) in truths.iter().enumerate() {
+            for (j, h) in hypotheses.iter().enumerate() {
+                let d = distance(t, h);
+                if d <= options.ignore_gate {
+                    pairs.push((d, i, j));
+                }
+            }
+        }
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let (mut truth_used, mut hyp_used) = (vec![false; truths.len()], vec![false; hypotheses.len()]);
+        let mut drop_hyp = vec![false; hypotheses.len()];
+        for (_, i, j) in pairs {
+            if truth_used[i] || hyp_used[j] {
+                continue;
+            }
+            truth_used[i] = true;
+            hyp_used[j] = true;
+            drop_hyp[j] = truths[i].in_view == Some(false);
+        }
+        let before = (truths.len(), hypotheses.len());
+        truths.retain(|t| t.in_view != Some(false));
+        let mut k = 0;
+        hypotheses.retain(|_| {
+            k += 1;
+            !drop_hyp[k - 1]
+        });
+        self.truth += before.0 - truths.len();
+        self.hypotheses += before.1 - hypotheses.len();
+    }
 }
 
 /// A stream aligned with the ground truth.
@@ -113,12 +193,25 @@ pub fn align(
     options: &AlignOptions,
 ) -> Result<Aligned, AlignError> {
     let span = |s: &ObjectStream| Some((s.snapshots.first()?.time, s.snapshots.last()?.time));
-    let Some(stream_span) = span(stream) else {
-        return Err(AlignError::Empty { stream: stream.name.clone() });
-    };
     let Some(truth_span) = span(truth) else { return Err(AlignError::Empty { stream: truth.name.clone() }) };
-    let from = stream_span.0.max(truth_span.0);
-    let to = stream_span.1.min(truth_span.1);
+    let stream_span = match span(stream) {
+        Some(span) => span,
+        // A tracker that reported nothing still has every true object missed.
+        None if options.whole_truth => truth_span,
+        None => return Err(AlignError::Empty { stream: stream.name.clone() }),
+    };
+    if options.boxes {
+        for (side, s) in [(truth, "ground truth"), (stream, "hypotheses")] {
+            if let Some(o) = side.snapshots.iter().flat_map(|s| &s.objects).find(|o| o.bbox.is_none()) {
+                return Err(AlignError::NoBox { stream: side.name.clone(), side: s, id: o.id.clone() });
+            }
+        }
+    }
+    let (from, to) = if options.whole_truth {
+        truth_span
+    } else {
+        (stream_span.0.max(truth_span.0), stream_span.1.min(truth_span.1))
+    };
     if from > to {
         return Err(AlignError::NoOverlap {
             stream: stream.name.clone(),
@@ -154,7 +247,8 @@ pub fn align(
             (_, None) => break,
         }
     }
-    if options.missing == Missing::Error {
+    let missing_as = if options.whole_truth { Missing::Empty } else { options.missing };
+    if missing_as == Missing::Error {
         if !extra.is_empty() {
             return Err(AlignError::ExtraTimes {
                 stream: stream.name.clone(),
@@ -177,19 +271,32 @@ pub fn align(
     let mut filter = ObjectFilter::new(options, stream.has_measured);
     let mut sequence = Sequence::new();
     let mut scored: Vec<Time> = Vec::with_capacity(pairs.len());
+    let mut ignored = Ignored::default();
     for (t, s) in pairs {
-        if s.is_none() && options.missing == Missing::Skip {
+        if s.is_none() && missing_as == Missing::Skip {
             continue;
         }
-        let hypotheses: Vec<&RecordedObject> =
+        let mut hypotheses: Vec<&RecordedObject> =
             s.map(|s| s.objects.iter().filter(|o| filter.keep(o)).collect()).unwrap_or_default();
-        sequence
-            .push_frame(
+        let mut truths: Vec<&RecordedObject> = t.objects.iter().collect();
+        if options.in_view_only {
+            ignored.frame(&mut truths, &mut hypotheses, options);
+        }
+        let pushed = if options.boxes {
+            let bbox = |o: &&RecordedObject| o.bbox.unwrap_or_default();
+            sequence.push_frame_boxes(
                 t.time,
-                t.objects.iter().map(|o| (o.id.as_str(), o.pos)),
+                truths.iter().map(|o| (o.id.as_str(), bbox(o))),
+                hypotheses.iter().map(|o| (o.id.as_str(), bbox(o))),
+            )
+        } else {
+            sequence.push_frame(
+                t.time,
+                truths.iter().map(|o| (o.id.as_str(), o.pos)),
                 hypotheses.iter().map(|o| (o.id.as_str(), o.pos)),
             )
-            .map_err(|source| AlignError::Sequence { stream: stream.name.clone(), source })?;
+        };
+        pushed.map_err(|source| AlignError::Sequence { stream: stream.name.clone(), source })?;
         scored.push(t.time);
     }
     let measured = match (options.measured_only, stream.has_measured) {
@@ -205,10 +312,13 @@ pub fn align(
         truth_outside: truth.snapshots.len() - truth_in.len(),
         stream_outside: stream.snapshots.len() - stream_in.len(),
         missing: missing.len(),
-        missing_as: options.missing,
+        missing_as,
         extra: extra.len(),
         measured,
         branches,
+        out_of_view: options
+            .in_view_only
+            .then_some(OutOfView { truth: ignored.truth, hypotheses: ignored.hypotheses }),
     };
     Ok(Aligned { sequence, alignment })
 }

@@ -15,8 +15,10 @@ pub enum SequenceError {
     TimeNotIncreasing { time: Time, previous: Time },
     #[error("the {side} list `{id}` twice at {}", seconds(*time))]
     DuplicateId { time: Time, side: Side, id: String },
-    #[error("the {side} give `{id}` a position that is not a finite number at {}", seconds(*time))]
+    #[error("the {side} give `{id}` a position (or box) that is not finite numbers at {}", seconds(*time))]
     NotFinite { time: Time, side: Side, id: String },
+    #[error("frame at {}: boxes and points in one sequence", seconds(*time))]
+    MixedGeometry { time: Time },
 }
 
 /// A scoring configuration that cannot be used.
@@ -26,6 +28,8 @@ pub enum ConfigError {
     MaxDistance(f64),
     #[error("HOTA's zero-similarity distance must be a positive number of metres, not {0}")]
     ZeroDistance(f64),
+    #[error("the IoU threshold must be above 0 and at most 1, not {0}")]
+    Iou(f64),
 }
 
 /// Reading recorded files failed as a whole (single bad lines are counted, not errors).
@@ -108,6 +112,10 @@ pub enum AlignError {
     ExtraTimes { stream: String, truth: String, count: usize, first: Vec<Time> },
     #[error("`{stream}`: {source}")]
     Sequence { stream: String, source: SequenceError },
+    #[error(
+        "`{stream}` ({side}): `{id}` has no `box` ([left, top, width, height] in pixels), which scoring by IoU needs"
+    )]
+    NoBox { stream: String, side: &'static str, id: String },
 }
 
 fn span((from, to): (Time, Time)) -> String {

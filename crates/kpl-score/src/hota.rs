@@ -113,7 +113,8 @@ impl HotaFrames {
         let similarities = close
             .iter()
             .filter_map(|p| {
-                let s = (1.0 - p.distance / self.zero_distance).max(0.0);
+                // Boxes: the IoU itself, as TrackEval's box similarity.
+                let s = if frame.boxes { p.iou } else { (1.0 - p.distance / self.zero_distance).max(0.0) };
                 (s > 0.0).then_some((p.truth as u32, p.hypothesis as u32, s))
             })
             .collect();

@@ -2,7 +2,9 @@
 //! reports against ground truth: CLEAR MOT (MOTA, MOTP, identity switches, fragmentations, mostly
 //! tracked / lost) and the identity measures (IDF1, IDP, IDR) as py-motmetrics defines them, and
 //! HOTA with DetA, AssA and LocA as TrackEval defines it. Positions are metres; a pair is matched
-//! only within a gating distance. See `docs/scoring.md`.
+//! only within a gating distance; or boxes in pixels, matched when their intersection over union
+//! reaches a threshold, as MOTChallenge's evaluation matches them, with the ground truth read
+//! from a data set's file ([`truth_file`]: MOTChallenge's `gt.txt`, ...). See `docs/scoring.md`.
 //!
 //! - [`Sequence`]: frames of true objects and hypotheses; [`score`] / [`evaluate`] compute
 //!   [`Scores`] (and the [`Mapping`] of hypotheses to true objects over time).
@@ -41,6 +43,7 @@ pub mod scores;
 pub mod sequence;
 pub mod situations;
 mod time;
+pub mod truth_file;
 
 pub use align::{AlignOptions, Aligned, Alignment, BranchFilter, MeasuredFilter, Missing, align};
 pub use clear::ClearMot;
@@ -51,5 +54,6 @@ pub use mapping::{Correspondence, IdentityAssignment, IdentityPair, Mapping};
 pub use recorded::{Options, Scored, ScoredStream, score_recording};
 pub use recording::{ObjectStream, Recording};
 pub use report::Report;
-pub use scores::{Config, DEFAULT_MAX_DISTANCE, Evaluation, Scores, evaluate, mapping, score};
-pub use sequence::{Pos, Sequence};
+pub use scores::{Config, DEFAULT_IOU, DEFAULT_MAX_DISTANCE, Evaluation, Scores, evaluate, mapping, score};
+pub use sequence::{Bbox, Pos, Sequence};
+pub use truth_file::{SeqInfo, TruthFile, read_truth_file, seqinfo};

@@ -8,6 +8,9 @@
 //! frame,id,-1,-1,-1,-1,1,x,y,0
 //! ```
 //!
+//! A sequence of boxes is written in MOT15-2D's layout, the box in pixels and the world columns
+//! unused: `frame,id,left,top,width,height,1,-1,-1,-1`.
+//!
 //! `frame` counts the scored frames from 1 in time order (`frames.csv` gives each frame's valid
 //! time), `id` is an integer (the number of the symbol when every id of the file is one prefix
 //! and a distinct number, `car12` → 12; else numbered in order of first appearance; `ids.csv`
@@ -75,7 +78,15 @@ pub fn export(sequence: &Sequence, mapping: Option<&Mapping>) -> Vec<ExportFile>
 fn lines(out: &mut String, frame: usize, objects: &[Object], numbers: &[u64]) {
     for o in objects {
         // `{}` prints the shortest text that parses back to the same f64.
-        let _ = writeln!(out, "{frame},{},-1,-1,-1,-1,1,{},{},0", numbers[o.id as usize], o.pos[0], o.pos[1]);
+        let id = numbers[o.id as usize];
+        match o.bbox {
+            Some([l, t, w, h]) => {
+                let _ = writeln!(out, "{frame},{id},{l},{t},{w},{h},1,-1,-1,-1");
+            }
+            None => {
+                let _ = writeln!(out, "{frame},{id},-1,-1,-1,-1,1,{},{},0", o.pos[0], o.pos[1]);
+            }
+        }
     }
 }
 

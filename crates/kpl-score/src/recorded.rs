@@ -3,7 +3,7 @@
 
 use crate::align::{AlignOptions, Aligned, align};
 use crate::error::SelectError;
-use crate::recording::Recording;
+use crate::recording::{ObjectStream, Recording};
 use crate::report::{Failed, Report, StreamReport};
 use crate::scores::{Config, Evaluation, evaluate};
 
@@ -16,6 +16,9 @@ pub struct Options {
     pub streams: Vec<String>,
     pub config: Config,
     pub align: AlignOptions,
+    /// Ground truth from outside the recording (a data set's file, [`crate::truth_file`]),
+    /// instead of one of its streams.
+    pub external_truth: Option<ObjectStream>,
 }
 
 /// One stream, scored.
@@ -36,11 +39,29 @@ pub struct Scored {
 /// Scores the chosen streams of `recording`. A stream that cannot be aligned with the ground
 /// truth is listed in [`Report::failed`]; choosing the streams can fail as a whole.
 pub fn score_recording(recording: &Recording, options: &Options) -> Result<Scored, SelectError> {
-    let truth = recording.truth(options.truth.as_deref())?;
-    let chosen = recording.hypotheses(&options.streams, &truth.name)?;
+    let truth = match &options.external_truth {
+        Some(truth) => truth,
+        None => recording.truth(options.truth.as_deref())?,
+    };
+    let mut chosen = recording.hypotheses(&options.streams, &truth.name)?;
+    let mut report_notes = Vec::new();
+    if options.align.boxes && options.streams.is_empty() {
+        // Scoring by IoU: every stream of boxes (a world-coordinate stream cannot be).
+        let (boxes, others): (Vec<&ObjectStream>, Vec<&ObjectStream>) =
+            chosen.into_iter().partition(|s| s.has_boxes);
+        if !others.is_empty() {
+            let names: Vec<&str> = others.iter().map(|s| s.name.as_str()).collect();
+            report_notes.push(format!(
+                "scored by IoU: {} not scored (records without `box` [left, top, width, height])",
+                names.join(", ")
+            ));
+        }
+        chosen = boxes;
+    }
     let mut report = Report::new(&truth.name, &options.config);
     report.problems = recording.problems().into();
     report.notes = recording.notes().to_vec();
+    report.notes.extend(report_notes);
     let mut streams = Vec::new();
     for stream in chosen {
         if stream.name == truth.name {

@@ -35,7 +35,13 @@ const MAX_EXAMPLES: usize = 8;
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordedObject {
     pub id: String,
+    /// Its `pos`, or its box's centre.
     pub pos: Pos,
+    /// Its `box` in pixels, `[left, top, width, height]`, when it has one.
+    pub bbox: Option<crate::sequence::Bbox>,
+    /// The record's `in_view` field (ground truth: whether the sensor could see it), when it
+    /// has one.
+    pub in_view: Option<bool>,
     /// The record's `measured` field, when it has one.
     pub measured: Option<bool>,
     /// The record's `branch_of` field: the object is a branch object, one of the other
@@ -63,6 +69,8 @@ pub struct ObjectStream {
     pub has_measured: bool,
     /// Some record says which percept sees it (`seen_as`: the tracker's ground truth).
     pub has_seen_as: bool,
+    /// Every record has a `box`.
+    pub has_boxes: bool,
 }
 
 /// Lines or records that were left out, with the first few as `FILE:LINE: what`.
@@ -355,7 +363,7 @@ impl RecordingReader {
         if reading.kind == Kind::Undecided
             && let Some(first) = items.first()
         {
-            reading.kind = if first.get("pos").is_some() {
+            reading.kind = if first.get("pos").is_some() || first.get("box").is_some() {
                 Kind::Objects
             } else if first.get("type").is_some() && first.get("status").is_some() {
                 Kind::WorldModel
@@ -441,12 +449,15 @@ impl RecordingReader {
 }
 
 fn stream(name: String, reading: &Reading, snapshots: Vec<Snapshot>) -> ObjectStream {
+    let has_boxes = snapshots.iter().any(|s| !s.objects.is_empty())
+        && snapshots.iter().all(|s| s.objects.iter().all(|o| o.bbox.is_some()));
     ObjectStream {
         name,
         file: reading.file.clone(),
         snapshots,
         has_measured: reading.has_measured,
         has_seen_as: reading.has_seen_as,
+        has_boxes,
     }
 }
 
@@ -560,13 +571,38 @@ fn object(item: &Json, pos: Option<&Json>) -> Result<RecordedObject, String> {
         Some(other) => return Err(format!("`id` is {other}, not a string")),
         None => return Err("no `id`".to_string()),
     };
-    let pos = match pos {
-        None => return Err(format!("`{id}` has no `pos`")),
-        Some(Json::Array(xy)) if xy.len() == 2 => match (xy[0].as_f64(), xy[1].as_f64()) {
+    let bbox = match item.get("box") {
+        None => None,
+        Some(Json::Array(b)) if b.len() == 4 => {
+            let numbers: Option<Vec<f64>> = b.iter().map(Json::as_f64).collect();
+            match numbers {
+                Some(n) if n.iter().all(|v| v.is_finite()) && n[2] >= 0.0 && n[3] >= 0.0 => {
+                    Some([n[0], n[1], n[2], n[3]])
+                }
+                _ => {
+                    return Err(format!(
+                        "`{id}`: `box` is not four finite numbers [left, top, width, height]"
+                    ));
+                }
+            }
+        }
+        // A KPL `box` ([x1, y1, x2, y2]) of another kind of object, or anything else: not a
+        // MOTChallenge box; such a record is scored by its `pos`.
+        Some(_) => None,
+    };
+    let pos = match (pos, bbox) {
+        (None, Some(b)) => [b[0] + b[2] / 2.0, b[1] + b[3] / 2.0],
+        (None, None) => return Err(format!("`{id}` has no `pos`")),
+        (Some(Json::Array(xy)), _) if xy.len() == 2 => match (xy[0].as_f64(), xy[1].as_f64()) {
             (Some(x), Some(y)) if x.is_finite() && y.is_finite() => [x, y],
             _ => return Err(format!("`{id}`: `pos` is not two finite numbers")),
         },
-        Some(other) => return Err(format!("`{id}`: `pos` is {other}, not [x, y]")),
+        (Some(other), _) => return Err(format!("`{id}`: `pos` is {other}, not [x, y]")),
+    };
+    let in_view = match item.get("in_view") {
+        None => None,
+        Some(Json::Bool(b)) => Some(*b),
+        Some(other) => return Err(format!("`{id}`: `in_view` is {other}, not true or false")),
     };
     let measured = match item.get("measured") {
         None => None,
@@ -578,7 +614,7 @@ fn object(item: &Json, pos: Option<&Json>) -> Result<RecordedObject, String> {
         Some(Json::String(owner)) => Some(owner.clone()),
         Some(other) => return Err(format!("`{id}`: `branch_of` is {other}, not a symbol")),
     };
-    Ok(RecordedObject { id, pos, measured, branch_of })
+    Ok(RecordedObject { id, pos, bbox, in_view, measured, branch_of })
 }
 
 #[cfg(test)]

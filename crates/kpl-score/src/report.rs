@@ -17,6 +17,10 @@ pub struct Report {
     pub truth: String,
     pub max_distance: f64,
     pub hota_zero_distance: f64,
+    /// Boxes scored by IoU with this threshold (then `max_distance` is `1 - threshold`, MOTP the
+    /// mean `1 - IoU` of the matched pairs, and HOTA's similarity the IoU).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iou_threshold: Option<f64>,
     pub streams: Vec<StreamReport>,
     /// Streams that could not be scored, with why.
     pub failed: Vec<Failed>,
@@ -60,6 +64,7 @@ impl Report {
             truth: truth.to_string(),
             max_distance: config.max_distance(),
             hota_zero_distance: config.hota_zero_distance(),
+            iou_threshold: config.iou_threshold(),
             streams: Vec::new(),
             failed: Vec::new(),
             problems: ProblemsReport::default(),
@@ -100,6 +105,12 @@ impl Report {
             if a.extra > 0 {
                 notes.push(format!("{name}: {} snapshots at times without ground truth left out", a.extra));
             }
+            if let Some(o) = a.out_of_view {
+                notes.push(format!(
+                    "{name}: {} true states out of the sensor's view (`in_view: false`) and {} hypotheses at them left out",
+                    o.truth, o.hypotheses
+                ));
+            }
             if let MeasuredFilter::Applied { left_out } = a.measured
                 && left_out > 0
             {
@@ -124,7 +135,7 @@ impl Report {
             .collect();
         if !unfiltered.is_empty() {
             notes.push(format!(
-                "--measured-only: {} say nothing about which states were measured (no `measured` field), so every \
+                "only measured states are scored, but {} say nothing about which states were measured (no `measured` field), so every \
                  state of theirs was scored",
                 unfiltered.join(", ")
             ));
@@ -135,18 +146,32 @@ impl Report {
     /// The report as text: a header, two tables, notes and problems.
     pub fn to_text(&self) -> String {
         let mut out = String::new();
-        let _ = writeln!(
-            out,
-            "scored against `{}`; gate {} m; HOTA similarity max(0, 1 - d / {} m)",
-            self.truth, self.max_distance, self.hota_zero_distance
-        );
+        let motp = match self.iou_threshold {
+            Some(threshold) => {
+                let _ = writeln!(
+                    out,
+                    "scored against `{}` by box overlap: a pair matches at IoU >= {threshold}; MOTP is the mean 1 - IoU of \
+                     the matches; HOTA similarity IoU",
+                    self.truth
+                );
+                "MOTP"
+            }
+            None => {
+                let _ = writeln!(
+                    out,
+                    "scored against `{}`; gate {} m; HOTA similarity max(0, 1 - d / {} m)",
+                    self.truth, self.max_distance, self.hota_zero_distance
+                );
+                "MOTP m"
+            }
+        };
         if !self.streams.is_empty() {
             let width = self.streams.iter().map(|s| s.stream.len()).max().unwrap_or(0).max("stream".len());
             out.push('\n');
             let _ = writeln!(
                 out,
                 "{:<width$} {:>6} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-                "stream", "frames", "MOTA", "MOTP m", "IDF1", "IDP", "IDR", "HOTA", "DetA", "AssA", "LocA"
+                "stream", "frames", "MOTA", motp, "IDF1", "IDP", "IDR", "HOTA", "DetA", "AssA", "LocA"
             );
             for s in &self.streams {
                 let (c, i, h) = (&s.scores.clear, &s.scores.identity, &s.scores.hota);

@@ -14,16 +14,28 @@ use crate::sequence::{Pair, Sequence};
 /// below the 3.5 m between lane centres and a car's length.
 pub const DEFAULT_MAX_DISTANCE: f64 = 3.0;
 
-/// How pairs are compared.
+/// How pairs are compared: points by distance (gate in metres, HOTA's similarity
+/// `max(0, 1 - d / zero_distance)`), or boxes by IoU (a pair may be matched when its IoU is at
+/// least the threshold; HOTA's similarity is the IoU, as MOTChallenge's evaluation has it).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Config {
     max_distance: f64,
     hota_zero_distance: f64,
+    /// Boxes compared by IoU with this threshold (the distance of a pair is `1 - IoU`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    iou_threshold: Option<f64>,
 }
+
+/// The IoU threshold of MOTChallenge's evaluation.
+pub const DEFAULT_IOU: f64 = 0.5;
 
 impl Default for Config {
     fn default() -> Config {
-        Config { max_distance: DEFAULT_MAX_DISTANCE, hota_zero_distance: 2.0 * DEFAULT_MAX_DISTANCE }
+        Config {
+            max_distance: DEFAULT_MAX_DISTANCE,
+            hota_zero_distance: 2.0 * DEFAULT_MAX_DISTANCE,
+            iou_threshold: None,
+        }
     }
 }
 
@@ -34,7 +46,21 @@ impl Config {
         if !max_distance.is_finite() || max_distance <= 0.0 {
             return Err(ConfigError::MaxDistance(max_distance));
         }
-        Ok(Config { max_distance, hota_zero_distance: 2.0 * max_distance })
+        Ok(Config { max_distance, hota_zero_distance: 2.0 * max_distance, iou_threshold: None })
+    }
+
+    /// Boxes, matched when their IoU is at least `threshold` (py-motmetrics'
+    /// `iou_matrix(max_iou = 1 - threshold)`; MOTChallenge uses 0.5); HOTA's similarity is the IoU.
+    pub fn iou(threshold: f64) -> Result<Config, ConfigError> {
+        if !(threshold.is_finite() && threshold > 0.0 && threshold <= 1.0) {
+            return Err(ConfigError::Iou(threshold));
+        }
+        Ok(Config { max_distance: 1.0 - threshold, hota_zero_distance: 1.0, iou_threshold: Some(threshold) })
+    }
+
+    /// The IoU threshold, when boxes are compared.
+    pub fn iou_threshold(&self) -> Option<f64> {
+        self.iou_threshold
     }
 
     /// HOTA's similarity `max(0, 1 − d / zero_distance)` with another zero distance.
@@ -85,6 +111,7 @@ pub fn evaluate(sequence: &Sequence, config: &Config) -> Evaluation {
     let mut clear = Clear::new(n_truth, n_hyp);
     let mut identity = IdentityCounts::new(n_truth, n_hyp);
     let mut hota = HotaFrames::new(config.hota_zero_distance, n_truth, n_hyp);
+    // Boxes: the radius 1 takes every overlapping pair (1 - IoU below 1).
     let radius = config.max_distance.max(config.hota_zero_distance);
     let (mut close, mut gated) = (Vec::new(), Vec::new());
     let mut matches: Vec<Vec<Match>> = Vec::with_capacity(sequence.frames().len());

@@ -1,7 +1,9 @@
 //! What the metrics score: a [`Sequence`] of frames at increasing valid times, each with the true
-//! objects and the hypotheses (a tracker's percepts, an anchoring's symbols) on the ground plane.
-//! Ids are interned per side, so the metrics work on dense indices; the order of the objects in a
-//! frame is kept (py-motmetrics' matching visits them in that order).
+//! objects and the hypotheses (a tracker's percepts, an anchoring's symbols), either as points on
+//! the ground plane (compared by distance) or as boxes in pixels (compared by intersection over
+//! union, as MOTChallenge's evaluation does: the pair's distance is `1 - IoU`). Ids are interned
+//! per side, so the metrics work on dense indices; the order of the objects in a frame is kept
+//! (py-motmetrics' matching visits them in that order).
 
 use std::collections::HashMap;
 
@@ -12,11 +14,16 @@ use crate::error::SequenceError;
 /// A position on the ground plane, metres.
 pub type Pos = [f64; 2];
 
-/// One object in one frame: its interned id and its position.
+/// A box in pixels, `[left, top, width, height]` (MOTChallenge's convention).
+pub type Bbox = [f64; 4];
+
+/// One object in one frame: its interned id, its position (a box's centre) and its box.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Object {
     pub id: u32,
     pub pos: Pos,
+    /// The box, in a sequence of boxes.
+    pub bbox: Option<Bbox>,
 }
 
 /// The objects of both sides at one valid time.
@@ -25,15 +32,19 @@ pub struct Frame {
     pub time: Time,
     pub truth: Vec<Object>,
     pub hypotheses: Vec<Object>,
+    /// The objects are boxes, compared by IoU.
+    pub boxes: bool,
 }
 
 /// A pair of a true object and a hypothesis of one frame (indices into the frame's lists) and
-/// their Euclidean distance.
+/// their distance: Euclidean for points, `1 - IoU` for boxes (whose IoU is kept too).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pair {
     pub truth: usize,
     pub hypothesis: usize,
     pub distance: f64,
+    /// The boxes' intersection over union (0 for points).
+    pub iou: f64,
 }
 
 /// Names of one side's objects, interned in order of first appearance.
@@ -84,6 +95,8 @@ pub struct Sequence {
     frames: Vec<Frame>,
     truth_ids: Ids,
     hypothesis_ids: Ids,
+    /// The frames hold boxes (set by the first frame pushed).
+    boxes: bool,
 }
 
 /// Which side of a sequence an object is on (for messages).
@@ -116,20 +129,66 @@ impl Sequence {
         truth: impl IntoIterator<Item = (&'a str, Pos)>,
         hypotheses: impl IntoIterator<Item = (&'a str, Pos)>,
     ) -> Result<(), SequenceError> {
-        if let Some(last) = self.frames.last()
-            && time <= last.time
-        {
-            return Err(SequenceError::TimeNotIncreasing { time, previous: last.time });
-        }
+        self.check_frame(time, false)?;
         let truth: Vec<(&str, Pos)> = truth.into_iter().collect();
         let hypotheses: Vec<(&str, Pos)> = hypotheses.into_iter().collect();
         check_side(time, Side::Truth, &truth)?;
         check_side(time, Side::Hypotheses, &hypotheses)?;
-        let truth = truth.iter().map(|&(id, pos)| Object { id: self.truth_ids.intern(id), pos }).collect();
-        let hypotheses =
-            hypotheses.iter().map(|&(id, pos)| Object { id: self.hypothesis_ids.intern(id), pos }).collect();
-        self.frames.push(Frame { time, truth, hypotheses });
+        let truth = truth
+            .iter()
+            .map(|&(id, pos)| Object { id: self.truth_ids.intern(id), pos, bbox: None })
+            .collect();
+        let hypotheses = hypotheses
+            .iter()
+            .map(|&(id, pos)| Object { id: self.hypothesis_ids.intern(id), pos, bbox: None })
+            .collect();
+        self.frames.push(Frame { time, truth, hypotheses, boxes: false });
         Ok(())
+    }
+
+    /// Appends a frame of boxes in pixels (`[left, top, width, height]`), compared by IoU.
+    /// Refused as [`Sequence::push_frame`] is, and when a box is not four finite numbers with
+    /// sides at least 0, or the sequence holds points.
+    pub fn push_frame_boxes<'a>(
+        &mut self,
+        time: Time,
+        truth: impl IntoIterator<Item = (&'a str, Bbox)>,
+        hypotheses: impl IntoIterator<Item = (&'a str, Bbox)>,
+    ) -> Result<(), SequenceError> {
+        self.check_frame(time, true)?;
+        let truth: Vec<(&str, Bbox)> = truth.into_iter().collect();
+        let hypotheses: Vec<(&str, Bbox)> = hypotheses.into_iter().collect();
+        check_boxes(time, Side::Truth, &truth)?;
+        check_boxes(time, Side::Hypotheses, &hypotheses)?;
+        let centre = |b: Bbox| [b[0] + b[2] / 2.0, b[1] + b[3] / 2.0];
+        let truth = truth
+            .iter()
+            .map(|&(id, b)| Object { id: self.truth_ids.intern(id), pos: centre(b), bbox: Some(b) })
+            .collect();
+        let hypotheses = hypotheses
+            .iter()
+            .map(|&(id, b)| Object { id: self.hypothesis_ids.intern(id), pos: centre(b), bbox: Some(b) })
+            .collect();
+        self.boxes = true;
+        self.frames.push(Frame { time, truth, hypotheses, boxes: true });
+        Ok(())
+    }
+
+    fn check_frame(&self, time: Time, boxes: bool) -> Result<(), SequenceError> {
+        if let Some(last) = self.frames.last() {
+            if time <= last.time {
+                return Err(SequenceError::TimeNotIncreasing { time, previous: last.time });
+            }
+            if last.boxes != boxes {
+                return Err(SequenceError::MixedGeometry { time });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the frames hold boxes (compared by IoU) rather than points.
+    pub fn boxes(&self) -> bool {
+        self.boxes
     }
 
     pub fn frames(&self) -> &[Frame] {
@@ -151,10 +210,16 @@ impl Sequence {
             frames: self
                 .frames
                 .iter()
-                .map(|f| Frame { time: f.time, truth: f.hypotheses.clone(), hypotheses: f.truth.clone() })
+                .map(|f| Frame {
+                    time: f.time,
+                    truth: f.hypotheses.clone(),
+                    hypotheses: f.truth.clone(),
+                    boxes: f.boxes,
+                })
                 .collect(),
             truth_ids: self.hypothesis_ids.clone(),
             hypothesis_ids: self.truth_ids.clone(),
+            boxes: self.boxes,
         }
     }
 
@@ -182,6 +247,26 @@ fn check_side(time: Time, side: Side, objects: &[(&str, Pos)]) -> Result<(), Seq
     Ok(())
 }
 
+fn check_boxes(time: Time, side: Side, objects: &[(&str, Bbox)]) -> Result<(), SequenceError> {
+    let mut seen = std::collections::HashSet::with_capacity(objects.len());
+    for &(id, b) in objects {
+        if !seen.insert(id) {
+            return Err(SequenceError::DuplicateId { time, side, id: id.to_string() });
+        }
+        if !(b.iter().all(|c| c.is_finite()) && b[2] >= 0.0 && b[3] >= 0.0) {
+            return Err(SequenceError::NotFinite { time, side, id: id.to_string() });
+        }
+    }
+    Ok(())
+}
+
+/// The intersection over union of two boxes `[left, top, width, height]`, as py-motmetrics'
+/// `boxiou` and TrackEval's `_calculate_box_ious` compute it: corners `left + width` and
+/// `top + height`, 0 without overlap.
+pub fn iou(a: Bbox, b: Bbox) -> f64 {
+    kpl_camera::PixelBox::from_array(a).iou(&kpl_camera::PixelBox::from_array(b))
+}
+
 /// Above this many candidate pairs a frame's close pairs are found through a grid.
 const BRUTE_FORCE_PAIRS: usize = 1024;
 
@@ -189,9 +274,24 @@ impl Frame {
     /// The pairs of a true object and a hypothesis at most `radius` apart, ordered by the true
     /// object's index, then the hypothesis'. The distance is `sqrt(dx² + dy²)` as NumPy's norm
     /// computes it, so a pair exactly at the radius is the same pair for the reference tools.
+    ///
+    /// For boxes the distance is `1 - IoU`, and only overlapping pairs (IoU above 0) are given.
     pub fn pairs_within(&self, radius: f64, out: &mut Vec<Pair>) {
         out.clear();
         if self.truth.is_empty() || self.hypotheses.is_empty() {
+            return;
+        }
+        if self.boxes {
+            for (i, t) in self.truth.iter().enumerate() {
+                for (j, h) in self.hypotheses.iter().enumerate() {
+                    let (Some(a), Some(b)) = (t.bbox, h.bbox) else { continue };
+                    let iou = iou(a, b);
+                    let distance = 1.0 - iou;
+                    if iou > 0.0 && distance <= radius {
+                        out.push(Pair { truth: i, hypothesis: j, distance, iou });
+                    }
+                }
+            }
             return;
         }
         if self.truth.len() * self.hypotheses.len() <= BRUTE_FORCE_PAIRS || radius.is_nan() || radius <= 0.0 {
@@ -199,7 +299,7 @@ impl Frame {
                 for (j, h) in self.hypotheses.iter().enumerate() {
                     let distance = distance(t.pos, h.pos);
                     if distance <= radius {
-                        out.push(Pair { truth: i, hypothesis: j, distance });
+                        out.push(Pair { truth: i, hypothesis: j, distance, iou: 0.0 });
                     }
                 }
             }
@@ -221,7 +321,7 @@ impl Frame {
                     for &j in grid.get(&key).map_or(&[][..], Vec::as_slice) {
                         let distance = distance(t.pos, self.hypotheses[j].pos);
                         if distance <= radius {
-                            out.push(Pair { truth: i, hypothesis: j, distance });
+                            out.push(Pair { truth: i, hypothesis: j, distance, iou: 0.0 });
                         }
                     }
                 }
@@ -294,7 +394,7 @@ mod tests {
                 for (j, h) in frame.hypotheses.iter().enumerate() {
                     let d = distance(t.pos, h.pos);
                     if d <= radius {
-                        brute.push(Pair { truth: i, hypothesis: j, distance: d });
+                        brute.push(Pair { truth: i, hypothesis: j, distance: d, iou: 0.0 });
                     }
                 }
             }

@@ -6,7 +6,8 @@ code under test.
 
     python oracles.py DOCS BATCH RESULTS
 
-BATCH is a JSON file `{"cases": [{"folder": ..., "max_distance": ..., "zero_distance": ...}]}`;
+BATCH is a JSON file `{"cases": [{"folder": ..., "max_distance": ..., "zero_distance": ...,
+"iou": ...}]}` (`iou`: an export of boxes, scored by IoU with that threshold);
 RESULTS gets `{"results": [{metric: value, ...}, ...]}` in the same order, with `null` for values
 that are not numbers (0 / 0).
 """
@@ -27,7 +28,7 @@ def documented(docs_path):
         sys.exit("docs/scoring.md has no Python block with `def score_export` in its export section")
     namespace = {}
     exec(code[0], namespace)
-    return namespace["score_export"]
+    return namespace["score_export"], namespace["score_export_boxes"]
 
 
 def plain(value):
@@ -40,14 +41,17 @@ def plain(value):
 
 def main():
     docs, batch_path, results_path = sys.argv[1:4]
-    score_export = documented(docs)
+    score_export, score_export_boxes = documented(docs)
     batch = json.load(open(batch_path, encoding="utf-8"))
     results = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for case in batch["cases"]:
             try:
-                scores = score_export(case["folder"], case["max_distance"], case.get("zero_distance"))
+                if case.get("iou") is not None:
+                    scores = score_export_boxes(case["folder"], case["iou"])
+                else:
+                    scores = score_export(case["folder"], case["max_distance"], case.get("zero_distance"))
                 results.append({k: plain(v) for k, v in scores.items()})
             except Exception as e:  # report which case failed, with the error
                 results.append({"error": f"{type(e).__name__}: {e}"})

@@ -44,6 +44,7 @@ fn oracle(python: &str, dir: &Path, cases: &[(PathBuf, Config)]) -> Vec<Value> {
             "folder": folder,
             "max_distance": config.max_distance(),
             "zero_distance": config.hota_zero_distance(),
+            "iou": config.iou_threshold(),
         })).collect::<Vec<_>>()
     });
     let batch_path = dir.join("batch.json");
@@ -202,5 +203,66 @@ fn the_metrics_agree_with_py_motmetrics_and_trackeval() {
         evaluations.len()
     );
     assert!(switches > 100 && fragmentations > 100 && false_positives > 1000 && misses > 1000 && partly > 50);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A case of boxes made from a case of points: each object a box around its position (scaled to
+/// pixels) of a size of its own, hypotheses' sizes a little off, so IoU decides the matches.
+fn box_case(seed: u64) -> (kpl_score::Sequence, f64) {
+    let case = common::case(seed);
+    let size = |id: &str, hypothesis: bool| {
+        let h = id.bytes().fold(seed, |a, b| a.wrapping_mul(31).wrapping_add(u64::from(b)));
+        let (w, ht) = (20.0 + (h % 17) as f64, 40.0 + (h % 23) as f64);
+        if hypothesis { (w * (0.8 + (h % 5) as f64 * 0.1), ht * (0.9 + (h % 3) as f64 * 0.1)) } else { (w, ht) }
+    };
+    let boxes = |objects: &[(String, [f64; 2])], hypothesis: bool| -> Vec<(String, [f64; 4])> {
+        objects
+            .iter()
+            .map(|(id, p)| {
+                let (w, h) = size(id, hypothesis);
+                // Positions are within a few tens of metres: 8 pixels per metre.
+                (id.clone(), [p[0] * 8.0 - w / 2.0, p[1] * 8.0 - h / 2.0, w, h])
+            })
+            .collect()
+    };
+    let mut s = kpl_score::Sequence::new();
+    for (k, (truth, hyps)) in case.frames.iter().enumerate() {
+        let (t, h) = (boxes(truth, false), boxes(hyps, true));
+        s.push_frame_boxes(
+            k as i64 * 40_000,
+            t.iter().map(|(id, b)| (id.as_str(), *b)),
+            h.iter().map(|(id, b)| (id.as_str(), *b)),
+        )
+        .unwrap();
+    }
+    (s, [0.5, 0.3, 0.7][(seed % 3) as usize])
+}
+
+#[test]
+fn box_metrics_agree_with_py_motmetrics_and_trackeval() {
+    let Some(python) = python() else { return };
+    let dir = std::env::temp_dir().join(format!("kpl-score-box-oracles-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (mut cases, mut evaluations) = (Vec::new(), Vec::new());
+    for seed in 0..150u64 {
+        let (sequence, threshold) = box_case(seed);
+        let config = Config::iou(threshold).unwrap();
+        let folder = dir.join(format!("boxes{seed}"));
+        write_export(&folder, &sequence);
+        evaluations.push((format!("box case {seed}"), evaluate(&sequence, &config)));
+        cases.push((folder, config));
+    }
+    let results = oracle(&python, &dir, &cases);
+    for ((name, ours), theirs) in evaluations.iter().zip(&results) {
+        compare(name, ours, theirs);
+    }
+    let total = |f: &dyn Fn(&Evaluation) -> usize| evaluations.iter().map(|(_, e)| f(e)).sum::<usize>();
+    let (switches, matches, false_positives) = (
+        total(&|e| e.scores.clear.switches),
+        total(&|e| e.scores.clear.matches),
+        total(&|e| e.scores.clear.false_positives),
+    );
+    eprintln!("{} box cases: {matches} matches, {switches} switches, {false_positives} false positives", evaluations.len());
+    assert!(switches > 50 && matches > 1000 && false_positives > 500);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,5 +1,5 @@
 //! The signatures of the formula functions every spec may use: `kpl-mtl`'s built-ins (which
-//! implements them) and `vec2`. They belong to the language, not to a runtime, so the checker
+//! implements them: arithmetic, distances, `iou` and `box_dist` of boxes in pixels) and `vec2`. They belong to the language, not to a runtime, so the checker
 //! knows them without one ([`Registry::with_builtin_functions`]).
 
 use kpl_core::ValueType;
@@ -34,6 +34,18 @@ pub fn builtin_functions() -> Vec<Function> {
         "distance between two positions (or objects' `pos`), or |a - b| of two numbers",
     ));
     functions.push(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
+    functions.push(Function::new(
+        "iou",
+        vec![Any, Any],
+        Float,
+        "intersection over union of two boxes in pixels ([left, top, width, height], a box, or two objects' `box`)",
+    ));
+    functions.push(Function::new(
+        "box_dist",
+        vec![Any, Any],
+        Float,
+        "distance in pixels between the centres of two boxes (as iou takes them)",
+    ));
     functions
 }
 

@@ -23,11 +23,13 @@
 //! ```
 //!
 //! Modules: [`traffic`] (simulated cars and ground truth), [`recorded`] (recorded traffic played
-//! back), [`camera`] (the footprint), [`tracker`] (percepts), [`params`] (source parameters),
+//! back), [`camera`] (the footprint), [`tracker`] (percepts), [`image`] (the camera mode: a UAV
+//! camera and an image tracker reporting boxes in pixels), [`params`] (source parameters),
 //! [`sim`] (the source object), [`error`].
 
 pub mod camera;
 pub mod error;
+pub mod image;
 pub mod params;
 pub mod recorded;
 pub mod sim;
@@ -35,6 +37,7 @@ pub mod tracker;
 pub mod traffic;
 
 pub use error::ParamsError;
+pub use image::{CameraParams, ImageObservation, ImagePercept, ImageTracker};
 pub use kpl_roads::{LaneId, LanePosition, NetworkError, NodeId, OccluderId, Place, RoadId, RoadNetwork};
 pub use params::{ParamInfo, Params};
 pub use sim::{Frame, UavTrackerSim};

@@ -24,6 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::camera::Camera;
 use crate::error::ParamsError;
+use crate::image::{CameraParams, ImageObservation, ImageTracker, SharedSettings};
 use crate::params::Params;
 use crate::recorded::{Playback, Problem, VehicleTypes};
 use crate::tracker::{Percept, Tracker, TrackerConfig, View, Visibility};
@@ -46,6 +47,17 @@ pub struct Frame {
     pub cars: Vec<CarState>,
     /// What the camera could see of each car (in the order of `cars`).
     pub visibility: Vec<Visibility>,
+    /// In camera mode ([`UavTrackerSim::with_camera`]): the boxes in pixels and the pose (then
+    /// `percepts` is empty).
+    pub image: Option<ImageObservation>,
+}
+
+/// What looks at the vehicles: the world tracker (percepts in metres), or the UAV camera and its
+/// image tracker (boxes in pixels).
+#[derive(Debug)]
+enum Observer {
+    World(Tracker),
+    Camera(Box<ImageTracker>),
 }
 
 /// Where the cars come from.
@@ -60,7 +72,7 @@ enum Vehicles {
 pub struct UavTrackerSim {
     network: Arc<RoadNetwork>,
     vehicles: Vehicles,
-    tracker: Tracker,
+    observer: Observer,
     camera: Camera,
     occluders: Occluders,
     start: Time,
@@ -93,6 +105,41 @@ impl UavTrackerSim {
         network: Arc<RoadNetwork>,
         start: Time,
         traffic_seed: u64,
+    ) -> Result<UavTrackerSim, ParamsError> {
+        let tracker =
+            Tracker::new(TrackerConfig::from_params(params), rng_stream(params.seed, TRACKER_STREAM));
+        UavTrackerSim::build(params, network, start, traffic_seed, Observer::World(tracker))
+    }
+
+    /// The camera mode: the same traffic watched by a UAV camera whose image tracker reports
+    /// boxes in pixels ([`crate::image`]); `params` gives the traffic, the seed, the rate, the
+    /// occluders and what the world tracker shares (`dropout`, `max_gap_frames`,
+    /// `false_positive_rate`, `false_positive_on_road`, `false_positive_duration_s`).
+    pub fn with_camera(
+        params: &Params,
+        camera: &CameraParams,
+        network: Arc<RoadNetwork>,
+        start: Time,
+        traffic_seed: u64,
+    ) -> Result<UavTrackerSim, ParamsError> {
+        let shared = SharedSettings {
+            dropout: params.dropout,
+            max_gap_frames: params.max_gap_frames,
+            false_positive_rate: params.false_positive_rate,
+            false_positive_on_road: params.false_positive_on_road,
+            false_positive_duration_s: params.false_positive_duration_s,
+        };
+        let tracker =
+            ImageTracker::new(camera.clone(), shared, &network, rng_stream(params.seed, TRACKER_STREAM))?;
+        UavTrackerSim::build(params, network, start, traffic_seed, Observer::Camera(Box::new(tracker)))
+    }
+
+    fn build(
+        params: &Params,
+        network: Arc<RoadNetwork>,
+        start: Time,
+        traffic_seed: u64,
+        observer: Observer,
     ) -> Result<UavTrackerSim, ParamsError> {
         params.validate()?;
         let vehicles = match &params.traffic_file {
@@ -135,12 +182,10 @@ impl UavTrackerSim {
             });
         }
         let occluders = network.occluders().with(extra);
-        let tracker =
-            Tracker::new(TrackerConfig::from_params(params), rng_stream(params.seed, TRACKER_STREAM));
         Ok(UavTrackerSim {
             network,
             vehicles,
-            tracker,
+            observer,
             camera: params.camera()?,
             occluders,
             start,
@@ -202,20 +247,29 @@ impl UavTrackerSim {
             Vehicles::Simulated(traffic) => {
                 if self.next_index > 0 {
                     let left_map = traffic.step(&self.network, dt_s);
-                    self.tracker.forget(&left_map);
+                    self.observer.forget(&left_map);
                 }
                 traffic.states(&self.network)
             }
             Vehicles::Recorded(playback) => {
                 let (cars, gone) = playback.states_at(elapsed);
-                self.tracker.forget(&gone);
+                self.observer.forget(&gone);
                 cars
             }
         };
         let time = self.next_frame_time();
-        let view = View { camera: &self.camera, occluders: &self.occluders, elapsed };
-        let (percepts, visibility) = self.tracker.observe(&self.network, &view, &cars, dt_s);
-        let frame = Frame { index: self.next_index, time, percepts, cars, visibility };
+        let (percepts, visibility, image) = match &mut self.observer {
+            Observer::World(tracker) => {
+                let view = View { camera: &self.camera, occluders: &self.occluders, elapsed };
+                let (percepts, visibility) = tracker.observe(&self.network, &view, &cars, dt_s);
+                (percepts, visibility, None)
+            }
+            Observer::Camera(tracker) => {
+                let (image, visibility) = tracker.observe(&self.network, &cars, &self.occluders, elapsed, dt_s);
+                (Vec::new(), visibility, Some(image))
+            }
+        };
+        let frame = Frame { index: self.next_index, time, percepts, cars, visibility, image };
         self.next_index += 1;
         frame
     }
@@ -232,6 +286,26 @@ impl UavTrackerSim {
 
     /// Percept ids handed out so far (the last one is `vp{n}`).
     pub fn n_percept_ids(&self) -> u64 {
-        self.tracker.n_percept_ids()
+        match &self.observer {
+            Observer::World(tracker) => tracker.n_percept_ids(),
+            Observer::Camera(tracker) => tracker.n_percept_ids(),
+        }
+    }
+
+    /// The UAV camera's image tracker, in camera mode.
+    pub fn image_tracker(&self) -> Option<&ImageTracker> {
+        match &self.observer {
+            Observer::World(_) => None,
+            Observer::Camera(tracker) => Some(tracker),
+        }
+    }
+}
+
+impl Observer {
+    fn forget(&mut self, cars: &[crate::traffic::CarId]) {
+        match self {
+            Observer::World(tracker) => tracker.forget(cars),
+            Observer::Camera(tracker) => tracker.forget(cars),
+        }
     }
 }

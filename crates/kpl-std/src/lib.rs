@@ -3,6 +3,9 @@
 //! ([`registry::registry`], [`registry::signatures`]).
 //!
 //! - `sim.uav_tracker`: vision percepts from the simulated UAV tracker (`kpl-sim`).
+//! - `camera.georeference`, `camera.homography`, `sim.uav_camera` and the camera functions
+//!   (`kpl-camera`: from pixels to the world), `file.tracker` (trackers' files as percepts),
+//!   docs/camera.md.
 //! - `aapa.anchor`, `sim.gearbox`, `cater.video`: action-aware perceptual anchoring (`kpl-aapa`),
 //!   docs/aapa.md.
 //! - [`anchor`]: hierarchical anchoring on the runtime (`kpl-anchor`'s engine): link processes,
@@ -12,8 +15,10 @@
 
 mod aapa;
 pub mod anchor;
+mod camera;
 pub mod driver;
 pub mod registry;
 mod tracker;
+mod trackfiles;
 
 pub use registry::{assemble, check_text, registry, signatures};

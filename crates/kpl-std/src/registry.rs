@@ -14,6 +14,8 @@ use kpl_semantic::hir;
 pub fn assemble(registry: &mut Registry) {
     registry.add_builtins();
     crate::tracker::register(registry);
+    crate::trackfiles::register(registry);
+    crate::camera::register(registry);
     crate::aapa::register(registry);
     crate::anchor::register(registry);
     kpl_zenoh::register(registry);

@@ -76,8 +76,8 @@ impl Source for Tracker {
 }
 
 /// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
-/// (the camera could see it: in the footprint and not occluded) and `seen_as` (the percept that
-/// shows it, "" when none).
+/// (the camera could see it: in the footprint and not occluded), `in_view` (in the footprint,
+/// occluded or not) and `seen_as` (the percept that shows it, "" when none).
 fn truth(frame: &Frame, prefix: &str) -> Value {
     let mut seen_as = std::collections::BTreeMap::new();
     for p in &frame.percepts {
@@ -92,6 +92,8 @@ fn truth(frame: &Frame, prefix: &str) -> Value {
         .map(|(car, visibility)| {
             let mut record = car.to_record();
             record.fields.push(("visible".into(), Value::Bool(visibility.in_view())));
+            // In the camera's footprint, occluded or not (`kpl score --in-view-only`).
+            record.fields.push(("in_view".into(), Value::Bool(*visibility != kpl_sim::Visibility::OutOfView)));
             let seen = seen_as.get(&car.id).cloned().unwrap_or_default();
             record.fields.push(("seen_as".into(), Value::str(&seen)));
             Value::Record(Arc::new(record))
@@ -109,10 +111,18 @@ macro_rules! FILE_PARAMS {
 
 /// The parameters, with the run's seed mixed in, and the seed of the simulated traffic.
 fn params(ctx: &BuildContext<'_>) -> Result<(Params, u64), kpl_runtime::registry::BuildError> {
+    params_where(ctx, |_| true)
+}
+
+/// [`params`] from the call's parameters whose names `keep` (the camera mode's own are left to it).
+pub(crate) fn params_where(
+    ctx: &BuildContext<'_>,
+    keep: impl Fn(&str) -> bool,
+) -> Result<(Params, u64), kpl_runtime::registry::BuildError> {
     let call = ctx.call().ok_or_else(|| ctx.error("no parameters"))?;
     let spec_dir = ctx.spec_dir.to_path_buf();
     let mut args: Vec<(String, Value)> = Vec::new();
-    for (name, value) in &call.params {
+    for (name, value) in call.params.iter().filter(|(name, _)| keep(name)) {
         match (name.as_str(), value) {
             (FILE_PARAMS!(), Value::Str(s)) if !s.is_empty() => {
                 args.push((name.clone(), Value::str(&spec_dir.join(&**s).to_string_lossy())))
@@ -147,6 +157,23 @@ fn param_type(name: &str) -> ParamType {
     }
 }
 
+/// A simulator parameter as a registry parameter (its type, default and description).
+pub(crate) fn param_from_info(info: &kpl_sim::ParamInfo) -> Param {
+    let ty = param_type(info.ty);
+    let ty = if info.name == "scenario" {
+        ParamType::Choice(vec!["crossing".into(), "bridge".into(), "grid_town".into()])
+    } else if info.name == "flight" {
+        ParamType::Choice(vec!["hover".into(), "circle".into()])
+    } else {
+        ty
+    };
+    let default = serde_json::from_str::<serde_json::Value>(&info.default)
+        .ok()
+        .and_then(|j| Value::from_json_untyped(&j).ok())
+        .unwrap_or_else(|| Value::str(""));
+    Param::optional(info.name, ty, default, info.doc)
+}
+
 pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
     let mut entry = Entry::new(
         EntryKind::Source,
@@ -164,17 +191,7 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
         "ground truth per frame: every vehicle (id, pos, vel, heading, speed, road, lane, node, length, width), `visible`, and `seen_as` the percept that sees it",
     );
     for info in Params::describe() {
-        let ty = param_type(info.ty);
-        let ty = if info.name == "scenario" {
-            ParamType::Choice(vec!["crossing".into(), "bridge".into(), "grid_town".into()])
-        } else {
-            ty
-        };
-        let default = serde_json::from_str::<serde_json::Value>(&info.default)
-            .ok()
-            .and_then(|j| Value::from_json_untyped(&j).ok())
-            .unwrap_or_else(|| Value::str(""));
-        entry = entry.param(Param::optional(info.name, ty, default, info.doc));
+        entry = entry.param(param_from_info(&info));
     }
     registry.add_source(entry, |ctx| {
         let (params, traffic_seed) = params(ctx)?;

@@ -7,13 +7,15 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args as ClapArgs, ValueEnum};
-use kpl_score::{AlignOptions, Config, Missing, Options, Recording, ScoredStream, motchallenge};
+use kpl_camera::formats::Format as TruthFormat;
+use kpl_score::{AlignOptions, Config, Missing, Options, Recording, ScoredStream, TruthFile, motchallenge};
 
 const AFTER_HELP: &str = "\
 Examples:
   kpl run specs/traffic/bridge.kpl --for 60s && kpl score out/bridge
   kpl score out/bridge --stream onroad_car --max-distance 2 --format json
   kpl score out/bridge/tracks.jsonl --truth tracker.truth --export out/mot
+  kpl run specs/mot/image_plane.kpl --out out/mot && kpl score out/mot --gt specs/mot/gt.txt
 
 Every object stream of the recording (lists of records with `id` and `pos`: percepts, link
 outputs; a world model is scored per type) is compared with the ground truth (the stream named
@@ -21,8 +23,12 @@ outputs; a world model is scored per type) is compared with the ground truth (th
 IDP, IDR, identity switches, fragmentations, mostly tracked / partially tracked / mostly lost
 (py-motmetrics' definitions), HOTA, DetA, AssA, LocA (TrackEval's, similarity max(0, 1 - d / Z)
 with Z twice the gate). Branch objects of predictions split at junctions (records with
-`branch_of`) are hypotheses, not objects: they are left out and counted unless --branches. See
-docs/scoring.md.
+`branch_of`) are hypotheses, not objects: they are left out and counted unless --branches.
+With --gt, the ground truth is a data set's file (MOTChallenge's gt.txt, VisDrone, UA-DETRAC XML,
+COCO JSON; frame f at (f - first) / fps) and every stream of boxes (records with `box`: [left,
+top, width, height] in pixels) is scored by IoU as MOTChallenge's evaluation scores it (--iou,
+0.5), on what each stream measured (records with `measured: false`, predicted states, are left
+out as a tracker's file has none; --predicted scores them too). See docs/scoring.md.
 Exit status: 0 every stream scored, 1 the recording cannot be scored as asked (no ground truth,
 an unknown stream, times that do not match), 2 usage or I/O errors.";
 
@@ -60,6 +66,47 @@ pub struct Args {
     /// Also write MOTChallenge-style files (ground plane) of each scored stream into this folder.
     #[arg(long, value_name = "DIR")]
     export: Option<PathBuf>,
+    /// Ground truth from a data set's file (boxes in pixels, e.g. MOTChallenge's gt.txt) instead
+    /// of a recorded stream; the streams of boxes are scored by IoU.
+    #[arg(long, value_name = "FILE", conflicts_with = "truth")]
+    gt: Option<PathBuf>,
+    /// The format of --gt (default: by its name: `.xml` UA-DETRAC, `.json` COCO, else MOTChallenge).
+    #[arg(long, value_enum, requires = "gt")]
+    gt_format: Option<GtFormat>,
+    /// Frames per second of --gt (default: `frameRate` of the sequence's seqinfo.ini, else 25).
+    #[arg(long, value_name = "FPS", requires = "gt")]
+    fps: Option<f64>,
+    /// The frame of --gt at valid time 0.
+    #[arg(long, value_name = "FRAME", default_value_t = 1, requires = "gt")]
+    first_frame: i64,
+    /// Boxes of --gt with a lower score are left out (MOTChallenge's ground truth flags boxes not
+    /// to be considered with 0).
+    #[arg(long, value_name = "SCORE", default_value_t = 1.0, requires = "gt")]
+    min_score: f64,
+    /// Score boxes (records with `box`) by intersection over union: a pair matches at this IoU or
+    /// more (the default with --gt: 0.5, MOTChallenge's).
+    #[arg(long, value_name = "THRESHOLD", conflicts_with_all = ["max_distance", "hota_zero_distance"])]
+    iou: Option<f64>,
+    /// With --gt: score predicted states too (records with `measured: false`); by default a run is
+    /// scored against a data set's ground truth as a tracker's output is, on what it measured.
+    #[arg(long, requires = "gt", conflicts_with = "measured_only")]
+    predicted: bool,
+    /// Leave out true objects out of the sensor's view (records with `in_view: false`) and the
+    /// hypotheses closest to them within the gate: neither misses nor false positives.
+    #[arg(long)]
+    in_view_only: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum GtFormat {
+    /// MOTChallenge's text format (gt.txt).
+    Motchallenge,
+    /// VisDrone's MOT text format.
+    Visdrone,
+    /// UA-DETRAC's XML annotations.
+    Detrac,
+    /// COCO-style JSON.
+    Coco,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -81,9 +128,14 @@ enum Format {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let config = match Config::new(args.max_distance)
-        .and_then(|c| args.hota_zero_distance.map_or(Ok(c), |z| c.with_hota_zero_distance(z)))
-    {
+    let iou = args.iou.or(args.gt.as_ref().map(|_| kpl_score::DEFAULT_IOU));
+    let config = match iou.map_or_else(
+        || {
+            Config::new(args.max_distance)
+                .and_then(|c| args.hota_zero_distance.map_or(Ok(c), |z| c.with_hota_zero_distance(z)))
+        },
+        Config::iou,
+    ) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("error: {e}");
@@ -97,6 +149,11 @@ pub fn run(args: Args) -> ExitCode {
             return ExitCode::from(if e.is_data_error() { 1 } else { 2 });
         }
     };
+    let external_truth = match args.gt.as_ref().map(|gt| truth_file(gt, &args)) {
+        None => None,
+        Some(Ok(truth)) => Some(truth),
+        Some(Err(code)) => return code,
+    };
     let options = Options {
         truth: args.truth.clone(),
         streams: args.streams.clone(),
@@ -107,9 +164,14 @@ pub fn run(args: Args) -> ExitCode {
                 MissingArg::Empty => Missing::Empty,
                 MissingArg::Skip => Missing::Skip,
             },
-            measured_only: args.measured_only,
+            measured_only: args.measured_only || (args.gt.is_some() && !args.predicted),
             score_branches: args.branches,
+            boxes: iou.is_some(),
+            whole_truth: args.gt.is_some(),
+            in_view_only: args.in_view_only,
+            ignore_gate: config.max_distance(),
         },
+        external_truth,
     };
     let scored = match kpl_score::score_recording(&recording, &options) {
         Ok(s) => s,
@@ -177,6 +239,62 @@ pub(super) fn parse_metres(text: &str) -> Result<f64, String> {
         ));
     }
     Ok(metres)
+}
+
+/// The ground truth of --gt as a stream (its problems and the frame rate used printed as notes).
+fn truth_file(gt: &Path, args: &Args) -> Result<kpl_score::ObjectStream, ExitCode> {
+    let name = gt.to_string_lossy();
+    let format = match args.gt_format {
+        Some(GtFormat::Motchallenge) => TruthFormat::MotChallenge,
+        Some(GtFormat::Visdrone) => TruthFormat::VisDrone,
+        Some(GtFormat::Detrac) => TruthFormat::Detrac,
+        Some(GtFormat::Coco) => TruthFormat::Coco,
+        None if name.ends_with(".xml") => TruthFormat::Detrac,
+        None if name.ends_with(".json") => TruthFormat::Coco,
+        None => TruthFormat::MotChallenge,
+    };
+    let info = kpl_score::seqinfo(gt);
+    let fps = match (args.fps, info.as_ref().and_then(|(_, i)| i.frame_rate)) {
+        (Some(fps), _) => fps,
+        (None, Some(fps)) => {
+            eprintln!(
+                "note: {fps} frames per second, from {}",
+                info.as_ref().map_or(String::new(), |(f, _)| f.display().to_string())
+            );
+            fps
+        }
+        (None, None) => {
+            eprintln!("note: 25 frames per second (no --fps and no seqinfo.ini beside {})", gt.display());
+            25.0
+        }
+    };
+    if !(fps.is_finite() && fps > 0.0 && fps <= 1e6) {
+        eprintln!("error: --fps must be above 0 and at most 1000000, not {fps}");
+        return Err(ExitCode::from(2));
+    }
+    let truth = TruthFile {
+        path: gt.to_path_buf(),
+        format,
+        fps,
+        first_frame: args.first_frame,
+        last_frame: info.and_then(|(_, i)| i.seq_length).map(|n| args.first_frame + n - 1),
+        min_score: args.min_score,
+    };
+    match kpl_score::read_truth_file(&truth, &format!("gt:{}", gt.display())) {
+        Ok((stream, problems)) => {
+            for p in problems.iter().take(8) {
+                eprintln!("warning: {p}");
+            }
+            if problems.len() > 8 {
+                eprintln!("warning: ... {} more problems in {}", problems.len() - 8, gt.display());
+            }
+            Ok(stream)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            Err(ExitCode::from(2))
+        }
+    }
 }
 
 /// Writes each stream's files into a folder named after it.
