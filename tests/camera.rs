@@ -4,7 +4,12 @@
 //! format of `file.tracker`; a fixed camera calibrated from point pairs; `camera_grid.kpl` through
 //! the simulated UAV camera and the georeferencing unit, scored in world coordinates, with the
 //! percepts' covariances checked against their true errors.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, reason = "tests report and fail loudly")]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::print_stderr,
+    reason = "tests report and fail loudly"
+)]
 
 mod common;
 
@@ -27,11 +32,18 @@ fn scores(args: &[&str]) -> Vec<(String, Value)> {
     let out = kpl(&all);
     assert!(out.status.success(), "kpl {all:?}: {}", String::from_utf8_lossy(&out.stderr));
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
-    report["streams"].as_array().unwrap().iter().map(|s| (s["stream"].as_str().unwrap().to_string(), s.clone())).collect()
+    report["streams"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s["stream"].as_str().unwrap().to_string(), s.clone()))
+        .collect()
 }
 
 fn idf1(scores: &[(String, Value)], stream: &str) -> f64 {
-    scores.iter().find(|(n, _)| n == stream).unwrap_or_else(|| panic!("no {stream}")).1["identity"]["idf1"].as_f64().unwrap()
+    scores.iter().find(|(n, _)| n == stream).unwrap_or_else(|| panic!("no {stream}")).1["identity"]["idf1"]
+        .as_f64()
+        .unwrap()
 }
 
 /// The image-plane spec in a folder of its own with `tracker` as its tracker.txt; the run's output.
@@ -61,12 +73,17 @@ fn the_image_plane_spec_keeps_fragmented_tracks_together() {
     assert!(anchored > tracker + 0.005, "anchoring joins the tracker's fragments: {anchored} vs {tracker}");
     // What was measured is the tracker's boxes: the same detections, fewer switches.
     let clear = |n: &str| s.iter().find(|(m, _)| m == n).unwrap().1["clear"].clone();
-    assert_eq!(clear("tracker")["matches"].as_u64().unwrap() + clear("tracker")["switches"].as_u64().unwrap(),
-        clear("image_tracks")["matches"].as_u64().unwrap() + clear("image_tracks")["switches"].as_u64().unwrap());
+    assert_eq!(
+        clear("tracker")["matches"].as_u64().unwrap() + clear("tracker")["switches"].as_u64().unwrap(),
+        clear("image_tracks")["matches"].as_u64().unwrap()
+            + clear("image_tracks")["switches"].as_u64().unwrap()
+    );
     assert!(clear("image_tracks")["switches"].as_u64() <= clear("tracker")["switches"].as_u64());
     // --predicted scores the predicted states too: more hypotheses.
     let p = scores(&["score", out.to_str().unwrap(), "--gt", "specs/mot/gt.txt", "--predicted"]);
-    let predictions = |s: &[(String, Value)]| s.iter().find(|(n, _)| n == "image_tracks").unwrap().1["clear"]["predictions"].as_u64().unwrap();
+    let predictions = |s: &[(String, Value)]| {
+        s.iter().find(|(n, _)| n == "image_tracks").unwrap().1["clear"]["predictions"].as_u64().unwrap()
+    };
     assert!(predictions(&p) > predictions(&s));
 }
 
@@ -74,7 +91,10 @@ fn the_image_plane_spec_keeps_fragmented_tracks_together() {
 fn on_trackers_outputs_py_motmetrics_ships_anchoring_never_lowers_idf1() {
     let Some(python) = python("py-motmetrics") else { return };
     let out = std::process::Command::new(python)
-        .args(["-c", "import motmetrics, os; print(os.path.join(os.path.dirname(motmetrics.__file__), 'data'))"])
+        .args([
+            "-c",
+            "import motmetrics, os; print(os.path.join(os.path.dirname(motmetrics.__file__), 'data'))",
+        ])
         .output()
         .unwrap();
     let data = PathBuf::from(String::from_utf8(out.stdout).unwrap().trim());
@@ -91,7 +111,10 @@ fn on_trackers_outputs_py_motmetrics_ships_anchoring_never_lowers_idf1() {
             let clear = &s.iter().find(|(n, _)| n == "tracker").unwrap().1["clear"];
             assert!((tracker - 0.558).abs() < 5e-4 && (clear["mota"].as_f64().unwrap() - 0.526).abs() < 5e-4);
             assert!((clear["motp"].as_f64().unwrap() - 0.277).abs() < 5e-4);
-            assert_eq!((clear["false_positives"].as_u64(), clear["misses"].as_u64(), clear["switches"].as_u64()), (Some(13), Some(150), Some(7)));
+            assert_eq!(
+                (clear["false_positives"].as_u64(), clear["misses"].as_u64(), clear["switches"].as_u64()),
+                (Some(13), Some(150), Some(7))
+            );
         }
         assert!(anchored >= tracker, "{sequence}: anchoring lowered IDF1 from {tracker} to {anchored}");
         if anchored > tracker {
@@ -107,8 +130,15 @@ fn a_malformed_line_of_a_trackers_file_is_counted_and_the_run_goes_on() {
     let tracker = dir.join("tracker.txt");
     std::fs::write(&tracker, "1,1,10,10,20,40,1,-1,-1,-1\n1,2,oops,10,20,40,1\n2,1,12,10,20,40,1,-1,-1,-1\nnot a line\n3,1,14,10,20,40,1,-1,-1,-1\n").unwrap();
     let out = image_plane_run("malformed", &tracker);
-    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    let process = summary["summary"]["processes"].as_array().unwrap().iter().find(|p| p["name"] == "tracker").unwrap().clone();
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let process = summary["summary"]["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "tracker")
+        .unwrap()
+        .clone();
     assert_eq!(process["malformed"], 2, "{process}");
     let samples = lines(&out.join("tracks.jsonl"));
     assert_eq!(samples.iter().filter(|s| s["stream"] == "image_tracks").count(), 3, "three frames replayed");
@@ -117,7 +147,11 @@ fn a_malformed_line_of_a_trackers_file_is_counted_and_the_run_goes_on() {
 #[test]
 fn file_tracker_reads_every_format_and_a_fixed_camera_maps_it_to_the_ground() {
     let dir = fresh_dir("camera", "formats");
-    std::fs::write(dir.join("visdrone.txt"), "1,1,100,200,20,10,1,4,0,0\n1,0,0,0,50,50,0,0,0,0\n2,1,102,200,20,10,1,4,0,0\n").unwrap();
+    std::fs::write(
+        dir.join("visdrone.txt"),
+        "1,1,100,200,20,10,1,4,0,0\n1,0,0,0,50,50,0,0,0,0\n2,1,102,200,20,10,1,4,0,0\n",
+    )
+    .unwrap();
     std::fs::write(
         dir.join("detrac.xml"),
         r#"<sequence name="x"><ignored_region><box left="0" top="0" width="9" height="9"/></ignored_region>
@@ -161,7 +195,8 @@ sink out = file.jsonl(vis, det, coco, ground, path: "formats.jsonl")
     assert!((pos[0] - 11.2).abs() < 1e-6 && (pos[1] + 21.0).abs() < 1e-6, "{g}");
     let cov: Vec<f64> = g["pos_cov"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!((cov[0] - 0.01).abs() < 1e-6 && cov[1].abs() < 1e-9, "1 px is 0.1 m: {cov:?}");
-    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let text = summary.to_string();
     assert!(text.contains("calibration residual"), "the fit's residual is reported: {stderr}");
 }
@@ -179,8 +214,11 @@ fn the_camera_spec_anchors_georeferenced_percepts_in_world_coordinates() {
     // Every world percept's true error against its covariance: inside the 2-sigma ellipse
     // (Mahalanobis 2.486, 95.45 % for a Gaussian) for most of them.
     let samples = lines(&out.join("camera_grid/tracks.jsonl"));
-    let truth: std::collections::HashMap<i64, &Value> =
-        samples.iter().filter(|s| s["stream"] == "uav.truth").map(|s| (s["valid"].as_i64().unwrap(), &s["value"])).collect();
+    let truth: std::collections::HashMap<i64, &Value> = samples
+        .iter()
+        .filter(|s| s["stream"] == "uav.truth")
+        .map(|s| (s["valid"].as_i64().unwrap(), &s["value"]))
+        .collect();
     let (mut inside, mut total) = (0usize, 0usize);
     for sample in samples.iter().filter(|s| s["stream"] == "percepts") {
         let Some(cars) = truth.get(&sample["valid"].as_i64().unwrap()) else { continue };
@@ -206,6 +244,9 @@ fn the_camera_spec_anchors_georeferenced_percepts_in_world_coordinates() {
         }
     }
     let fraction = inside as f64 / total as f64;
-    eprintln!("camera_grid 60 s: {inside} of {total} percepts ({:.1} %) inside their 2-sigma ellipse", fraction * 100.0);
+    eprintln!(
+        "camera_grid 60 s: {inside} of {total} percepts ({:.1} %) inside their 2-sigma ellipse",
+        fraction * 100.0
+    );
     assert!(total > 1000 && fraction > 0.8, "{fraction}");
 }

@@ -172,7 +172,15 @@ fn hostile_files_get_a_clear_error_or_a_skip_never_an_abort() {
     let dir = scratch("hostile");
     let data = dir.join("data");
     let output = kpl(&[
-        "cater", "generate", "--videos", "3", "--seed", "4", "--layout", "la-cater", "--out",
+        "cater",
+        "generate",
+        "--videos",
+        "3",
+        "--seed",
+        "4",
+        "--layout",
+        "la-cater",
+        "--out",
         data.to_str().unwrap(),
     ]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
@@ -209,16 +217,36 @@ fn la_caters_perfect_perception_pickles_are_found_and_never_averaged() {
     let dir = scratch("la-cater");
     let data = dir.join("data");
     let output = kpl(&[
-        "cater", "generate", "--videos", "4", "--seed", "6", "--layout", "la-cater", "--out", data.to_str().unwrap(),
+        "cater",
+        "generate",
+        "--videos",
+        "4",
+        "--seed",
+        "6",
+        "--layout",
+        "la-cater",
+        "--out",
+        data.to_str().unwrap(),
     ]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let json = dir.join("perfect.json");
     let output = kpl(&[
-        "cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa", "--json", json.to_str().unwrap(),
+        "cater",
+        "eval",
+        "--data",
+        data.to_str().unwrap(),
+        "--model",
+        "aapa",
+        "--json",
+        json.to_str().unwrap(),
     ]);
     let table = String::from_utf8_lossy(&output.stdout);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(table.contains("perfect_perception") && table.contains("average_still off for exact boxes (4 videos)"), "{table}");
+    assert!(
+        table.contains("perfect_perception")
+            && table.contains("average_still off for exact boxes (4 videos)"),
+        "{table}"
+    );
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(report["iou"]["visible"]["mean"], 100.0, "{}", report["iou"]);
     assert_eq!(report["noisy_videos"], 0);
@@ -227,8 +255,16 @@ fn la_caters_perfect_perception_pickles_are_found_and_never_averaged() {
     for (sub, noisy) in [("perfect_perception", 0), ("od_perception", 4)] {
         let pickles = data.join(sub);
         let output = kpl(&[
-            "cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa", "--pickles",
-            pickles.to_str().unwrap(), "--json", json.to_str().unwrap(),
+            "cater",
+            "eval",
+            "--data",
+            data.to_str().unwrap(),
+            "--model",
+            "aapa",
+            "--pickles",
+            pickles.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
         ]);
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();

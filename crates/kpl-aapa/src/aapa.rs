@@ -359,7 +359,10 @@ impl Aapa {
             && names_single_other(action, work)
         {
             let open = open_binding(action, time, bindings);
-            let by_type = action.args.first().is_some_and(|m| !work.iter().any(|w| !w.removed && w.anchor.symbol == *m));
+            let by_type = action
+                .args
+                .first()
+                .is_some_and(|m| !work.iter().any(|w| !w.removed && w.anchor.symbol == *m));
             let nearest = nearest_to_other(action, work, theta_anch).or_else(|| {
                 let infer = by_type && self.params.extensions.infer_hidden && self.hides_in_mover(action);
                 infer.then(|| infer_container(action, time, work, theta_anch, notes)).flatten()
@@ -370,7 +373,10 @@ impl Aapa {
                 return;
             }
         }
-        let by_type = action.args.first().is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
+        let by_type = action
+            .args
+            .first()
+            .is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
         let movers = match (by_type, self.params.extensions.identity_by_place) {
             (false, _) => Vec::new(),
             (true, true) => self.movers(action, starting, work),
@@ -507,8 +513,9 @@ impl Aapa {
 
     /// Whether an action's rules attach something to its moving object (argument 0 is a parent).
     fn attaches_to_mover(&self, action: &Action) -> bool {
-        self.rules_for(action)
-            .any(|r| r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0)))
+        self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0))
+        })
     }
 
     /// The box a parent's children follow: its own, or for a noisy detector's (`average_still`) seen
@@ -1063,12 +1070,8 @@ impl MovePath {
 
 /// The profiles a move is fitted with; smooth first, which wins unless another fits clearly
 /// better (residual below [`CLEARLY_BETTER`] of smooth's).
-const PROFILES: [fn(f64) -> f64; 4] = [
-    |u| u * u * (3.0 - 2.0 * u),
-    |u| u,
-    |u| u * u,
-    |u| 1.0 - (1.0 - u) * (1.0 - u),
-];
+const PROFILES: [fn(f64) -> f64; 4] =
+    [|u| u * u * (3.0 - 2.0 * u), |u| u, |u| u * u, |u| 1.0 - (1.0 - u) * (1.0 - u)];
 const CLEARLY_BETTER: f64 = 0.5;
 /// How far (root mean square, pixels plus a share of the move's length) the positions seen may lie
 /// from the best fit for it to be used to continue a move unseen, and to smooth a detector's boxes
@@ -1166,7 +1169,10 @@ fn merge_duplicates(work: &mut [Work], bindings: &mut [Binding], notes: &mut Vec
             let (aligned, percept_type) = (work[j].aligned, work[j].percept_type.clone());
             work[j].removed = true;
             let old = &mut work[i];
-            notes.push(format!("`{}` merged into `{}`: one object anchored twice", younger.symbol, old.anchor.symbol));
+            notes.push(format!(
+                "`{}` merged into `{}`: one object anchored twice",
+                younger.symbol, old.anchor.symbol
+            ));
             if aligned && !old.aligned {
                 old.anchor.bbox = younger.bbox;
                 old.anchor.status = younger.status;
@@ -1485,7 +1491,8 @@ fn nearest_to_other(action: &Action, work: &[Work], theta_anch: f64) -> Option<S
         .filter(|&i| !work[i].removed && work[i].anchor.object_type == *mover && i != other)
         .filter(free)
         .collect();
-    let established: Vec<usize> = all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+    let established: Vec<usize> =
+        all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
     let pool = if established.is_empty() { all } else { established };
     pool.into_iter()
         .map(|i| {

@@ -301,7 +301,7 @@ impl Sim {
             let bbox = BBox::new(u - w / 2.0, v - h / 2.0, u + w / 2.0, v + h / 2.0);
             let in_view =
                 bbox.x1 >= 0.0 && bbox.y1 >= 0.0 && bbox.x2 <= IMAGE.width && bbox.y2 <= IMAGE.height;
-            let flickering = self.flicker.contains(&i) && index % 3 == 0;
+            let flickering = self.flicker.contains(&i) && index.is_multiple_of(3);
             truth.push(TruthObject {
                 name: part.name.into(),
                 object_type: part.object_type.into(),

@@ -89,7 +89,8 @@ fn an_unexplained_disappearance_is_lost_decays_and_is_removed() {
 fn an_established_object_that_vanishes_is_kept_for_keep_lost_seconds() {
     // `Params::cater()` keeps an established anchor that vanishes unexplained for 10 s (H1), then
     // the paper's decay takes it; a short-lived detection (not established) decays at once.
-    let mut frames = still(vec![p("a", "cube", bx(100., 100., 120., 120.)), p("g", "cube", bx(0., 0., 9., 9.))], 1);
+    let mut frames =
+        still(vec![p("a", "cube", bx(100., 100., 120., 120.)), p("g", "cube", bx(0., 0., 9., 9.))], 1);
     frames.extend(still(vec![p("a", "cube", bx(100., 100., 120., 120.))], 10)); // a: confidence 1.0
     frames.extend(still(vec![p("far", "cone", bx(200., 0., 210., 10.))], 320));
     let worlds = run(&cater(), &frames);

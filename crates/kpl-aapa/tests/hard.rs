@@ -32,7 +32,11 @@ fn completed(name: &str, args: &[&str]) -> Action {
 }
 
 /// Runs `frames` frames; `scene(f)` gives frame `f`'s percepts and actions. Returns every world.
-fn run(aapa: &Aapa, frames: usize, mut scene: impl FnMut(usize) -> (Vec<Percept>, Vec<Action>)) -> Vec<WorldState> {
+fn run(
+    aapa: &Aapa,
+    frames: usize,
+    mut scene: impl FnMut(usize) -> (Vec<Percept>, Vec<Action>),
+) -> Vec<WorldState> {
     let mut world = WorldState::default();
     let mut out = Vec::with_capacity(frames);
     for f in 0..frames {
@@ -67,7 +71,8 @@ fn a_move_seen_in_part_continues_with_the_profile_it_showed() {
     // A cube slides from x = 40 to x = 240 over frames 10 to 40, seen until frame 22, then behind
     // a wide wall until it stops. Its speed profile is linear, ease-in or ease-out (CATER renders
     // Blender's smooth easing; hard scenes use all four).
-    let profiles: [(&str, fn(f64) -> f64); 3] =
+    type Profile = (&'static str, fn(f64) -> f64);
+    let profiles: [Profile; 3] =
         [("linear", |u| u), ("ease-in", |u| u * u), ("ease-out", |u| 1.0 - (1.0 - u) * (1.0 - u))];
     for (name, profile) in profiles {
         let worlds = run(&cater(), 41, |f| {
@@ -87,7 +92,10 @@ fn a_move_seen_in_part_continues_with_the_profile_it_showed() {
         for f in [28, 34, 40] {
             let truth = along(profile, 40.0, 240.0, 10, 40, f);
             let predicted = centre_of(&worlds[f], "cube")[0];
-            assert!((predicted - truth).abs() < 3.0, "{name}, frame {f}: at {predicted:.1}, truly at {truth:.1}");
+            assert!(
+                (predicted - truth).abs() < 3.0,
+                "{name}, frame {f}: at {predicted:.1}, truly at {truth:.1}"
+            );
         }
         assert_eq!(worlds[40].anchor("cube").unwrap().status, AnchorStatus::Occluded);
     }
@@ -117,7 +125,10 @@ fn an_object_turning_in_place_is_followed_not_averaged() {
     for (f, world) in worlds.iter().enumerate().skip(20) {
         let [w, h] = size(f);
         let b = world.anchor("cube").unwrap().bbox;
-        assert!((b.width() - w).abs() < 0.5 && (b.height() - h).abs() < 0.5, "frame {f}: {b:?}, truly {w} x {h}");
+        assert!(
+            (b.width() - w).abs() < 0.5 && (b.height() - h).abs() < 0.5,
+            "frame {f}: {b:?}, truly {w} x {h}"
+        );
     }
 }
 
@@ -129,7 +140,11 @@ fn a_false_detection_of_the_contained_class_is_not_what_the_cone_covers() {
     // not re-acquired there, and the cone covers the snitch, not the false one: when the cone then
     // slides to x = 250, the snitch goes with it, where it was in the cone.
     let worlds = run(&cater(), 60, |f| {
-        let cone_x = if f < 30 { along(|u| u, 200.0, 100.0, 10, 30, f) } else { along(|u| u, 100.0, 250.0, 35, 55, f) };
+        let cone_x = if f < 30 {
+            along(|u| u, 200.0, 100.0, 10, 30, f)
+        } else {
+            along(|u| u, 100.0, 250.0, 35, 55, f)
+        };
         let mut percepts = vec![p("cone", "cone", at(cone_x, 160.0, 50.0, 60.0))];
         if f < 26 {
             percepts.push(p("snitch", "snitch", at(100.0, 158.0, 16.0, 16.0)));
@@ -187,7 +202,11 @@ fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen()
         if f < 26 {
             percepts.push(p("s", "snitch", snitch));
         }
-        let b = if f <= 100 { lerp(at(240.0, 154.0, 52.0, 64.0), b_on, 40, 60, f) } else { lerp(b_on, b_end, 100, 130, f) };
+        let b = if f <= 100 {
+            lerp(at(240.0, 154.0, 52.0, 64.0), b_on, 40, 60, f)
+        } else {
+            lerp(b_on, b_end, 100, 130, f)
+        };
         percepts.push(p("b", "cone_l", b));
         let actions = [
             starts(f, 10, 30, "_contain", &["cone_m", "snitch"]),
@@ -206,7 +225,11 @@ fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen()
         (percepts, actions.into_iter().flatten().collect())
     });
     let last = worlds.last().unwrap();
-    assert!(last.has_relation("contained", "s", "a") && last.has_relation("contained", "a", "b"), "{:?}", last.relations);
+    assert!(
+        last.has_relation("contained", "s", "a") && last.has_relation("contained", "a", "b"),
+        "{:?}",
+        last.relations
+    );
     let x = centre_of(last, "snitch")[0];
     assert!((x - 260.0).abs() < 3.0, "the snitch is at {x:.1}, carried two levels down to 260");
 }
@@ -314,7 +337,10 @@ fn an_identical_object_left_out_of_the_perception_keeps_its_identity() {
         if f < 10 {
             percepts.push(p("s", "snitch", at(200.0, 148.0, 14.0, 14.0)));
         }
-        let actions = [starts(f, 10, 19, "_contain", &["cone", "snitch"]), ends(f, 19, "_contain", &["cone", "snitch"])];
+        let actions = [
+            starts(f, 10, 19, "_contain", &["cone", "snitch"]),
+            ends(f, 19, "_contain", &["cone", "snitch"]),
+        ];
         (percepts, actions.into_iter().flatten().collect())
     });
     let last = worlds.last().unwrap();
@@ -334,14 +360,26 @@ fn a_stack_released_where_it_stands_is_not_taken_for_its_twin_sliding_by() {
         let mut percepts = vec![];
         let hidden = (60..=110).contains(&f);
         if !hidden {
-            percepts.push(p("a", "cone_m", lerp(at(100.0, 152.0, 34.0, 42.0), at(160.0, 152.0, 34.0, 42.0), 10, 30, f)));
-            percepts.push(p("a2", "cone_m", lerp(at(60.0, 152.0, 34.0, 42.0), at(200.0, 152.0, 34.0, 42.0), 100, 130, f)));
+            percepts.push(p(
+                "a",
+                "cone_m",
+                lerp(at(100.0, 152.0, 34.0, 42.0), at(160.0, 152.0, 34.0, 42.0), 10, 30, f),
+            ));
+            percepts.push(p(
+                "a2",
+                "cone_m",
+                lerp(at(60.0, 152.0, 34.0, 42.0), at(200.0, 152.0, 34.0, 42.0), 100, 130, f),
+            ));
         }
         if f < 26 {
             percepts.push(p("s", "snitch", at(160.0, 150.0, 14.0, 14.0)));
         }
         let b = lerp(at(260.0, 154.0, 52.0, 64.0), at(160.0, 154.0, 52.0, 64.0), 40, 60, f);
-        percepts.push(p("b", "cone_l", if f > 110 { lerp(b, bx(b.x1, b.y1 - 80.0, b.x2, b.y2 - 80.0), 110, 120, f) } else { b }));
+        percepts.push(p(
+            "b",
+            "cone_l",
+            if f > 110 { lerp(b, bx(b.x1, b.y1 - 80.0, b.x2, b.y2 - 80.0), 110, 120, f) } else { b },
+        ));
         let actions = [
             starts(f, 10, 30, "_contain", &["cone_m", "snitch"]),
             ends(f, 30, "_contain", &["cone_m", "snitch"]),
@@ -368,7 +406,8 @@ fn an_object_detected_under_another_class_for_a_while_stays_one_anchor() {
     // that the cone that then covers the snitch carries the one snitch there is.
     let snitch = at(150.0, 150.0, 14.0, 14.0);
     let worlds = run(&cater(), 80, |f| {
-        let mut percepts = vec![p("c", "cone", lerp(at(240.0, 152.0, 34.0, 42.0), at(150.0, 152.0, 34.0, 42.0), 30, 50, f))];
+        let mut percepts =
+            vec![p("c", "cone", lerp(at(240.0, 152.0, 34.0, 42.0), at(150.0, 152.0, 34.0, 42.0), 30, 50, f))];
         if f < 46 {
             let kind = if (20..=23).contains(&f) { "sphere" } else { "snitch" };
             percepts.push(p("s", kind, snitch));
@@ -382,9 +421,9 @@ fn an_object_detected_under_another_class_for_a_while_stays_one_anchor() {
             starts(f, 55, 75, "_slide", &["cone"]),
             ends(f, 75, "_slide", &["cone"]),
         ];
-        let mut percepts = percepts;
         if f >= 55 {
-            percepts[0] = p("c", "cone", lerp(at(150.0, 152.0, 34.0, 42.0), at(60.0, 152.0, 34.0, 42.0), 55, 75, f));
+            percepts[0] =
+                p("c", "cone", lerp(at(150.0, 152.0, 34.0, 42.0), at(60.0, 152.0, 34.0, 42.0), 55, 75, f));
         }
         (percepts, actions.into_iter().flatten().collect())
     });
@@ -413,12 +452,15 @@ fn a_noisy_detectors_outlier_neither_moves_a_still_object_nor_its_contents() {
             let b = at(150.0, 152.0, 34.0, 42.0);
             bx(b.x1 + dx, b.y1 + dy, b.x2 - dy, b.y2 + dx)
         };
-        let mut percepts = vec![p("k", "cube", at(60.0 + cube_shift, 100.0, 20.0, 20.0)), p("c", "cone", cone)];
+        let mut percepts =
+            vec![p("k", "cube", at(60.0 + cube_shift, 100.0, 20.0, 20.0)), p("c", "cone", cone)];
         if f < 26 {
             percepts.push(p("s", "snitch", snitch));
         }
-        let actions =
-            [starts(f, 10, 30, "_contain", &["cone", "snitch"]), ends(f, 30, "_contain", &["cone", "snitch"])];
+        let actions = [
+            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
+            ends(f, 30, "_contain", &["cone", "snitch"]),
+        ];
         (percepts, actions.into_iter().flatten().collect())
     });
     assert_eq!(worlds[40].anchor("k").unwrap().bbox, at(60.0, 100.0, 20.0, 20.0), "the outlier is left out");
@@ -435,7 +477,11 @@ fn a_container_no_one_saw_is_inferred_over_what_it_covers() {
     // nothing, so the container is inferred over the snitch, and the snitch stays where it is.
     let snitch = at(60.0, 150.0, 14.0, 14.0);
     let worlds = run(&cater(), 80, |f| {
-        let mut percepts = vec![p("b", "cone_l", lerp(at(260.0, 154.0, 52.0, 64.0), at(200.0, 154.0, 52.0, 64.0), 10, 30, f))];
+        let mut percepts = vec![p(
+            "b",
+            "cone_l",
+            lerp(at(260.0, 154.0, 52.0, 64.0), at(200.0, 154.0, 52.0, 64.0), 10, 30, f),
+        )];
         if f < 30 {
             percepts.push(p("a", "cone_m", at(200.0, 152.0, 34.0, 42.0)));
         }

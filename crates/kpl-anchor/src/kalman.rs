@@ -41,12 +41,17 @@ use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
 /// error when it is there but not a positive definite covariance.
 pub fn position_covariance(record: &Record) -> Result<Option<Matrix2<f64>>, String> {
     let Some(value) = record.get("pos_cov") else { return Ok(None) };
-    let bad = || format!("`pos_cov` must be [σ_xx, σ_xy, σ_yy] of a positive definite covariance (m²), found {value}");
+    let bad = || {
+        format!("`pos_cov` must be [σ_xx, σ_xy, σ_yy] of a positive definite covariance (m²), found {value}")
+    };
     let Value::List(items) = value else { return Err(bad()) };
     let numbers: Option<Vec<f64>> = items.iter().map(Value::as_f64).collect();
     match numbers.as_deref() {
         Some([xx, xy, yy])
-            if [*xx, *xy, *yy].iter().all(|v| v.is_finite()) && *xx > 0.0 && *yy > 0.0 && xx * yy - xy * xy > 0.0 =>
+            if [*xx, *xy, *yy].iter().all(|v| v.is_finite())
+                && *xx > 0.0
+                && *yy > 0.0
+                && xx * yy - xy * xy > 0.0 =>
         {
             Ok(Some(Matrix2::new(*xx, *xy, *xy, *yy)))
         }
@@ -280,10 +285,10 @@ impl Kalman {
                 CvFilter::with_position_covariance(pos, vel, r_pos, vel_sd * vel_sd, call.time)
             }
         };
-        if let (Some(fuse), Some(Some(other))) = (self.fuse, call.inputs.first()) {
-            if let Some(z) = closest_within(other, filter.position(), fuse.gate_m) {
-                filter.update(z, fuse.other_noise_m.powi(2)).map_err(|e| e.to_string())?;
-            }
+        if let (Some(fuse), Some(Some(other))) = (self.fuse, call.inputs.first())
+            && let Some(z) = closest_within(other, filter.position(), fuse.gate_m)
+        {
+            filter.update(z, fuse.other_noise_m.powi(2)).map_err(|e| e.to_string())?;
         }
         Ok(filter)
     }
@@ -386,11 +391,18 @@ mod tests {
         // along x (variance 1) and hardly along y (variance 99), moves it 1 m in x and 0.02 m in y.
         let mut f = CvFilter::new([0.0, 0.0], [0.0, 0.0], 1.0, 1.0, 0);
         f.update_with_covariance([2.0, 2.0], Matrix2::new(1.0, 0.0, 0.0, 99.0)).unwrap();
-        assert!((f.position()[0] - 1.0).abs() < 1e-12 && (f.position()[1] - 0.02).abs() < 1e-12, "{:?}", f.position());
+        assert!(
+            (f.position()[0] - 1.0).abs() < 1e-12 && (f.position()[1] - 0.02).abs() < 1e-12,
+            "{:?}",
+            f.position()
+        );
         // A record's `pos_cov`.
         let numbers = |v: &[f64]| Value::List(v.iter().map(|x| Value::Float(*x)).collect::<Vec<_>>().into());
         let record = |cov: Value| Record { id: None, fields: vec![("pos_cov".into(), cov)] };
-        assert_eq!(position_covariance(&record(numbers(&[4.0, 1.0, 2.0]))), Ok(Some(Matrix2::new(4.0, 1.0, 1.0, 2.0))));
+        assert_eq!(
+            position_covariance(&record(numbers(&[4.0, 1.0, 2.0]))),
+            Ok(Some(Matrix2::new(4.0, 1.0, 1.0, 2.0)))
+        );
         assert!(position_covariance(&record(numbers(&[1.0, 2.0, 1.0]))).is_err(), "not positive definite");
         assert!(position_covariance(&record(numbers(&[1.0, 0.0]))).is_err());
         assert_eq!(position_covariance(&Record::default()), Ok(None));

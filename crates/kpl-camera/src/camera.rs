@@ -171,10 +171,10 @@ impl Camera {
             if k == n {
                 break;
             }
-            if below(a) {
-                if let Some(p) = self.ground_within(a, ground_z, max_range) {
-                    polygon.push(p);
-                }
+            if below(a)
+                && let Some(p) = self.ground_within(a, ground_z, max_range)
+            {
+                polygon.push(p);
             }
             match (below(a), below(b)) {
                 (true, false) => {

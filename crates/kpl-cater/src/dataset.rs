@@ -18,17 +18,18 @@ use crate::categories::{FrameCategories, carried_frames, contained_frames, visib
 use crate::classes::{SNITCH_INDEX, opnet_index};
 use crate::detector::{DetectorNoise, detect_video, perfect};
 use crate::detector_b::{DetectorBNoise, detect_video_b};
-use crate::formats::pickle::write_perception_pickle;
-use crate::perfect_pickles::{Occlusion, perfect_perception};
 use crate::error::CaterError;
+use crate::formats::pickle::write_perception_pickle;
 use crate::formats::{
     Annotations, CameraField, FRAMES, GroundTruth, PerceptionFile, Scene, read_json, write_annotation_file,
     write_json,
 };
 use crate::layout::{
     ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, DETECTOR_PICKLES_DIR, LABELS_DIR, PERCEPTION_DIR,
-    PERFECT_PICKLES_DIR, Perception, VISIBLE_FILE, ground_truth_path, perception_path, pickle_path, scene_path,
+    PERFECT_PICKLES_DIR, Perception, VISIBLE_FILE, ground_truth_path, perception_path, pickle_path,
+    scene_path,
 };
+use crate::perfect_pickles::{Occlusion, perfect_perception};
 use crate::render::{Camera, Rendered, render};
 use crate::sim::{Motion, directions, simulate};
 
@@ -179,8 +180,8 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
     } else {
         Occlusion::OneBox { visible_ratio: 0.0 }
     };
-    let opnet_perfect =
-        perfect_perception(&scene, &ground_truth, FRAMES, occlusion).unwrap_or_else(|| vec![Vec::new(); FRAMES]);
+    let opnet_perfect = perfect_perception(&scene, &ground_truth, FRAMES, occlusion)
+        .unwrap_or_else(|| vec![Vec::new(); FRAMES]);
     let visible = if config.motion == Motion::Hard {
         // Visible when OPNet's rule, with the union of nearer boxes, keeps the snitch.
         opnet_perfect.iter().map(|f| f.iter().any(|(label, _)| *label == i64::from(SNITCH_INDEX))).collect()
@@ -324,15 +325,23 @@ pub fn write_video(dir: &Path, video: &GeneratedVideo, layout: Layout) -> Result
             video.detector_b.write(&perception_path(dir, name, Perception::DetectorB))
         }
         Layout::LaCater => {
-            for sub in [LABELS_DIR, PERFECT_PICKLES_DIR, DETECTOR_PICKLES_DIR, Perception::DetectorB.pickle_dir()] {
+            for sub in
+                [LABELS_DIR, PERFECT_PICKLES_DIR, DETECTOR_PICKLES_DIR, Perception::DetectorB.pickle_dir()]
+            {
                 create_dir(&dir.join(sub))?;
             }
             video.ground_truth.write(&dir.join(LABELS_DIR).join(format!("{name}_bb.json")))?;
-            write_perception_pickle(&pickle_path(&dir.join(PERFECT_PICKLES_DIR), name), &video.opnet_perfect)?;
+            write_perception_pickle(
+                &pickle_path(&dir.join(PERFECT_PICKLES_DIR), name),
+                &video.opnet_perfect,
+            )?;
             for (perception, file) in
                 [(Perception::Detector, &video.detector), (Perception::DetectorB, &video.detector_b)]
             {
-                write_perception_pickle(&pickle_path(&dir.join(perception.pickle_dir()), name), &opnet_labels(file))?;
+                write_perception_pickle(
+                    &pickle_path(&dir.join(perception.pickle_dir()), name),
+                    &opnet_labels(file),
+                )?;
             }
             Ok(())
         }
@@ -347,14 +356,16 @@ fn opnet_labels(file: &PerceptionFile) -> Vec<Vec<(i64, [i64; 4])>> {
         .iter()
         .map(|f| {
             f.iter()
-                .map(|d| (labels.get(d.class as usize).copied().unwrap_or(-1), d.bbox.map(|v| v.round() as i64)))
+                .map(|d| {
+                    (labels.get(d.class as usize).copied().unwrap_or(-1), d.bbox.map(|v| v.round() as i64))
+                })
                 .collect()
         })
         .collect()
 }
 
 /// Xor-ed into the seed for the second detector's generator.
-const DETECTOR_B_SEED: u64 = 0x00de_7ec7_0b;
+const DETECTOR_B_SEED: u64 = 0xde7e_c70b;
 
 pub fn read_manifest(dir: &Path) -> Result<Manifest, CaterError> {
     read_json(&dir.join("manifest.json"))

@@ -168,7 +168,8 @@ pub fn detect_video_b(
                 *e = rho * *e + innovation * gaussian(rng);
             }
             let Some(whole) = r.bbox else { continue };
-            let logistic = 1.0 / (1.0 + (-(r.visible_fraction - noise.half_visible) / noise.visible_width).exp());
+            let logistic =
+                1.0 / (1.0 + (-(r.visible_fraction - noise.half_visible) / noise.visible_width).exp());
             let mut p = noise.detect_probability * logistic;
             if track.bad {
                 p *= noise.burst_factor;
@@ -217,7 +218,8 @@ pub fn detect_video_b(
                 });
             }
         }
-        let real: Vec<(usize, &Rendered)> = frame.iter().enumerate().filter(|(_, r)| r.bbox.is_some()).collect();
+        let real: Vec<(usize, &Rendered)> =
+            frame.iter().enumerate().filter(|(_, r)| r.bbox.is_some()).collect();
         if rng.random_bool(noise.ghost_rate.clamp(0.0, 1.0))
             && let Some(&(i, near)) = real.choose(rng)
             && let Some(b) = near.bbox

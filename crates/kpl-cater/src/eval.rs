@@ -201,7 +201,8 @@ impl EvalOptions {
         }
         let base = self.model.params_for(noisy);
         let Some(overrides) = &self.param_overrides else { return Ok(base) };
-        let mut value = serde_json::to_value(base).map_err(|e| format!("encoding default parameters: {e}"))?;
+        let mut value =
+            serde_json::to_value(base).map_err(|e| format!("encoding default parameters: {e}"))?;
         if !overrides.is_object() {
             return Err("expected a JSON object of AAPA parameters".into());
         }
@@ -485,7 +486,8 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
         None => AnnotationSet::read(&annotations_dir(&options.data))?,
     };
     let bad_params = |e: String| CaterError::invalid(Path::new("--params"), e);
-    let params = [options.params_for(false).map_err(bad_params)?, options.params_for(true).map_err(bad_params)?];
+    let params =
+        [options.params_for(false).map_err(bad_params)?, options.params_for(true).map_err(bad_params)?];
     let boxes = options.perception.boxes();
     let next = AtomicUsize::new(0);
     type Outcome = Result<Scored, String>;
@@ -527,7 +529,8 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
                             )?;
                             if let (true, Some(dir)) = (traced, &options.predictions_dir) {
                                 let path = dir.join(format!("{name}_worlds.jsonl"));
-                                std::fs::write(&path, worlds).map_err(|e| format!("{}: {e}", path.display()))?;
+                                std::fs::write(&path, worlds)
+                                    .map_err(|e| format!("{}: {e}", path.display()))?;
                             }
                             Ok((Scored { score, noisy, dropped: video.perception.dropped }, predictions))
                         });

@@ -29,6 +29,9 @@ pub enum Occlusion {
     Union { camera: [f64; 3] },
 }
 
+/// One frame's perception: `(OPNet label, [x1, y1, x2, y2])` of each object perceived.
+pub type FrameDetections = Vec<(i64, [i64; 4])>;
+
 /// Per frame, `(OPNet label, [x1, y1, x2, y2])` of each object perceived; `None` if an object's
 /// class is not one of OPNet's or the files disagree (no boxes or locations for an object).
 pub fn perfect_perception(
@@ -36,7 +39,7 @@ pub fn perfect_perception(
     truth: &GroundTruth,
     frames: usize,
     occlusion: Occlusion,
-) -> Option<Vec<Vec<(i64, [i64; 4])>>> {
+) -> Option<Vec<FrameDetections>> {
     struct Object<'a> {
         label: i64,
         boxes: &'a [[i32; 4]],
@@ -72,7 +75,8 @@ pub fn perfect_perception(
         let mut occluded = vec![false; shown.len()];
         match occlusion {
             Occlusion::OneBox { visible_ratio } => {
-                let distances: Vec<f64> = shown.iter().map(|o| distance(OPNET_CAMERA, o.locations[f])).collect();
+                let distances: Vec<f64> =
+                    shown.iter().map(|o| distance(OPNET_CAMERA, o.locations[f])).collect();
                 for i in 0..shown.len() {
                     for j in i..shown.len() {
                         match one_box(boxes[i], boxes[j], distances[i], distances[j], 1.0 - visible_ratio) {
@@ -154,7 +158,9 @@ pub fn union_covers(target: [i64; 4], others: &[[i64; 4]]) -> bool {
     ys.sort_unstable();
     ys.dedup();
     xs.windows(2).all(|x| {
-        ys.windows(2).all(|y| clipped.iter().any(|o| o[0] <= x[0] && x[1] - 1 <= o[2] && o[1] <= y[0] && y[1] - 1 <= o[3]))
+        ys.windows(2).all(|y| {
+            clipped.iter().any(|o| o[0] <= x[0] && x[1] - 1 <= o[2] && o[1] <= y[0] && y[1] - 1 <= o[3])
+        })
     })
 }
 

@@ -339,7 +339,12 @@ impl Generator<'_> {
     }
 
     fn keyframe(&mut self, object: usize, frame: usize) {
-        let k = Keyframe { frame, location: self.current[object], tilt: self.tilt[object], profile: self.profile };
+        let k = Keyframe {
+            frame,
+            location: self.current[object],
+            tilt: self.tilt[object],
+            profile: self.profile,
+        };
         self.keyframes[object].push(k);
     }
 
@@ -620,7 +625,9 @@ impl Generator<'_> {
                         None => continue,
                     }
                 }
-                _ => (0..self.groups.len()).collect::<Vec<_>>().choose_multiple(self.rng, 2).copied().collect(),
+                _ => {
+                    (0..self.groups.len()).collect::<Vec<_>>().choose_multiple(self.rng, 2).copied().collect()
+                }
             };
             let [g1, g2] = pair[..] else { return None };
             let moves_first = self.rng.random_bool(HardScenes::TARGET_MOVES_FIRST);
@@ -636,7 +643,8 @@ impl Generator<'_> {
                 let snapshot = (self.current.clone(), self.locations.clone(), self.keyframes.clone());
                 let movements = self.movements.clone();
                 self.move_group(g2, slide_start, slide_end, Some(Act::Slide));
-                let slid = self.movements[target].last().is_some_and(|m| m.kind() == Some(MovementKind::Slide));
+                let slid =
+                    self.movements[target].last().is_some_and(|m| m.kind() == Some(MovementKind::Slide));
                 let frames = end - start;
                 let start = start.min(slide_start);
                 let needed = ((slide_end + 2 - start) as f64 / 0.8).ceil() as usize;

@@ -123,7 +123,10 @@ fn la_caters_layout_is_found_as_it_comes() {
     assert!(!dir.join("perception").exists());
     assert_eq!(layout::find_ground_truth(&dir, name), dir.join("labels").join(format!("{name}_bb.json")));
     let perfect = PerceptionSource::find(&dir, Perception::Perfect).unwrap();
-    assert_eq!(perfect, PerceptionSource::Pickles { dir: dir.join("perfect_perception"), boxes: Boxes::Exact });
+    assert_eq!(
+        perfect,
+        PerceptionSource::Pickles { dir: dir.join("perfect_perception"), boxes: Boxes::Exact }
+    );
     let detector = PerceptionSource::find(&dir, Perception::Detector).unwrap();
     assert_eq!(detector, PerceptionSource::Pickles { dir: dir.join("od_perception"), boxes: Boxes::Noisy });
     assert!(perfect.describe(&dir).contains("perfect_perception"));

@@ -247,7 +247,8 @@ fn a_contained_snitch_is_never_visible_and_boxes_stay_in_the_image() {
 fn snitch_stack_top(held: &BTreeMap<String, Vec<Option<String>>>, frame: usize) -> String {
     let mut top = SNITCH_INSTANCE.to_owned();
     loop {
-        let holder = held.iter().find(|(_, v)| v[frame].as_deref() == Some(top.as_str())).map(|(k, _)| k.clone());
+        let holder =
+            held.iter().find(|(_, v)| v[frame].as_deref() == Some(top.as_str())).map(|(k, _)| k.clone());
         match holder {
             Some(h) => top = h,
             None => return top,
@@ -257,10 +258,10 @@ fn snitch_stack_top(held: &BTreeMap<String, Vec<Option<String>>>, frame: usize) 
 
 #[test]
 fn hard_scenes_have_every_hard_property() {
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
     use kpl_cater::perfect_pickles::union_covers;
     use kpl_cater::sim::{Profile, simulate};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
 
     let config = GeneratorConfig { motion: Motion::Hard, ..GeneratorConfig::default() };
     let (mut crowded_slots, mut staggered, mut nested, mut on_snitch, mut contain_count) = (0, 0, 0, 0, 0);
@@ -274,7 +275,11 @@ fn hard_scenes_have_every_hard_property() {
         let moves: Vec<(i64, i64, &str)> = scene
             .movements
             .iter()
-            .flat_map(|(o, ms)| ms.iter().filter(|m| m.kind() != Some(MovementKind::NoOp)).map(move |m| (m.start, m.end, o.as_str())))
+            .flat_map(|(o, ms)| {
+                ms.iter()
+                    .filter(|m| m.kind() != Some(MovementKind::NoOp))
+                    .map(move |m| (m.start, m.end, o.as_str()))
+            })
             .collect();
         for f in 0..FRAMES as i64 {
             let at: Vec<&(i64, i64, &str)> = moves.iter().filter(|m| m.0 <= f && f <= m.1).collect();
@@ -331,7 +336,9 @@ fn hard_scenes_have_every_hard_property() {
             if video.categories.visible[f] || video.categories.contained[f] {
                 continue;
             }
-            let distance = |p: [f64; 3]| ((p[0] - camera[0]).powi(2) + (p[1] - camera[1]).powi(2) + (p[2] - camera[2]).powi(2)).sqrt();
+            let distance = |p: [f64; 3]| {
+                ((p[0] - camera[0]).powi(2) + (p[1] - camera[1]).powi(2) + (p[2] - camera[2]).powi(2)).sqrt()
+            };
             let me = distance(scene.object(SNITCH_INSTANCE).unwrap().locations.0[f]);
             let nearer: Vec<[i64; 4]> = scene
                 .objects
@@ -420,7 +427,9 @@ fn the_second_detector_has_its_own_kinds_of_noise() {
             for (k, r) in frame.iter().enumerate() {
                 let Some(whole) = r.bbox else { continue };
                 let own: Vec<_> = found.iter().filter(|d| d.class == object_class[k]).collect();
-                let matched = own.iter().find(|d| (d.bbox[0] - whole.x1).abs() < 8.0 && (d.bbox[1] - whole.y1).abs() < 8.0);
+                let matched = own
+                    .iter()
+                    .find(|d| (d.bbox[0] - whole.x1).abs() < 8.0 && (d.bbox[1] - whole.y1).abs() < 8.0);
                 if unique(k) && r.visible_fraction >= 0.6 {
                     clear += 1;
                     seen_clear += usize::from(matched.is_some());

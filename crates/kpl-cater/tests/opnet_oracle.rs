@@ -138,7 +138,8 @@ fn check_perfect_pickles(python: &str, dir: &Path, motion: Motion, seed: u64, vi
     assert!(status.success(), "the oracle failed");
     let mut detections = 0;
     for video in layout::list_videos(dir).unwrap() {
-        let pickle = |d: &Path| PerceptionFile::read_pickle(&layout::pickle_path(d, &video), &video, "perfect");
+        let pickle =
+            |d: &Path| PerceptionFile::read_pickle(&layout::pickle_path(d, &video), &video, "perfect");
         let ours = pickle(&dir.join(layout::PERFECT_PICKLES_DIR)).unwrap();
         let oracle = pickle(&theirs).unwrap();
         assert_eq!(ours.frames, oracle.frames, "{video}");
@@ -148,10 +149,15 @@ fn check_perfect_pickles(python: &str, dir: &Path, motion: Motion, seed: u64, vi
     let found = PerceptionSource::find(dir, Perception::Perfect).unwrap();
     assert_eq!(found.boxes(), Boxes::Exact, "{found:?}");
     let report = |perception| {
-        evaluate(&EvalOptions { perception, threads: 2, ..EvalOptions::new(dir, Model::Aapa, Perception::Perfect) })
-            .unwrap()
+        evaluate(&EvalOptions {
+            perception,
+            threads: 2,
+            ..EvalOptions::new(dir, Model::Aapa, Perception::Perfect)
+        })
+        .unwrap()
     };
-    let (ours, oracle) = (report(found), report(PerceptionSource::Pickles { dir: theirs, boxes: Boxes::Measured }));
+    let (ours, oracle) =
+        (report(found), report(PerceptionSource::Pickles { dir: theirs, boxes: Boxes::Measured }));
     assert_eq!(ours.videos, videos, "skipped: {:?}", ours.skipped);
     assert_eq!((ours.noisy_videos, oracle.noisy_videos), (0, 0), "perfect perception's boxes are exact");
     assert_eq!(ours.iou, oracle.iou);

@@ -66,7 +66,10 @@ fn opnets_pickles_are_read_as_python_wrote_them() {
     let last: Vec<(&str, [f64; 4])> = file.frames[3].iter().map(|d| (file.class_of(d), d.bbox)).collect();
     assert_eq!(
         last,
-        vec![(opnet_class(63).unwrap(), [0.0, 0.0, 319.0, 239.0]), (opnet_class(192).unwrap(), [30.0, 40.0, 50.0, 60.0])]
+        vec![
+            (opnet_class(63).unwrap(), [0.0, 0.0, 319.0, 239.0]),
+            (opnet_class(192).unwrap(), [30.0, 40.0, 50.0, 60.0])
+        ]
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -49,9 +49,9 @@ fn groups_share_work_without_changing_a_verdict() {
     // Pair i: off the road for 3 states in 17 (shifted by i), and one pair in 7 for 11 s from
     // 5 s on; partner near or far in turns.
     let state = |step: usize, i: usize| {
-        let off_road = (step + i) % 17 < 3 || (i % 7 == 0 && (50..160).contains(&step));
+        let off_road = (step + i) % 17 < 3 || (i.is_multiple_of(7) && (50..160).contains(&step));
         let y = if off_road { 8.0 } else { 1.0 };
-        let gap = if (step / 25 + i) % 2 == 0 { 4.0 } else { 30.0 };
+        let gap = if (step / 25 + i).is_multiple_of(2) { 4.0 } else { 30.0 };
         let x = i as f64 * 50.0 + step as f64;
         SlotState::new(vec![Some(record(x, y)), Some(record(x + gap, y))])
     };

@@ -47,8 +47,8 @@ fn started_windows_merge_so_size_does_not_depend_on_bound_or_rate() {
             let f = &formulas(b)[n];
             let values = |i: usize| match n {
                 // absence after q: q one state in eleven, never p (so the formula stays open)
-                1 => [false, i % 11 == 0],
-                _ => [i % 4 != 0, i % 11 == 0],
+                1 => [false, i.is_multiple_of(11)],
+                _ => [!i.is_multiple_of(4), i.is_multiple_of(11)],
             };
             sizes.push(largest(f, &ctx, 20_000, step, values));
         }

@@ -754,12 +754,12 @@ pub fn read_polygons(text: &str, net: &crate::RoadNetwork) -> Result<Vec<Occlude
             }
             Event::Start(e) | Event::Empty(e) if open_poly && e.name().as_ref() == b"param" => {
                 let param = to_element(e)?;
-                if param.get("key") == Some("roads") {
-                    if let Some((_, roads)) = polygons.last_mut() {
-                        roads.extend(
-                            param.get("value").unwrap_or("").split_ascii_whitespace().map(str::to_string),
-                        );
-                    }
+                if param.get("key") == Some("roads")
+                    && let Some((_, roads)) = polygons.last_mut()
+                {
+                    roads.extend(
+                        param.get("value").unwrap_or("").split_ascii_whitespace().map(str::to_string),
+                    );
                 }
             }
             Event::End(e) if e.name().as_ref() == b"poly" => open_poly = false,

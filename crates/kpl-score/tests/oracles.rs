@@ -213,7 +213,11 @@ fn box_case(seed: u64) -> (kpl_score::Sequence, f64) {
     let size = |id: &str, hypothesis: bool| {
         let h = id.bytes().fold(seed, |a, b| a.wrapping_mul(31).wrapping_add(u64::from(b)));
         let (w, ht) = (20.0 + (h % 17) as f64, 40.0 + (h % 23) as f64);
-        if hypothesis { (w * (0.8 + (h % 5) as f64 * 0.1), ht * (0.9 + (h % 3) as f64 * 0.1)) } else { (w, ht) }
+        if hypothesis {
+            (w * (0.8 + (h % 5) as f64 * 0.1), ht * (0.9 + (h % 3) as f64 * 0.1))
+        } else {
+            (w, ht)
+        }
     };
     let boxes = |objects: &[(String, [f64; 2])], hypothesis: bool| -> Vec<(String, [f64; 4])> {
         objects
@@ -262,7 +266,10 @@ fn box_metrics_agree_with_py_motmetrics_and_trackeval() {
         total(&|e| e.scores.clear.matches),
         total(&|e| e.scores.clear.false_positives),
     );
-    eprintln!("{} box cases: {matches} matches, {switches} switches, {false_positives} false positives", evaluations.len());
+    eprintln!(
+        "{} box cases: {matches} matches, {switches} switches, {false_positives} false positives",
+        evaluations.len()
+    );
     assert!(switches > 50 && matches > 1000 && false_positives > 500);
     let _ = std::fs::remove_dir_all(&dir);
 }

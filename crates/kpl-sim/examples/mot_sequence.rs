@@ -63,12 +63,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let Some(image) = &frame.image else { continue };
         for p in &image.percepts {
             let b = p.bbox;
-            writeln!(tracker, "{number},{},{:.2},{:.2},{:.2},{:.2},{:.3},-1,-1,-1", p.id.0, b.left, b.top, b.width, b.height, p.score)?;
+            writeln!(
+                tracker,
+                "{number},{},{:.2},{:.2},{:.2},{:.2},{:.3},-1,-1,-1",
+                p.id.0, b.left, b.top, b.width, b.height, p.score
+            )?;
         }
         for ((car, visibility), bbox) in frame.cars.iter().zip(&frame.visibility).zip(&image.boxes) {
             let Some(b) = bbox else { continue };
             let visible = if matches!(visibility, Visibility::Occluded) { 0.0 } else { 1.0 };
-            writeln!(gt, "{number},{},{:.2},{:.2},{:.2},{:.2},1,3,{visible}", car.id.0 + 1, b.left, b.top, b.width, b.height)?;
+            writeln!(
+                gt,
+                "{number},{},{:.2},{:.2},{:.2},{:.2},1,3,{visible}",
+                car.id.0 + 1,
+                b.left,
+                b.top,
+                b.width,
+                b.height
+            )?;
         }
         let _ = PerceptSource::FalsePositive;
     }

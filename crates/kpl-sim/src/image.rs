@@ -131,7 +131,6 @@ const FALSE_POSITIVE_TRIES: usize = 20;
 /// Smoothing of a track's pixel velocity: the weight of the newest centre difference.
 const VELOCITY_SMOOTHING: f64 = 0.5;
 
-
 impl CameraParams {
     /// Name, type, default and description of every parameter, in declaration order.
     pub fn describe() -> Vec<ParamInfo> {
@@ -643,7 +642,8 @@ impl ImageTracker {
                     p
                 };
                 let heading = self.rng.random_range(0.0..std::f64::consts::TAU);
-                if let Some(b) = Self::footprint_box(camera, g, heading, FALSE_POSITIVE_SIZE_M).and_then(|b| b.clipped(w, h))
+                if let Some(b) = Self::footprint_box(camera, g, heading, FALSE_POSITIVE_SIZE_M)
+                    .and_then(|b| b.clipped(w, h))
                     && camera.sees([g[0], g[1], 0.0])
                 {
                     placed = Some(b);

@@ -265,7 +265,8 @@ impl UavTrackerSim {
                 (percepts, visibility, None)
             }
             Observer::Camera(tracker) => {
-                let (image, visibility) = tracker.observe(&self.network, &cars, &self.occluders, elapsed, dt_s);
+                let (image, visibility) =
+                    tracker.observe(&self.network, &cars, &self.occluders, elapsed, dt_s);
                 (Vec::new(), visibility, Some(image))
             }
         };

@@ -204,7 +204,8 @@ fn an_oblique_circling_camera_hides_covered_vehicles_and_is_deterministic() {
 fn the_camera_parameter_table_in_the_docs_matches_the_code() {
     let docs =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/simulator.md")).unwrap();
-    let section = docs.split("## Camera mode").nth(1).expect("docs/simulator.md has a section `## Camera mode`");
+    let section =
+        docs.split("## Camera mode").nth(1).expect("docs/simulator.md has a section `## Camera mode`");
     let rows: Vec<&str> = section.lines().filter(|l| l.starts_with("| `")).collect();
     let described = CameraParams::describe();
     let expected: Vec<String> = described
@@ -212,6 +213,10 @@ fn the_camera_parameter_table_in_the_docs_matches_the_code() {
         .map(|info| format!("| `{}` | {} | `{}` | {} |", info.name, info.ty, info.default, info.doc))
         .collect();
     for row in &expected {
-        assert!(rows.contains(&row.as_str()), "docs/simulator.md's camera mode should have the rows\n{}", expected.join("\n"));
+        assert!(
+            rows.contains(&row.as_str()),
+            "docs/simulator.md's camera mode should have the rows\n{}",
+            expected.join("\n")
+        );
     }
 }

@@ -93,7 +93,9 @@ fn truth(frame: &Frame, prefix: &str) -> Value {
             let mut record = car.to_record();
             record.fields.push(("visible".into(), Value::Bool(visibility.in_view())));
             // In the camera's footprint, occluded or not (`kpl score --in-view-only`).
-            record.fields.push(("in_view".into(), Value::Bool(*visibility != kpl_sim::Visibility::OutOfView)));
+            record
+                .fields
+                .push(("in_view".into(), Value::Bool(*visibility != kpl_sim::Visibility::OutOfView)));
             let seen = seen_as.get(&car.id).cloned().unwrap_or_default();
             record.fields.push(("seen_as".into(), Value::str(&seen)));
             Value::Record(Arc::new(record))

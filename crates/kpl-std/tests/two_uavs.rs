@@ -164,14 +164,14 @@ fn run(seed: u64) -> Outcome {
                 }
             }
             // The world object's estimate, once per car and step.
-            if id.starts_with('a') || !by_uav(*car, "a") {
-                if let Some((_, wo)) = chain.first() {
-                    let view = engine.object("WorldObject", wo).unwrap();
-                    if view.measured {
-                        let e = view.state.as_record().unwrap().get("pos").unwrap().as_vec2().unwrap();
-                        outcome.kalman.0 += (e[0] - p[0]).powi(2) + (e[1] - p[1]).powi(2);
-                        outcome.kalman.1 += 1;
-                    }
+            if (id.starts_with('a') || !by_uav(*car, "a"))
+                && let Some((_, wo)) = chain.first()
+            {
+                let view = engine.object("WorldObject", wo).unwrap();
+                if view.measured {
+                    let e = view.state.as_record().unwrap().get("pos").unwrap().as_vec2().unwrap();
+                    outcome.kalman.0 += (e[0] - p[0]).powi(2) + (e[1] - p[1]).powi(2);
+                    outcome.kalman.1 += 1;
                 }
             }
             let has_car = chain.len() == TYPES.len();

@@ -3,20 +3,19 @@
 //! as the server's time. A client that subscribes to a still topic (roads, occluders, a fixed
 //! camera) is sent its last message at once.
 
-use std::collections::HashMap;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 
 use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
 use foxglove::{Context, PartialMetadata, WebSocketServer, WebSocketServerHandle};
 use kpl_mcap::foxglove::Role;
 
-use crate::hub::{Hub, lock};
+use crate::hub::{Hub, Latched, lock};
 
 /// Messages a client is sent when it subscribes to a still topic.
 struct Latch {
     context: Arc<Context>,
-    latched: Arc<Mutex<HashMap<String, (Vec<u8>, u64)>>>,
+    latched: Latched,
     /// Subscriptions to the streams' channels (not the scene's), for `wait_for_client`.
     subscribers: Arc<AtomicUsize>,
 }

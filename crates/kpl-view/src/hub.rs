@@ -20,6 +20,9 @@ pub struct HubStream {
     view: ViewId,
 }
 
+/// The last message of each topic (its bytes and log time), for a client that subscribes later.
+pub(crate) type Latched = Arc<Mutex<HashMap<String, (Vec<u8>, u64)>>>;
+
 /// The Foxglove side: channels by topic, and the last message of each still topic (the roads,
 /// occluders, a fixed camera) for clients that subscribe later.
 pub(crate) struct Live {
@@ -27,7 +30,7 @@ pub(crate) struct Live {
     channels: HashMap<Arc<str>, Arc<RawChannel>>,
     /// Shared with the server's listener, which sends them to a client that subscribes; never
     /// held while calling into the SDK.
-    pub(crate) latched: Arc<Mutex<HashMap<String, (Vec<u8>, u64)>>>,
+    pub(crate) latched: Latched,
     /// The latest time told to clients, nanoseconds.
     time: u64,
     /// What to tell the server's clients the time is.

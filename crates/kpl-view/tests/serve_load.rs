@@ -8,7 +8,7 @@
 //!
 //! A measurement, not a test: it asserts only that every client got every frame. Needs Node with
 //! tests/node's packages (scripts/test installs them).
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // a benchmark harness
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, clippy::disallowed_methods)] // a benchmark harness: it times what it serves
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};

@@ -821,7 +821,7 @@ impl RemoteSender for ZenohSender {
             }
             if self.put(bytes, attachment).await {
                 self.published += 1;
-                if self.published % 256 == 0
+                if self.published.is_multiple_of(256)
                     && let Ok(mut report) = self.state.report.lock()
                 {
                     report.published = self.published;

@@ -278,7 +278,10 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
                 Some(_) => Boxes::Noisy,
             },
         },
-        None => PerceptionSource::find(&args.data, args.perception.map_or(Perception::Perfect, PerceptionArg::perception))?,
+        None => PerceptionSource::find(
+            &args.data,
+            args.perception.map_or(Perception::Perfect, PerceptionArg::perception),
+        )?,
     };
     let param_overrides = match &args.params {
         None => None,
@@ -301,7 +304,9 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     };
     let visible = match args.visible {
         VisibleArg::Opnet => VisibleFrom::Opnet,
-        VisibleArg::Perception => VisibleFrom::Perception(PerceptionSource::find(&args.data, Perception::Perfect)?),
+        VisibleArg::Perception => {
+            VisibleFrom::Perception(PerceptionSource::find(&args.data, Perception::Perfect)?)
+        }
     };
     #[allow(clippy::disallowed_methods)] // how long the command took, reported beside its results
     let started = Instant::now();

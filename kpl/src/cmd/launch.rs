@@ -134,11 +134,10 @@ pub fn run(args: Args) -> ExitCode {
     }
     if args.tls
         && let Some(keys) = &keys
+        && let Err(err) = kpl_zenoh::credentials::make(keys, &deployment, &hosts)
     {
-        if let Err(err) = kpl_zenoh::credentials::make(keys, &deployment, &hosts) {
-            eprintln!("error: cannot make the keys in {}: {err}", keys.display());
-            return ExitCode::from(2);
-        }
+        eprintln!("error: cannot make the keys in {}: {err}", keys.display());
+        return ExitCode::from(2);
     }
     let port_base = match port_base(hosts.len()) {
         Ok(base) => base,

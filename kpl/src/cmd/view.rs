@@ -164,7 +164,7 @@ pub fn attach(
     }
     line.push_str(")\n");
     let mut file = SourceFile::read(path).map_err(|err| {
-        report::io_error(path, &err);
+        report::read_error(&err);
         ExitCode::from(2)
     })?;
     file.text.push_str(&line);

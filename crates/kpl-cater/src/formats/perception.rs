@@ -137,7 +137,8 @@ impl PerceptionFile {
                 let [x1, y1, x2, y2] = d.bbox;
                 if d.class as usize >= classes {
                     self.dropped.unknown_class += 1;
-                    first_bad.get_or_insert_with(|| format!("frame {frame}: class index {} unknown", d.class));
+                    first_bad
+                        .get_or_insert_with(|| format!("frame {frame}: class index {} unknown", d.class));
                     false
                 } else if !d.bbox.iter().all(|v| coordinate_ok(*v)) || x2 < x1 || y2 < y1 {
                     self.dropped.bad_box += 1;

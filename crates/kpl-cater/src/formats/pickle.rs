@@ -26,8 +26,9 @@ pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
     let bytes = read_capped(path, MAX_PICKLE_BYTES)?;
     // Refuse what would overflow the decoder's stack or expand beyond any perception's size before
     // decoding (see `pickle_guard`).
-    pickle_guard::check(&bytes)
-        .map_err(|reason| CaterError::invalid(path, format!("not a pickle of OPNet's perception: {reason}")))?;
+    pickle_guard::check(&bytes).map_err(|reason| {
+        CaterError::invalid(path, format!("not a pickle of OPNet's perception: {reason}"))
+    })?;
     let value = serde_pickle::value_from_slice(
         &bytes,
         DeOptions::new().keep_restore_state().replace_unresolved_globals(),
@@ -77,9 +78,14 @@ pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
 pub fn write_perception_pickle(path: &Path, frames: &[Vec<(i64, [i64; 4])>]) -> Result<(), CaterError> {
     let bb = frames
         .iter()
-        .map(|f| Value::List(f.iter().map(|(_, b)| Value::List(b.iter().map(|v| Value::I64(*v)).collect())).collect()))
+        .map(|f| {
+            Value::List(
+                f.iter().map(|(_, b)| Value::List(b.iter().map(|v| Value::I64(*v)).collect())).collect(),
+            )
+        })
         .collect();
-    let labels = frames.iter().map(|f| Value::List(f.iter().map(|(l, _)| Value::I64(*l)).collect())).collect();
+    let labels =
+        frames.iter().map(|f| Value::List(f.iter().map(|(l, _)| Value::I64(*l)).collect())).collect();
     let value = Value::Dict(
         [
             (HashableValue::String("bb".into()), Value::List(bb)),
@@ -195,7 +201,7 @@ fn numpy_array(value: &Value) -> Result<Option<Numbers>, String> {
         }
         return Ok(Some(Numbers { values: Vec::new() }));
     }
-    if bytes.len() % count != 0 {
+    if !bytes.len().is_multiple_of(count) {
         return Err(format!("{} bytes for {count} elements", bytes.len()));
     }
     let item = bytes.len() / count;

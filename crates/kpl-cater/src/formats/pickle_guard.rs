@@ -49,7 +49,9 @@ impl Graph {
     fn add(&mut self, parent: u32, child: Item) {
         match child {
             Item::Node(c) => self.edges.push((parent, c)),
-            Item::Scalar(w) => self.scalars[parent as usize] = self.scalars[parent as usize].saturating_add(w),
+            Item::Scalar(w) => {
+                self.scalars[parent as usize] = self.scalars[parent as usize].saturating_add(w)
+            }
             Item::Mark => {}
         }
     }
@@ -269,7 +271,8 @@ fn run(bytes: &[u8]) -> Result<(Item, Graph), String> {
                     b'h' => uint(take(&mut at, 1)?),
                     _ => uint(take(&mut at, 4)?),
                 };
-                let item = *memo.get(&key).ok_or_else(|| format!("memo entry {key} used before it is set"))?;
+                let item =
+                    *memo.get(&key).ok_or_else(|| format!("memo entry {key} used before it is set"))?;
                 stack.push(item);
             }
             other => return Err(format!("unknown pickle opcode 0x{other:02x}")),
