@@ -12,8 +12,8 @@ pub(crate) fn extend_with(extend: fn(&mut Registry)) {
     let _ = EXTENSION.set(extend);
 }
 
-fn assemble(registry: &mut Registry) {
-    kpl_std::assemble(registry);
+/// A user's extension, if `kpl::main_with` gave one.
+fn extend(registry: &mut Registry) {
     if let Some(extend) = EXTENSION.get() {
         extend(registry);
     }
@@ -21,15 +21,11 @@ fn assemble(registry: &mut Registry) {
 
 /// What `kpl run` builds processes from.
 pub fn registry() -> Registry {
-    let mut registry = Registry::default();
-    assemble(&mut registry);
-    registry
+    kpl_std::registry::registry_with(extend)
 }
 
 /// The signatures of [`registry`], without its implementations: what `kpl check` and `kpl list`
 /// check and show.
 pub fn signatures() -> kpl_semantic::registry::Registry {
-    let mut registry = Registry::signatures_only();
-    assemble(&mut registry);
-    registry.into_signatures()
+    kpl_std::registry::signatures_with(extend)
 }

@@ -26,6 +26,41 @@ pub mod runtime;
 pub mod situations;
 pub mod timescales;
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use kpl_runtime::Registry;
+use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
+use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
+
+/// Counts the samples that arrive and that `counts` accepts.
+struct Count {
+    counted: Arc<AtomicU64>,
+    counts: fn(&Input<'_>) -> bool,
+}
+
+impl Unit for Count {
+    fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
+        if (self.counts)(input) {
+            self.counted.fetch_add(1, Ordering::Relaxed);
+        }
+        Ok(())
+    }
+}
+
+/// Registers the sink `bench.count`, which adds to `counted` each sample that `counts` accepts.
+fn add_count_sink(registry: &mut Registry, counted: Arc<AtomicU64>, counts: fn(&Input<'_>) -> bool) {
+    registry.add_unit(
+        Entry::new(EntryKind::Sink, "bench.count", "Counts samples.").variadic(
+            1,
+            "in",
+            TypeReq::Any,
+            "anything",
+        ),
+        move |_| Ok(Box::new(SyncUnit(Count { counted: counted.clone(), counts }))),
+    );
+}
+
 /// Why a benchmark could not run to its end.
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {

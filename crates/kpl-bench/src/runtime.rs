@@ -85,16 +85,6 @@ impl Source for Counter {
     }
 }
 
-/// Counts what arrives.
-struct Count(Arc<AtomicU64>);
-
-impl Unit for Count {
-    fn on_input(&mut self, _input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        self.0.fetch_add(1, Ordering::Relaxed);
-        Ok(())
-    }
-}
-
 fn registry(counted: Arc<AtomicU64>) -> Registry {
     let mut registry = Registry::with_builtins();
     registry.add_source(
@@ -113,15 +103,7 @@ fn registry(counted: Arc<AtomicU64>) -> Registry {
             Ok(Box::new(Counter { count, rate }))
         },
     );
-    registry.add_unit(
-        Entry::new(EntryKind::Sink, "bench.count", "Counts samples.").variadic(
-            1,
-            "in",
-            TypeReq::Any,
-            "anything",
-        ),
-        move |_| Ok(Box::new(SyncUnit(Count(counted.clone())))),
-    );
+    crate::add_count_sink(&mut registry, counted, |_| true);
     registry
 }
 

@@ -111,19 +111,10 @@ impl Source for Highway {
     }
 }
 
-/// Counts the situations reported (`true` episodes: ungated pair monitors also report the
-/// `false` ones of pairs far apart).
-struct Count(Arc<AtomicU64>);
-
-impl Unit for Count {
-    fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        if let Some(Value::Record(r)) = input.trigger_value()
-            && r.get("verdict") == Some(&Value::Bool(true))
-        {
-            self.0.fetch_add(1, Ordering::Relaxed);
-        }
-        Ok(())
-    }
+/// Whether a sample is a situation reported (a `true` episode: ungated pair monitors also report
+/// the `false` ones of pairs far apart).
+fn is_situation(input: &Input<'_>) -> bool {
+    matches!(input.trigger_value(), Some(Value::Record(r)) if r.get("verdict") == Some(&Value::Bool(true)))
 }
 
 fn registry(counted: Arc<AtomicU64>) -> Registry {
@@ -139,15 +130,7 @@ fn registry(counted: Arc<AtomicU64>) -> Registry {
             Ok(Box::new(Highway { cars, seconds }))
         },
     );
-    registry.add_unit(
-        Entry::new(EntryKind::Sink, "bench.count", "Counts samples.").variadic(
-            1,
-            "in",
-            TypeReq::Any,
-            "anything",
-        ),
-        move |_| Ok(Box::new(SyncUnit(Count(counted.clone())))),
-    );
+    crate::add_count_sink(&mut registry, counted, is_situation);
     registry
 }
 

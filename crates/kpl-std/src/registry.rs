@@ -25,15 +25,27 @@ pub fn assemble(registry: &mut Registry) {
 
 /// The registry `kpl run` builds processes from.
 pub fn registry() -> Registry {
-    let mut registry = Registry::default();
-    assemble(&mut registry);
-    registry
+    registry_with(|_| {})
 }
 
 /// The signatures of [`registry`]: what specs are checked against.
 pub fn signatures() -> kpl_semantic::registry::Registry {
+    signatures_with(|_| {})
+}
+
+/// [`registry`] with what `extend` adds (a user's crate: `kpl::main_with`).
+pub fn registry_with(extend: impl FnOnce(&mut Registry)) -> Registry {
+    let mut registry = Registry::default();
+    assemble(&mut registry);
+    extend(&mut registry);
+    registry
+}
+
+/// The signatures of [`registry_with`] the same `extend`, without building anything.
+pub fn signatures_with(extend: impl FnOnce(&mut Registry)) -> kpl_semantic::registry::Registry {
     let mut registry = Registry::signatures_only();
     assemble(&mut registry);
+    extend(&mut registry);
     registry.into_signatures()
 }
 
