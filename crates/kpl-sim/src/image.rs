@@ -51,27 +51,10 @@ use crate::params::ParamInfo;
 use crate::tracker::{PerceptId, PerceptSource, Visibility};
 use crate::traffic::{CarId, CarState};
 
-macro_rules! declare_camera_params {
-    ($( #[doc = $doc:literal] $name:ident : $ty:ty, $kpl_ty:literal = $default:expr; )*) => {
-        /// The camera mode's parameters (`sim.uav_camera`, besides the traffic's). Missing fields
-        /// take their defaults.
-        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-        #[serde(deny_unknown_fields, default)]
-        pub struct CameraParams {
-            $( #[doc = $doc] pub $name: $ty, )*
-        }
-
-        impl Default for CameraParams {
-            fn default() -> CameraParams {
-                CameraParams { $( $name: $default, )* }
-            }
-        }
-
-        const CAMERA_PARAM_TABLE: &[(&str, &str, &str)] = &[ $( (stringify!($name), $kpl_ty, $doc), )* ];
-    };
-}
-
-declare_camera_params! {
+crate::params::declare_params! {
+    /// The camera mode's parameters (`sim.uav_camera`, besides the traffic's). Missing fields
+    /// take their defaults.
+    struct CameraParams, table CAMERA_PARAM_TABLE;
     /// Width and height of the image, pixels.
     image_size: Vec<f64>, "list<float>" = vec![1920.0, 1080.0];
     /// Horizontal field of view, degrees (square pixels, principal point at the image's centre).

@@ -30,26 +30,34 @@ pub struct ParamInfo {
     pub doc: &'static str,
 }
 
+/// Declares a parameter struct whose missing fields take their defaults, with the table of its
+/// fields (name, KPL type, doc) that signatures and `kpl list` show.
 macro_rules! declare_params {
-    ($( #[doc = $doc:literal] $name:ident : $ty:ty, $kpl_ty:literal = $default:expr; )*) => {
-        /// Parameters of a simulated UAV tracker run. Missing fields take their defaults.
+    (
+        $(#[doc = $struct_doc:literal])* struct $name_of_struct:ident, table $table:ident;
+        $( #[doc = $doc:literal] $name:ident : $ty:ty, $kpl_ty:literal = $default:expr; )*
+    ) => {
+        $(#[doc = $struct_doc])*
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[serde(deny_unknown_fields, default)]
-        pub struct Params {
+        pub struct $name_of_struct {
             $( #[doc = $doc] pub $name: $ty, )*
         }
 
-        impl Default for Params {
-            fn default() -> Params {
-                Params { $( $name: $default, )* }
+        impl Default for $name_of_struct {
+            fn default() -> $name_of_struct {
+                $name_of_struct { $( $name: $default, )* }
             }
         }
 
-        const PARAM_TABLE: &[(&str, &str, &str)] = &[ $( (stringify!($name), $kpl_ty, $doc), )* ];
+        const $table: &[(&str, &str, &str)] = &[ $( (stringify!($name), $kpl_ty, $doc), )* ];
     };
 }
+pub(crate) use declare_params;
 
 declare_params! {
+    /// Parameters of a simulated UAV tracker run. Missing fields take their defaults.
+    struct Params, table PARAM_TABLE;
     /// Built-in road network: `crossing`, `bridge` or `grid_town` (unused when `network_file` is set).
     scenario: String, "string" = "crossing".to_string();
     /// Road network file to use instead of a built-in scenario: SUMO `.net.xml` or the project's JSON, either gzipped (docs/roads.md).
