@@ -126,7 +126,8 @@ fn on_trackers_outputs_py_motmetrics_ships_anchoring_never_lowers_idf1() {
 
 #[test]
 fn a_malformed_line_of_a_trackers_file_is_counted_and_the_run_goes_on() {
-    let dir = fresh_dir("camera", "malformed");
+    // Its own folder: image_plane_run makes a fresh one for the run.
+    let dir = fresh_dir("camera", "malformed-input");
     let tracker = dir.join("tracker.txt");
     std::fs::write(&tracker, "1,1,10,10,20,40,1,-1,-1,-1\n1,2,oops,10,20,40,1\n2,1,12,10,20,40,1,-1,-1,-1\nnot a line\n3,1,14,10,20,40,1,-1,-1,-1\n").unwrap();
     let out = image_plane_run("malformed", &tracker);

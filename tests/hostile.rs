@@ -249,7 +249,8 @@ const OWN_READERS: &[(&str, &str)] = &[
     ("crates/kpl-zenoh/src/bench.rs", "the output of its own child process"),
     ("kpl/src/cmd/mtl.rs", "formula and trace files, capped at 64 MiB by its own reader"),
     ("kpl/src/cmd/launch.rs", "the summary.json its own hosts wrote"),
-    ("kpl/src/cmd/bench_runtime.rs", "/proc/self/statm"),
+    ("crates/kpl-bench/src/runtime.rs", "/proc/self/statm"),
+    ("crates/kpl-bench/src/mtl.rs", "the file R2U2's C2PO compiler wrote for the benchmark"),
 ];
 
 /// Every other reader of a file goes through `kpl_core::read` (docs/architecture.md): nothing

@@ -190,7 +190,10 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     assert_eq!(stream(&measured, "tracker")["alignment"]["measured"], "not_available");
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "tracker"]);
     let text = String::from_utf8(o.stdout).unwrap();
-    assert!(text.contains("--measured-only: tracker say nothing about which states were measured"), "{text}");
+    assert!(
+        text.contains("only measured states are scored, but tracker say nothing about which states were measured"),
+        "{text}"
+    );
 }
 
 /// `specs/traffic/sumo_random.kpl` (recorded SUMO traffic on a network with junctions) run for
@@ -442,7 +445,7 @@ fn missing_frames_unknown_streams_and_bad_input_get_clear_errors() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     let o = kpl(&["score", tracks().to_str().unwrap(), "--max-distance=-1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("gating distance must be a positive number"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("-1 m is out of range: a distance is more than 0"), "{}", stderr(&o));
     let empty_dir = scratch("empty");
     let o = kpl(&["score", empty_dir.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));

@@ -76,7 +76,7 @@ fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
 impl Walker {
     /// Opens a file and checks its magic.
     pub fn open(path: &Path) -> Result<Walker, String> {
-        let file = File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let file = kpl_core::read::open(path).map_err(|e| e.to_string())?;
         let len = file.metadata().map_err(|e| format!("cannot read {}: {e}", path.display()))?.len();
         let mut file = BufReader::new(file);
         let mut magic = [0u8; 8];

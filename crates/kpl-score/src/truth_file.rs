@@ -55,7 +55,8 @@ pub fn seqinfo(gt: &Path) -> Option<(PathBuf, SeqInfo)> {
     let candidates =
         [dir.join("seqinfo.ini"), dir.parent().map(|p| p.join("seqinfo.ini")).unwrap_or_default()];
     let file = candidates.into_iter().find(|c| c.is_file())?;
-    let text = std::fs::read_to_string(&file).ok()?;
+    let bytes = kpl_core::read::read_file(&file, 1 << 20).ok()?;
+    let text = String::from_utf8_lossy(&bytes);
     let mut info = SeqInfo { frame_rate: None, seq_length: None, file: "seqinfo.ini" };
     for line in text.lines() {
         let Some((key, value)) = line.split_once('=') else { continue };

@@ -4,7 +4,6 @@
 //! with `verdict`). A stream that two files both hold is taken from the first.
 
 use std::collections::BTreeSet;
-use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
@@ -103,7 +102,7 @@ pub fn load(hub: &Hub, files: &[PathBuf]) -> Result<Loaded, String> {
                 }
             }
             _ => {
-                let f = File::open(file).map_err(|e| format!("cannot read {}: {e}", file.display()))?;
+                let f = kpl_core::read::open(file).map_err(|e| e.to_string())?;
                 let mut reader = BufReader::new(f);
                 let mut line = Vec::new();
                 for number in 1.. {

@@ -125,7 +125,9 @@ pub fn read_file(path: &std::path::Path, format: Format) -> Result<Parsed, Forma
     if size > MAX_FILE_BYTES {
         return Err(FormatError::TooLarge(size));
     }
-    format.read(&std::fs::read(path)?)
+    // A device or a pipe says its size is 0: read no further than the cap (`/dev/zero`).
+    let bytes = kpl_core::read::read_file(path, MAX_FILE_BYTES as usize).map_err(std::io::Error::from)?;
+    format.read(&bytes)
 }
 
 /// One box in a frame's snapshot, with its percept id and velocity.
