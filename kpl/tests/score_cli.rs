@@ -191,7 +191,9 @@ fn a_world_model_is_scored_per_type_and_agrees_with_the_link_outputs() {
     let o = kpl(&["score", bridge_run().to_str().unwrap(), "--measured-only", "--stream", "tracker"]);
     let text = String::from_utf8(o.stdout).unwrap();
     assert!(
-        text.contains("only measured states are scored, but tracker say nothing about which states were measured"),
+        text.contains(
+            "only measured states are scored, but tracker say nothing about which states were measured"
+        ),
         "{text}"
     );
 }

@@ -47,7 +47,9 @@ fn well_conditioned(camera: &Camera, pixel: [f64; 2]) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+    // Random poses and pixels: many draws are refused as ill-conditioned (grazing views, pixels
+    // too close together), so the budget of refusals is generous.
+    #![proptest_config(ProptestConfig { cases: 2000, max_global_rejects: 50_000, ..ProptestConfig::default() })]
 
     #[test]
     fn pixel_to_ground_and_back(camera in camera(), u in 0.0..1.0f64, v in 0.0..1.0f64) {
