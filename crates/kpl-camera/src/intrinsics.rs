@@ -8,7 +8,8 @@
 //! // 1920 x 1080 pixels, 90 degrees horizontal field of view.
 //! let k = Intrinsics::from_fov(1920.0, 1080.0, 90f64.to_radians()).unwrap();
 //! assert!((k.fx - 960.0).abs() < 1e-9 && k.cx == 960.0 && k.cy == 540.0);
-//! assert_eq!(k.normalized([1920.0, 540.0]), [1.0, 0.0]);
+//! let n = k.normalized([1920.0, 540.0]);
+//! assert!((n[0] - 1.0).abs() < 1e-12 && n[1] == 0.0);
 //! ```
 
 use crate::error::CameraError;
