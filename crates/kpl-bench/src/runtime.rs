@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use clap::Args as ClapArgs;
 use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::context::SourceContext;
-use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Unit};
+use kpl_runtime::process::{BoxFuture, ProcessError, Source};
 use kpl_runtime::{ClockKind, Registry, RunConfig, Sample};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 

@@ -21,7 +21,7 @@ use std::time::Instant;
 use clap::Args as ClapArgs;
 use kpl_core::{Record, Time, Value};
 use kpl_runtime::context::SourceContext;
-use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Unit};
+use kpl_runtime::process::{BoxFuture, Input, ProcessError, Source};
 use kpl_runtime::{ClockKind, Registry, RunConfig};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 

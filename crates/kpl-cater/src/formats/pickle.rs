@@ -170,7 +170,7 @@ fn numpy_array(value: &Value) -> Result<Option<Numbers>, String> {
         }
         return Ok(Some(Numbers { values: Vec::new() }));
     }
-    if bytes.len() % count != 0 {
+    if !bytes.len().is_multiple_of(count) {
         return Err(format!("{} bytes for {count} elements", bytes.len()));
     }
     let item = bytes.len() / count;
