@@ -137,7 +137,7 @@ fn a_malformed_line_of_a_trackers_file_is_counted_and_the_run_goes_on() {
         .as_array()
         .unwrap()
         .iter()
-        .find(|p| p["name"] == "tracker")
+        .find(|p| p["process"] == "tracker")
         .unwrap()
         .clone();
     assert_eq!(process["malformed"], 2, "{process}");

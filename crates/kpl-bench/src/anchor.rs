@@ -1,11 +1,11 @@
-//! The workload of the scale benchmark (`kpl bench anchor`, `cargo bench -p kpl-bench --bench anchor`): N cars
-//! in a grid town (about 11 per 100 m block) seen by the simulated tracker at 10 Hz with 10 %
+//! The workload of the scale benchmark (`kpl bench anchor`, `cargo bench -p kpl-bench --bench
+//! anchor`), the shipped `specs/bench/anchor_town.kpl` with N cars: cars in a grid town (about 11 per 100 m block) seen by the simulated tracker at 10 Hz with 10 %
 //! dropouts, noise and false positives, anchored through two link levels, vision percept ->
 //! world object -> on-road object, with the paper's conditions (section V), the reestablish
 //! condition of the first level also asking for similar velocities (as `specs/traffic/bridge.kpl`
 //! does: in a town, crossing traffic and oncoming lanes come within 10 m), and vision percepts
 //! kept for 600 ms after a missed detection (the tracker keeps their ids over 5 missed frames).
-//! This module builds the spec and the driver and says what a step emits ([`spec_text`],
+//! This module reads the spec and builds the driver and says what a step emits ([`spec`],
 //! [`driver`], [`emit`]); [`run`] times it (`kpl bench anchor`).
 //!
 //! [`run`], for each number of cars N, on one thread: after a warm-up, each frame is timed twice,
@@ -21,6 +21,7 @@ use std::io::Write;
 
 use clap::Args as ClapArgs;
 use kpl_core::Value;
+use kpl_semantic::hir;
 use kpl_std::driver::IdentityScore;
 
 use crate::BenchError;
@@ -39,56 +40,48 @@ pub struct ScaleSetup {
     pub dropout: f64,
     /// False positives per second per 100 cars.
     pub false_positives_per_100_cars: f64,
-    /// Seconds after which an object that is not anchored is forgotten.
-    pub forget_s: u32,
 }
 
 impl ScaleSetup {
     pub fn new(cars: u32) -> ScaleSetup {
-        ScaleSetup { cars, seed: 1, dropout: 0.1, false_positives_per_100_cars: 0.2, forget_s: 5 }
+        ScaleSetup { cars, seed: 1, dropout: 0.1, false_positives_per_100_cars: 0.2 }
     }
 }
 
-/// The spec of a run: two link levels with the paper's conditions.
-pub fn spec_text(setup: &ScaleSetup) -> String {
+/// The workload's spec as shipped (`specs/bench/anchor_town.kpl`): two link levels with the
+/// paper's conditions; its tracker is set up per run by [`spec`].
+pub const SPEC: &str = include_str!("../../../specs/bench/anchor_town.kpl");
+
+/// The shipped spec, checked, with its tracker set to `setup`'s cars (and a town sized for them),
+/// seed, dropout and false positives.
+pub fn spec(setup: &ScaleSetup) -> Result<hir::Spec, String> {
+    let mut spec = kpl_std::check_text(SPEC).map_err(|e| format!("specs/bench/anchor_town.kpl: {e}"))?;
     let town = GridTownSize::for_cars(setup.cars);
     let fp_rate = setup.false_positives_per_100_cars * f64::from(setup.cars) / 100.0;
-    format!(
-        r#"// Scale benchmark: {cars} cars, two link levels.
-type VisionPercept symbol vp {{ pos: vec2, vel: vec2, size: float }}
-type WorldObject   symbol wo {{ pos: vec2, vel: vec2 }}
-type OnRoadObject  : WorldObject symbol oo {{ road: int, lane_offset: float }}
-
-source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "grid_town", grid_blocks_x: {bx}, grid_blocks_y: {by}, n_cars: {cars}, seed: {seed}, dropout: {dropout:?}, false_positive_rate: {fp_rate:?})
-
-link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {{
-  establish   eventually[1s, inf] true
-  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0 and norm(from.vel - to.vel) < 5.0)
-  maintain    true
-}}
-link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario: "grid_town") {{
-  establish   eventually[1s, inf] always[0, 1s] on_road(from.pos)
-  reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
-  maintain    always eventually[0, 10s] always[0, 1s] on_road(from.pos)
-}}
-predict WorldObject  = constant_velocity
-predict OnRoadObject = along_roads(scenario: "grid_town")
-forget after {forget}s
-forget VisionPercept after 600ms
-"#,
-        cars = setup.cars,
-        bx = town.blocks_x,
-        by = town.blocks_y,
-        seed = setup.seed,
-        dropout = setup.dropout,
-        forget = setup.forget_s,
-    )
+    let call = spec
+        .processes
+        .iter_mut()
+        .find_map(|p| match &mut p.kind {
+            hir::ProcessKind::Source(call) if p.name == "tracker" => Some(call),
+            _ => None,
+        })
+        .ok_or("specs/bench/anchor_town.kpl has no source `tracker`")?;
+    for (name, value) in [
+        ("n_cars", Value::Int(i64::from(setup.cars))),
+        ("grid_blocks_x", Value::Int(i64::from(town.blocks_x))),
+        ("grid_blocks_y", Value::Int(i64::from(town.blocks_y))),
+        ("seed", Value::Int(setup.seed as i64)),
+        ("dropout", Value::Float(setup.dropout)),
+        ("false_positive_rate", Value::Float(fp_rate)),
+    ] {
+        call.params.insert(name.to_string(), value);
+    }
+    Ok(spec)
 }
 
 /// The driver of a run: the simulated tracker and the engine, at time 0.
 pub fn driver(setup: &ScaleSetup) -> Result<SimDriver, DriverError> {
-    let spec = kpl_std::check_text(&spec_text(setup))
-        .map_err(|e| DriverError::Source { name: "tracker".to_string(), message: e.to_string() })?;
+    let spec = spec(setup).map_err(|message| DriverError::Source { name: "tracker".to_string(), message })?;
     SimDriver::from_spec(&spec, AnchorConfig::default())
 }
 
