@@ -175,6 +175,7 @@ impl RunReport {
         for stream in transport.received_nothing() {
             out.push(format!("nothing arrived on `{stream}` from another host"));
         }
+        out.extend(transport.end_not_confirmed());
         out
     }
 }
@@ -278,6 +279,20 @@ pub async fn run_async(
         _ => None,
     };
 
+    // A transport that cannot go on (a clash with another run of this host) stops the run.
+    let transport_failure: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
+    let transport_watch = transport.clone().map(|transport| {
+        let (stop, slot) = (stop.clone(), transport_failure.clone());
+        tokio::spawn(async move {
+            let why = transport.failed().await;
+            tracing::error!("{why}");
+            if let Ok(mut slot) = slot.lock() {
+                *slot = Some(why);
+            }
+            stop.interrupt();
+        })
+    });
+
     // Build every local process.
     let mut shared = Extensions::default();
     let mut tasks: BTreeMap<ProcessId, ProcessTask> = BTreeMap::new();
@@ -329,6 +344,9 @@ pub async fn run_async(
     if !errors.is_empty() {
         signals.abort();
         watchers.abort();
+        if let Some(watch) = &transport_watch {
+            watch.abort();
+        }
         return Err(RunError::Build(errors));
     }
 
@@ -455,6 +473,12 @@ pub async fn run_async(
             }
             Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
         }
+    }
+    if let Some(watch) = &transport_watch {
+        watch.abort();
+    }
+    if let Some(why) = transport_failure.lock().ok().and_then(|mut f| f.take()) {
+        failures.push(format!("transport: {why}"));
     }
     let signal = received_signal();
     let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))

@@ -86,7 +86,6 @@ async fn receiver_from(
         host,
         Some(producer_host.into()),
         report.clone(),
-        Arc::default(),
     )
     .await
     .unwrap();
