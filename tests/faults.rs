@@ -438,7 +438,8 @@ impl Case {
         let dir = common::fresh_dir("faults", name);
         let spec = dir.join(format!("{name}.kpl"));
         std::fs::write(&spec, spec_text).unwrap();
-        let mut vars: Vec<(String, String)> = env.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        let mut vars: Vec<(String, String)> =
+            env.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
         vars.push(("KPL_STATE_DIR".into(), dir.join("state").display().to_string()));
         Case { dir, spec, base: free_ports(hosts), env: vars }
     }
@@ -548,9 +549,10 @@ fn a_host_that_comes_after_the_ends_gets_them_and_nothing_hangs() {
     // The issue's case: KPL_ZENOH_WAIT=5, host b started 12 s after host a. Host a stops waiting
     // for b after 5 s and publishes its streams to nobody; b must still get their ends (a is up,
     // waiting for b's `echoed`), and both must say what they wait for.
-    let spec = std::fs::read_to_string(common::root().join("specs/zenoh/two_hosts.kpl"))
-        .unwrap()
-        .replace("\"data/percepts.jsonl\"", &format!("\"{}\"", common::root().join("specs/zenoh/data/percepts.jsonl").display()));
+    let spec = std::fs::read_to_string(common::root().join("specs/zenoh/two_hosts.kpl")).unwrap().replace(
+        "\"data/percepts.jsonl\"",
+        &format!("\"{}\"", common::root().join("specs/zenoh/data/percepts.jsonl").display()),
+    );
     let case = Case::new("late", &spec, 2, &[("KPL_ZENOH_WAIT", "5"), ("KPL_ZENOH_GIVE_UP", "120")]);
     let mut a = case.start("a", "a", &[]);
     std::thread::sleep(Duration::from_secs(12));
@@ -561,7 +563,10 @@ fn a_host_that_comes_after_the_ends_gets_them_and_nothing_hangs() {
     assert_eq!(b_code, Some(3), "{b_log}");
     assert_eq!(a_code, Some(3), "{a_log}");
     assert!(a_log.contains("waiting for host(s) `b`"), "a said whom it waited for:\n{a_log}");
-    assert!(a_log.contains("waiting for stream `echoed` from host `b`"), "a said what it waited for:\n{a_log}");
+    assert!(
+        a_log.contains("waiting for stream `echoed` from host `b`"),
+        "a said what it waited for:\n{a_log}"
+    );
     let (a_report, b_report) = (a.summary(), b.summary());
     for stream in ["percepts", "ticks"] {
         let (n, received, lost) = ledger(&a_report, &b_report, stream);
@@ -585,7 +590,8 @@ fn chain_spec() -> String {
 
 #[test]
 fn a_relay_killed_and_restarted_in_a_chain_loses_nothing_uncounted() {
-    let case = Case::new("relay", &chain_spec(), 3, &[("KPL_ZENOH_WAIT", "30"), ("KPL_ZENOH_GIVE_UP", "120")]);
+    let case =
+        Case::new("relay", &chain_spec(), 3, &[("KPL_ZENOH_WAIT", "30"), ("KPL_ZENOH_GIVE_UP", "120")]);
     let mut c = case.start("c", "c", &[]);
     let mut b1 = case.start("b", "b-1", &[]);
     let mut a = case.start("a", "a", &[]);
@@ -614,7 +620,8 @@ fn a_relay_killed_and_restarted_in_a_chain_loses_nothing_uncounted() {
     // a -> b-2, and b-2 -> c: the ledgers of the surviving runs add up exactly.
     let (n, b_received, b_lost) = ledger(&a_report, &b_report, "ticks");
     let (relayed, c_received, c_lost) = ledger(&b_report, &c_report, "relay");
-    let joined = inbound_run(&b_report, "ticks", &published(&a_report, "ticks").0)["joined_at"].as_u64().unwrap();
+    let joined =
+        inbound_run(&b_report, "ticks", &published(&a_report, "ticks").0)["joined_at"].as_u64().unwrap();
     eprintln!(
         "relay restart: a published {n}; b-2 joined at {joined}, delivered {b_received}, counted lost {b_lost}; \
          b-2 published {relayed}, c delivered {c_received} of them, counted lost {c_lost}"
@@ -628,12 +635,16 @@ fn a_relay_killed_and_restarted_in_a_chain_loses_nothing_uncounted() {
     let after_join = (joined as i64..n as i64).filter(|v| !seen.contains(v)).count() as u64;
     assert_eq!(after_join, (b_lost - joined) + c_lost, "ticks after b-2 joined: missing at c = counted lost");
     let before = (0..joined as i64).filter(|v| !seen.contains(v)).count();
-    eprintln!("relay restart: c has {} of a's {n} ticks; {before} of the {joined} before b-2 joined were lost with the killed b-1", recorded.len());
+    eprintln!(
+        "relay restart: c has {} of a's {n} ticks; {before} of the {joined} before b-2 joined were lost with the killed b-1",
+        recorded.len()
+    );
 }
 
 #[test]
 fn a_producer_killed_and_restarted_is_a_new_run_recorded_once() {
-    let case = Case::new("producer", &chain_spec(), 3, &[("KPL_ZENOH_WAIT", "30"), ("KPL_ZENOH_GIVE_UP", "120")]);
+    let case =
+        Case::new("producer", &chain_spec(), 3, &[("KPL_ZENOH_WAIT", "30"), ("KPL_ZENOH_GIVE_UP", "120")]);
     let mut c = case.start("c", "c", &[]);
     let mut b = case.start("b", "b", &[]);
     let mut a1 = case.start("a", "a-1", &[]);
@@ -705,7 +716,10 @@ fn back_pressure_loses_nothing_uncounted_and_for_ends_the_producer() {
     assert_eq!(values(&q.out.join("in.jsonl"), "ticks").len() as u64, received, "the sink has what arrived");
     let warnings = p_report["summary"]["processes"].to_string();
     assert!(warnings.contains("could not keep its period"), "the timer said it fell behind: {warnings}");
-    assert!(!q_log.contains("went away") && !p_log.contains("went away"), "no link was closed:\n{p_log}\n{q_log}");
+    assert!(
+        !q_log.contains("went away") && !p_log.contains("went away"),
+        "no link was closed:\n{p_log}\n{q_log}"
+    );
     eprintln!(
         "back-pressure: published {n}, delivered {received}, counted lost {lost}; the producer with --for 10s \
          ran {:.1} s (wall)",

@@ -570,10 +570,13 @@ fn strangers_cannot_forge_into_the_default_two_host_deployment() {
     let dir = out_dir("strangers");
     let state = dir.join("state");
     let env = |c: &mut Command| {
-        c.env("KPL_ZENOH_PORT_BASE", base.to_string()).env("KPL_STATE_DIR", &state).env("KPL_ZENOH_WAIT", "120");
+        c.env("KPL_ZENOH_PORT_BASE", base.to_string())
+            .env("KPL_STATE_DIR", &state)
+            .env("KPL_ZENOH_WAIT", "120");
     };
     let run = |host: &str| -> Child {
-        let mut c = common::kpl_command(&["run", "specs/zenoh/two_hosts.kpl", "--clock", "wall", "--host", host]);
+        let mut c =
+            common::kpl_command(&["run", "specs/zenoh/two_hosts.kpl", "--clock", "wall", "--host", host]);
         c.arg("--out").arg(dir.join(host)).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped());
         env(&mut c);
         c.spawn().unwrap()
@@ -634,7 +637,11 @@ fn strangers_cannot_forge_into_the_default_two_host_deployment() {
     let sent = lines(&dir.join("a/sent.jsonl"));
     let received = lines(&dir.join("b/received.jsonl"));
     for stream in ["percepts", "ticks"] {
-        assert_eq!(of_stream(&received, stream), of_stream(&sent, stream), "{stream}: b has a's samples, none forged");
+        assert_eq!(
+            of_stream(&received, stream),
+            of_stream(&sent, stream),
+            "{stream}: b has a's samples, none forged"
+        );
     }
     assert_eq!(lines(&dir.join("a/returned.jsonl")).len(), 300, "a has b's echoes, none forged");
     let refused = |host: &str, stream: &str| -> u64 {
@@ -690,8 +697,15 @@ fn two_launches_of_one_spec_at_once_never_mix() {
         assert_eq!(code, Some(0), "{name}:\n{stderr}");
         let sent = of_stream(&lines(&out.join("a/sent.jsonl")), "ticks");
         assert_eq!(sent.len(), 300);
-        assert_eq!(of_stream(&lines(&out.join("b/received.jsonl")), "ticks"), sent, "{name}: its own ticks only");
+        assert_eq!(
+            of_stream(&lines(&out.join("b/received.jsonl")), "ticks"),
+            sent,
+            "{name}: its own ticks only"
+        );
         let report = summary(&out.join("b"));
-        assert!(report["transport"]["inbound"].as_array().unwrap().iter().all(|s| s["refused"] == 0), "{report}");
+        assert!(
+            report["transport"]["inbound"].as_array().unwrap().iter().all(|s| s["refused"] == 0),
+            "{report}"
+        );
     }
 }

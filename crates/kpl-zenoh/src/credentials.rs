@@ -107,7 +107,14 @@ impl Credentials {
         let secret = Secret::parse(&text).map_err(|e| {
             TransportError(format!("{} is not a deployment secret: {e}", secret_path.display()))
         })?;
-        Ok(Credentials { dir: dir.to_path_buf(), made_on_first_use: false, ca, certificate, private_key, secret })
+        Ok(Credentials {
+            dir: dir.to_path_buf(),
+            made_on_first_use: false,
+            ca,
+            certificate,
+            private_key,
+            secret,
+        })
     }
 }
 
@@ -121,8 +128,14 @@ pub fn default_dir(spec_dir: &Path, spec_name: &str, deployment: &str) -> PathBu
     let state = std::env::var_os("KPL_STATE_DIR")
         .filter(|v| !v.is_empty())
         .map(PathBuf::from)
-        .or_else(|| std::env::var_os("XDG_STATE_HOME").filter(|v| !v.is_empty()).map(|d| PathBuf::from(d).join("kpl")))
-        .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".local/state/kpl")))
+        .or_else(|| {
+            std::env::var_os("XDG_STATE_HOME").filter(|v| !v.is_empty()).map(|d| PathBuf::from(d).join("kpl"))
+        })
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .filter(|v| !v.is_empty())
+                .map(|h| PathBuf::from(h).join(".local/state/kpl"))
+        })
         .unwrap_or_else(|| std::env::temp_dir().join("kpl-state"));
     let dir = if spec_dir.as_os_str().is_empty() { Path::new(".") } else { spec_dir };
     let path = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf()).join(format!("{spec_name}.kpl"));
@@ -326,7 +339,11 @@ mod tests {
         assert_eq!(leftovers, 1, "no drafts are left beside the keys");
         std::fs::remove_dir_all(dir.parent().unwrap().parent().unwrap()).unwrap();
         let a = default_dir(Path::new("specs/zenoh"), "two_hosts", "default");
-        assert!(a.ends_with("default") && a.to_string_lossy().contains("/keys/two_hosts-"), "{}", a.display());
+        assert!(
+            a.ends_with("default") && a.to_string_lossy().contains("/keys/two_hosts-"),
+            "{}",
+            a.display()
+        );
         assert_ne!(a, default_dir(Path::new("specs/zenoh"), "two_hosts", "other"));
         assert_ne!(a, default_dir(Path::new("specs"), "two_hosts", "default"));
     }

@@ -264,9 +264,7 @@ impl Sequence {
             None => {
                 if self.runs.len() == RUNS {
                     // Forget the run least recently active.
-                    if let Some(oldest) =
-                        (0..self.runs.len()).min_by_key(|i| self.runs[*i].touched)
-                    {
+                    if let Some(oldest) = (0..self.runs.len()).min_by_key(|i| self.runs[*i].touched) {
                         let run = self.runs.remove(oldest);
                         self.forgotten_lost += run.lost();
                         self.forgotten_received += run.received;
@@ -292,7 +290,10 @@ impl Sequence {
             // An end carries the count of samples published: the number the next sample would
             // have had. A second end of the same run is a replay.
             if run.ended {
-                return Err(Refusal::Replayed { incarnation: envelope.incarnation, sequence: envelope.sequence });
+                return Err(Refusal::Replayed {
+                    incarnation: envelope.incarnation,
+                    sequence: envelope.sequence,
+                });
             }
             run.ended = true;
             let out_of_line = envelope.sequence != run.frontier;

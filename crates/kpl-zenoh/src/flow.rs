@@ -71,7 +71,8 @@ impl Ack {
             return None;
         }
         let flags = bytes[4];
-        let u64_at = |at: usize| -> Option<u64> { Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?)) };
+        let u64_at =
+            |at: usize| -> Option<u64> { Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?)) };
         let run = (flags & FLAG_RUN != 0).then_some((u64_at(5)?, u64_at(13)?));
         Some(Ack { run, end: flags & FLAG_END != 0 })
     }

@@ -39,8 +39,8 @@ use kpl_runtime::process::BoxFuture;
 use kpl_runtime::run::{RunConfig, TransportFactory};
 use kpl_runtime::stats::Malformed;
 use kpl_runtime::transport::{
-    HostReport, InboundEnding, InboundReport, InboundRun, OutboundReport, Remote, RemoteReceiver, RemoteSender,
-    StreamKey, Transport, TransportError, TransportReport,
+    HostReport, InboundEnding, InboundReport, InboundRun, OutboundReport, Remote, RemoteReceiver,
+    RemoteSender, StreamKey, Transport, TransportError, TransportReport,
 };
 use kpl_semantic::hir;
 use zenoh::Wait;
@@ -293,7 +293,8 @@ impl Clash {
         }
         let payload = sample.payload().to_bytes();
         let attachment = sample.attachment().map(|a| a.to_bytes());
-        let Ok(envelope) = Envelope::open(attachment.as_deref(), key_expr, &payload, self.secret.as_ref()) else {
+        let Ok(envelope) = Envelope::open(attachment.as_deref(), key_expr, &payload, self.secret.as_ref())
+        else {
             return;
         };
         if envelope.host != self.host || envelope.incarnation == self.instance || payload.len() != 8 {
@@ -329,8 +330,12 @@ impl Clash {
 async fn say_hello(session: zenoh::Session, clash: Arc<Clash>) {
     let payload = Clash::payload();
     for number in 0u64.. {
-        let envelope =
-            Envelope { host: clash.host.clone(), incarnation: clash.instance, sequence: number, unfinished: false };
+        let envelope = Envelope {
+            host: clash.host.clone(),
+            incarnation: clash.instance,
+            sequence: number,
+            unfinished: false,
+        };
         let attachment = envelope.seal(&clash.key, &payload, clash.secret.as_ref());
         if session.is_closed() {
             return;
@@ -724,7 +729,8 @@ impl Outbound {
             consumer.present = present;
             if present {
                 if !consumer.end {
-                    let base = consumer.acked.unwrap_or(consumer.joined_at).max(consumer.joined_at.min(published));
+                    let base =
+                        consumer.acked.unwrap_or(consumer.joined_at).max(consumer.joined_at.min(published));
                     limit = limit.min(base.saturating_add(self.window));
                 }
             } else {
@@ -790,7 +796,9 @@ impl Outbound {
         let Ok(mut state) = self.state.lock() else { return };
         let consumer = state.entry(host).or_default();
         match consumer.instance {
-            Some((instance, number)) if instance == envelope.incarnation && envelope.sequence <= number => return,
+            Some((instance, number)) if instance == envelope.incarnation && envelope.sequence <= number => {
+                return;
+            }
             Some((instance, _)) if instance == envelope.incarnation => {}
             _ => {
                 // A new run of the consumer's receiver: its progress starts again.
@@ -1259,7 +1267,8 @@ async fn acknowledge(
         let closing = state.closing.load(std::sync::atomic::Ordering::Relaxed);
         let ack = state.ack();
         let payload = ack.encode();
-        let envelope = Envelope { host: host.clone(), incarnation: instance, sequence: number, unfinished: false };
+        let envelope =
+            Envelope { host: host.clone(), incarnation: instance, sequence: number, unfinished: false };
         let attachment = envelope.seal(&ack_key, &payload, secret.as_ref());
         number += 1;
         if let Err(e) = publisher.put(payload).attachment(attachment).await {
@@ -1410,7 +1419,13 @@ impl ZenohReceiver {
             .history(true)
             .await
             .map_err(|e| error("cannot watch the producer of", e))?;
-        tokio::spawn(acknowledge(session.session.clone(), key.clone(), host.to_string(), secret.clone(), acks.clone()));
+        tokio::spawn(acknowledge(
+            session.session.clone(),
+            key.clone(),
+            host.to_string(),
+            secret.clone(),
+            acks.clone(),
+        ));
         // Declared after the subscriber: a publisher that sees the token finds the subscriber.
         let token = session
             .session
@@ -1637,11 +1652,19 @@ impl ZenohReceiver {
         let producer = self.producer_host.clone().unwrap_or_default();
         let state = match self.presence {
             Presence::Never(since) => {
-                format!("not seen yet ({:.0} s of {:.0} s)", since.elapsed().as_secs_f64(), self.give_up.as_secs_f64())
+                format!(
+                    "not seen yet ({:.0} s of {:.0} s)",
+                    since.elapsed().as_secs_f64(),
+                    self.give_up.as_secs_f64()
+                )
             }
             Presence::Here => "up".to_string(),
             Presence::Gone(since) => {
-                format!("away for {:.0} s of {:.0} s", since.elapsed().as_secs_f64(), self.give_up.as_secs_f64())
+                format!(
+                    "away for {:.0} s of {:.0} s",
+                    since.elapsed().as_secs_f64(),
+                    self.give_up.as_secs_f64()
+                )
             }
         };
         let received = self.report.lock().map(|r| r.received).unwrap_or(0);

@@ -378,7 +378,8 @@ fn port_base(n: usize) -> Result<(u16, Vec<Claim>), String> {
     if let Ok(base) = std::env::var("KPL_ZENOH_PORT_BASE")
         && !base.is_empty()
     {
-        let base = base.trim().parse().map_err(|_| format!("KPL_ZENOH_PORT_BASE=`{base}` is not a port number"))?;
+        let base =
+            base.trim().parse().map_err(|_| format!("KPL_ZENOH_PORT_BASE=`{base}` is not a port number"))?;
         return Ok((base, Vec::new()));
     }
     let n = u16::try_from(n).map_err(|_| "too many hosts".to_string())?;
