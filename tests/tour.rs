@@ -8,7 +8,7 @@
 //! - Benchmarks (`kpl bench ...`) run for minutes: each must start (load its inputs and begin)
 //!   and not fail while it is watched; then it is stopped.
 //! - The README's two-host pair is a separate block: `tests/zenoh.rs` runs it.
-#![allow(clippy::unwrap_used, clippy::expect_used)] // tests
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;
 

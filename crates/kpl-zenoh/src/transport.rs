@@ -1747,7 +1747,6 @@ impl RemoteReceiver for ZenohReceiver {
                     () = at(ask_at) => Event::AskForTheEnd,
                     () = at(report_at) => Event::Silence,
                 };
-                drop(arrived);
                 match event {
                     Event::Message(message) => {
                         self.next_report = Instant::now() + SILENCE;
