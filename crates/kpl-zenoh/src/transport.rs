@@ -237,6 +237,9 @@ pub struct ZenohTransport {
     /// Tokens kept until the session closes: this host's own, the ends it confirmed, and its
     /// publishers' (zenoh sends an undeclaration ahead of data still queued).
     tokens: Arc<Mutex<Vec<LivelinessToken>>>,
+    /// The end queryables of this host's streams, kept until the session closes: the runtime
+    /// drops a stream's sender once its end went out, but a host that comes later asks for it.
+    ends: Mutex<Vec<Queryable<()>>>,
     hosts: Arc<HostWatch>,
     outbound: Mutex<Vec<Arc<Outbound>>>,
     inbound: Mutex<Vec<Arc<Mutex<InboundReport>>>>,
@@ -387,6 +390,7 @@ impl ZenohTransport {
             plan,
             declared: tokio::sync::Mutex::new(None),
             tokens: Arc::new(Mutex::new(vec![token])),
+            ends: Mutex::new(Vec::new()),
             hosts,
             outbound: Mutex::new(Vec::new()),
             inbound: Mutex::new(Vec::new()),
@@ -467,6 +471,11 @@ impl Transport for ZenohTransport {
                 && let Ok(mut tokens) = self.tokens.lock()
             {
                 tokens.push(token);
+            }
+            if let Some(end) = sender.end_queryable.take()
+                && let Ok(mut ends) = self.ends.lock()
+            {
+                ends.push(end);
             }
             if let Ok(mut outbound) = self.outbound.lock() {
                 outbound.push(sender.state.clone());
@@ -573,6 +582,9 @@ impl Transport for ZenohTransport {
             self.declared.lock().await.take();
             if let Ok(mut tokens) = self.tokens.lock() {
                 tokens.clear();
+            }
+            if let Ok(mut ends) = self.ends.lock() {
+                ends.clear();
             }
             if let Err(e) = self.session.session.close().await {
                 tracing::warn!("closing the zenoh session of {}: {e}", self.session.describe());
@@ -856,7 +868,11 @@ pub struct ZenohSender {
     checked_at: u64,
     _subscribers: Subscriber<()>,
     _acks: Subscriber<()>,
-    _end: Queryable<()>,
+    /// The queryable that answers with the stream's end, once it has ended. Dropping it with the
+    /// sender (the runtime drops a stream's outputs once their end went out) would leave a host
+    /// that comes later without the end: keep it until the session closes, as
+    /// [`ZenohTransport`] does.
+    pub end_queryable: Option<Queryable<()>>,
     /// The producer's liveliness token. Dropping it (with the sender) right after the end can
     /// overtake the end: keep it until the session closes, as [`ZenohTransport`] does.
     pub token: Option<LivelinessToken>,
@@ -975,7 +991,7 @@ impl ZenohSender {
             checked_at: 0,
             _subscribers: subscribers,
             _acks: acks,
-            _end: end,
+            end_queryable: Some(end),
             token: Some(token),
         })
     }
