@@ -370,8 +370,9 @@ fn outside_peers_cannot_slip_samples_or_ends_into_a_deployment_with_keys() {
     let keys = dir.join("keys");
     let made = common::kpl(&["keys", spec, "--out", keys.to_str().unwrap()]);
     assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-    // Without keys, TLS endpoints are refused with the way out.
-    let refused = common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s"]);
+    // Without keys (--insecure: otherwise keys are made on first use), TLS endpoints are refused
+    // with the way out.
+    let refused = common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s", "--insecure"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&refused.stderr).contains("kpl keys"),
