@@ -372,7 +372,8 @@ fn outside_peers_cannot_slip_samples_or_ends_into_a_deployment_with_keys() {
     assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
     // Without keys (--insecure: otherwise keys are made on first use), TLS endpoints are refused
     // with the way out.
-    let refused = common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s", "--insecure"]);
+    let refused =
+        common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s", "--insecure"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&refused.stderr).contains("kpl keys"),
