@@ -399,7 +399,7 @@ mod tests {
         assert_eq!(s.accept(&envelope(2, 3), true), ok(false, true));
         assert!(matches!(s.accept(&envelope(2, 3), true), Err(Refusal::Replayed { .. })));
         assert_eq!(s.lost(), 4);
-        assert_eq!(s.runs()[1], Run { seen: vec![(0, 1)], touched: 7, ..s.runs()[1].clone() });
+        assert_eq!(s.runs()[1], Run { seen: vec![(0, 1)], touched: 8, ..s.runs()[1].clone() });
         assert_eq!((s.runs()[1].received, s.runs()[1].frontier, s.runs()[1].ended), (1, 3, true));
         // A subscriber that came late counts what it missed, and where it joined.
         let mut late = Sequence::default();
