@@ -370,8 +370,10 @@ fn outside_peers_cannot_slip_samples_or_ends_into_a_deployment_with_keys() {
     let keys = dir.join("keys");
     let made = common::kpl(&["keys", spec, "--out", keys.to_str().unwrap()]);
     assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-    // Without keys, TLS endpoints are refused with the way out.
-    let refused = common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s"]);
+    // Without keys (--insecure: otherwise keys are made on first use), TLS endpoints are refused
+    // with the way out.
+    let refused =
+        common::kpl(&["run", spec, "--host", "uav", "--clock", "wall", "--for", "1s", "--insecure"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&refused.stderr).contains("kpl keys"),
@@ -555,4 +557,157 @@ fn python_follows_the_docs_to_decode_and_encode_samples() {
     let example = &readings["malformed_examples"][0];
     assert_eq!(example["location"], "zenoh `kpl-demo/readings`, message 1");
     assert!(example["error"].as_str().unwrap().contains("not a KPL message"), "{example}");
+}
+
+/// The README's two hosts, as written (no keys given: they are made on first use), and a
+/// stranger on the same machine without them: it declares the liveliness tokens of a subscriber
+/// that is not there, of a host and of a done stream, and publishes samples and ends into both
+/// hosts' inputs (without an envelope, with an untagged one, with one tagged by a secret of its
+/// own and a far sequence number). Nothing of it is accepted, the hosts are not fooled into
+/// thinking host `b` is there, the run goes on, and the summaries count what was refused.
+#[test]
+fn strangers_cannot_forge_into_the_default_two_host_deployment() {
+    let Some(python) = python("eclipse-zenoh") else { return };
+    let base = free_ports(2);
+    let dir = out_dir("strangers");
+    let state = dir.join("state");
+    let env = |c: &mut Command| {
+        c.env("KPL_ZENOH_PORT_BASE", base.to_string())
+            .env("KPL_STATE_DIR", &state)
+            .env("KPL_ZENOH_WAIT", "120");
+    };
+    let run = |host: &str| -> Child {
+        let mut c =
+            common::kpl_command(&["run", "specs/zenoh/two_hosts.kpl", "--clock", "wall", "--host", host]);
+        c.arg("--out").arg(dir.join(host)).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped());
+        env(&mut c);
+        c.spawn().unwrap()
+    };
+    let forger = |args: &[&str], as_host: &str| -> Value {
+        let out = Command::new(&python)
+            .arg(root().join("tests/zenoh_forger.py"))
+            .arg(root().join("docs/streams.md"))
+            .args(args)
+            .env("KPL_FORGE_AS", as_host)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_str(String::from_utf8_lossy(&out.stdout).lines().last().unwrap()).unwrap()
+    };
+    let a_port = format!("tcp/127.0.0.1:{base}");
+    let b_port = format!("tcp/127.0.0.1:{}", base + 1);
+    let a = run("a");
+    // Before b comes: fake tokens of b subscribing, of b running and of b having the ends.
+    let streams = "kpl/default/two_hosts";
+    let tokens: Vec<String> = ["ticks", "percepts"]
+        .iter()
+        .flat_map(|s| [format!("{streams}/{s}/@subscriber/b"), format!("{streams}/{s}/@done/b")])
+        .chain([format!("{streams}/@host/b")])
+        .collect();
+    let holder = {
+        let (python, a_port, tokens) = (python.clone(), a_port.clone(), tokens.clone());
+        std::thread::spawn(move || {
+            Command::new(python)
+                .arg(root().join("tests/zenoh_forger.py"))
+                .arg(root().join("docs/streams.md"))
+                .args(["tokens", &a_port, "6"])
+                .args(&tokens)
+                .output()
+                .unwrap()
+        })
+    };
+    // Forged samples and ends into a's input from b.
+    for mode in ["plain", "wrongkey"] {
+        let forged = forger(&["forge", mode, &a_port, &format!("{streams}/echoed"), "20"], "b");
+        assert_eq!(forged["connected"], true, "{forged}");
+    }
+    let held = holder.join().unwrap();
+    assert!(held.status.success(), "{}", String::from_utf8_lossy(&held.stderr));
+    // Now b, and forged samples into b's input from a while the run goes on.
+    let b = run("b");
+    for mode in ["plain", "wrongkey"] {
+        let forged = forger(&["forge", mode, &b_port, &format!("{streams}/ticks"), "20"], "a");
+        assert_eq!(forged["connected"], true, "{forged}");
+    }
+    let (a_code, a_err) = finish(a, "host a");
+    let (b_code, b_err) = finish(b, "host b");
+    assert_eq!(a_code, Some(0), "host a:\n{a_err}");
+    assert_eq!(b_code, Some(0), "host b:\n{b_err}");
+    // a was not fooled: it waited for the real b (the fake tokens carry no authenticated word).
+    assert!(a_err.contains("waiting for host(s) `b`"), "{a_err}");
+    assert!(!a_err.contains("went on after"), "a did not go on without b: {a_err}");
+    let sent = lines(&dir.join("a/sent.jsonl"));
+    let received = lines(&dir.join("b/received.jsonl"));
+    for stream in ["percepts", "ticks"] {
+        assert_eq!(
+            of_stream(&received, stream),
+            of_stream(&sent, stream),
+            "{stream}: b has a's samples, none forged"
+        );
+    }
+    assert_eq!(lines(&dir.join("a/returned.jsonl")).len(), 300, "a has b's echoes, none forged");
+    let refused = |host: &str, stream: &str| -> u64 {
+        let report = summary(&dir.join(host));
+        let inbound = report["transport"]["inbound"].as_array().unwrap();
+        let s = inbound.iter().find(|s| s["stream"] == stream).unwrap();
+        assert_eq!(s["ending"], "end", "{s}");
+        assert_eq!(s["lost"], 0, "{s}");
+        s["refused"].as_u64().unwrap()
+    };
+    // Whatever of the forged messages zenoh delivered (a client's puts before a subscriber
+    // matched are dropped) was refused and counted; the stranger's last puts came after a match.
+    let (on_a, on_b) = (refused("a", "echoed"), refused("b", "ticks"));
+    eprintln!("strangers: refused {on_a} message(s) at a, {on_b} at b");
+    assert!(on_a > 0 && on_b > 0, "a refused {on_a}, b refused {on_b}");
+}
+
+/// Two `kpl launch` of one spec at once, each with its own --out: both pick their own ports and
+/// nothing crosses; a third with the first one's --out refuses, naming it.
+#[test]
+fn two_launches_of_one_spec_at_once_never_mix() {
+    let dir = out_dir("launches");
+    let state = dir.join("state");
+    let launch = |out: &Path| -> Child {
+        common::kpl_command(&["launch", "specs/zenoh/two_hosts.kpl", "--quiet", "--out"])
+            .arg(out)
+            .env_remove("KPL_ZENOH_PORT_BASE")
+            .env("KPL_STATE_DIR", &state)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (one, two) = (dir.join("one"), dir.join("two"));
+    let first = launch(&one);
+    let second = launch(&two);
+    let start = Instant::now();
+    while !one.join("launch.lock").exists() {
+        assert!(start.elapsed() < HANG, "the first launch never started");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let third = common::kpl_command(&["launch", "specs/zenoh/two_hosts.kpl", "--quiet", "--out"])
+        .arg(&one)
+        .env("KPL_STATE_DIR", &state)
+        .output()
+        .unwrap();
+    let third_err = String::from_utf8_lossy(&third.stderr);
+    assert_eq!(third.status.code(), Some(2), "{third_err}");
+    assert!(third_err.contains("held by another kpl launch (process"), "{third_err}");
+    for (name, child, out) in [("first", first, &one), ("second", second, &two)] {
+        let (code, stderr) = finish(child, name);
+        assert_eq!(code, Some(0), "{name}:\n{stderr}");
+        let sent = of_stream(&lines(&out.join("a/sent.jsonl")), "ticks");
+        assert_eq!(sent.len(), 300);
+        assert_eq!(
+            of_stream(&lines(&out.join("b/received.jsonl")), "ticks"),
+            sent,
+            "{name}: its own ticks only"
+        );
+        let report = summary(&out.join("b"));
+        assert!(
+            report["transport"]["inbound"].as_array().unwrap().iter().all(|s| s["refused"] == 0),
+            "{report}"
+        );
+    }
 }

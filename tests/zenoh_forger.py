@@ -13,15 +13,24 @@ blocks of the section "On the wire" (the message codec and the envelope).
           on the others (a stranger without the deployment's keys);
         - MODE `member`: with the certificate of HOST from the keys folder KEYS and valid tags made
           with its secret, naming the producer (a host of the deployment impersonating another);
-        - MODE `nocert`: over TLS trusting the deployment's authority but without a certificate.
+        - MODE `nocert`: over TLS trusting the deployment's authority but without a certificate;
+        - MODE `wrongkey`: envelopes naming the producer, tagged with a secret of its own (a
+          stranger guessing at the deployment's keys), with a far sequence number first (to shut
+          the producer out, if kpl let it);
+    python zenoh_forger.py DOCS tokens ENDPOINT SECONDS TOKEN...
+        connects to ENDPOINT as a zenoh client, declares each liveliness TOKEN (a key expression:
+        a subscriber's, a host's, a done token) and holds them SECONDS, then prints one JSON line.
 """
 
 import json
+import os
 import re
 import sys
 import time
 
 WAIT = 30.0
+#: The producing host forged envelopes name (the environment's KPL_FORGE_AS, else `uav`).
+AS_HOST = os.environ.get("KPL_FORGE_AS", "uav")
 
 
 def documented(docs_path):
@@ -81,6 +90,8 @@ def forge(ns, mode, endpoint, key, count, keys=None, host=None):
         print(json.dumps({"connected": False, "error": str(e)}), flush=True)
         return
     secret = bytes.fromhex(open(f"{keys}/secret").read().strip()) if mode == "member" else None
+    if mode == "wrongkey":
+        secret = bytes(range(32))
     publisher = session.declare_publisher(key)
     deadline = time.monotonic() + WAIT
     while not publisher.matching_status.matching:
@@ -90,19 +101,36 @@ def forge(ns, mode, endpoint, key, count, keys=None, host=None):
     matched = publisher.matching_status.matching
     incarnation = 0x0BAD
     sent = 0
+    if mode == "wrongkey":
+        far = ns["encode_sample"](1_700_000_000_000_000, 1_700_000_000_000_000, -1)
+        publisher.put(far, attachment=ns["seal_envelope"](key, far, AS_HOST, incarnation, 2**63, secret))
+        sent += 1
     for i in range(count):
         payload = ns["encode_sample"](1_700_000_000_000_000 + i, 1_700_000_000_000_000 + i, -1 - i)
         if mode == "plain" and i % 2 == 0:
             publisher.put(payload)
         else:
-            attachment = ns["seal_envelope"](key, payload, "uav", incarnation, i, secret)
+            attachment = ns["seal_envelope"](key, payload, AS_HOST, incarnation, i, secret)
             publisher.put(payload, attachment=attachment)
         sent += 1
     end = ns["encode_end"](count)
-    publisher.put(end, attachment=ns["seal_envelope"](key, end, "uav", incarnation, count, secret))
+    publisher.put(end, attachment=ns["seal_envelope"](key, end, AS_HOST, incarnation, count, secret))
     sent += 1
     time.sleep(1.0)
     print(json.dumps({"connected": True, "matched": matched, "sent": sent}), flush=True)
+    session.close()
+
+
+def tokens(endpoint, seconds, keys):
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    session = zenoh.open(config)
+    held = [session.liveliness().declare_token(key) for key in keys]
+    time.sleep(seconds)
+    print(json.dumps({"connected": True, "tokens": len(held)}), flush=True)
     session.close()
 
 
@@ -111,6 +139,8 @@ def main():
     ns = documented(docs)
     if command == "check":
         check(ns)
+    elif command == "tokens":
+        tokens(sys.argv[3], float(sys.argv[4]), sys.argv[5:])
     else:
         mode, endpoint, key, count = sys.argv[3:7]
         keys, host = (sys.argv[7:9] + [None, None])[:2]

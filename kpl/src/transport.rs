@@ -11,12 +11,21 @@ use std::process::ExitCode;
 use kpl_zenoh::bench::{self, BenchOptions, Implementation, Payload, PeerTask};
 
 /// The transport `kpl run --host` uses, with the deployment's keys folder when given (`--keys`,
-/// over `KPL_KEYS`). It opens a zenoh session only when a host sends or receives streams; a run
+/// over `KPL_KEYS`), else keys made on first use, or none with `--insecure`. It opens a zenoh session only when a host sends or receives streams; a run
 /// without `--host` never does.
-pub fn factory(keys: Option<&std::path::Path>) -> Option<Box<dyn kpl_runtime::run::TransportFactory>> {
+pub fn factory(
+    keys: Option<&std::path::Path>,
+    insecure: bool,
+) -> Option<Box<dyn kpl_runtime::run::TransportFactory>> {
     let sessions = kpl_zenoh::Sessions::process();
     if let Some(keys) = keys {
         sessions.configure(|options| options.keys = Some(keys.to_path_buf()));
+    }
+    if insecure {
+        sessions.configure(|options| {
+            options.keys = None;
+            options.insecure = true;
+        });
     }
     Some(Box::new(kpl_zenoh::ZenohFactory::new(sessions)))
 }

@@ -6,6 +6,7 @@ hosts, its envelopes (:mod:`kpl.envelope`).
 from __future__ import annotations
 
 import atexit
+import bisect
 import json
 import os
 import queue
@@ -324,8 +325,8 @@ class Subscription:
             if isinstance(verdict, str):
                 self._count("refused", f"{key}: {verdict}")
                 return None
-            lost, restarted = verdict
-            self.lost += lost
+            _, restarted = verdict
+            self.lost = sum(q.lost() for q in self._sequences.values())
             self.restarts += restarted
         if isinstance(message, wire.End):
             if envelope is not None and envelope.unfinished:
@@ -379,29 +380,61 @@ class Subscription:
 
 
 class _Sequence:
-    """The sequence numbers seen on one stream, as a KPL host checks them: they move forward within
-    an incarnation of the producer; a new incarnation is a restart, an old one a replay."""
+    """The sequence numbers seen on one stream, as a KPL host checks them: a message whose
+    (incarnation, sequence number) was accepted before is a replay or a duplicate; anything else
+    is accepted, so that no message (a far sequence number, a new incarnation) can shut the
+    producer's own messages out. A new incarnation is a restart."""
 
-    RETIRED = 64
+    RUNS = 16
+    RANGES = 1024
 
     def __init__(self) -> None:
-        self.incarnation: "int | None" = None
-        self.next = 0
-        self.retired: list[int] = []
+        # incarnation -> [ranges [start, end) sorted, received, frontier, ended, touched]
+        self.runs: dict[int, list] = {}
+        self.current: "int | None" = None
+        self.forgotten_lost = 0
+        self.clock = 0
+
+    def lost(self) -> int:
+        return self.forgotten_lost + sum(max(0, r[2] - r[1]) for r in self.runs.values())
 
     def accept(self, envelope: env.Envelope, is_end: bool) -> "tuple[int, bool] | str":
+        """(samples newly counted lost, restarted), or why the message is refused."""
+        self.clock += 1
+        before = self.lost()
+        run = self.runs.get(envelope.incarnation)
         restarted = False
-        if self.incarnation != envelope.incarnation:
-            if envelope.incarnation in self.retired:
-                return f"from an earlier run of the producer (incarnation {envelope.incarnation:016x}): replayed"
-            if self.incarnation is not None:
-                restarted = True
-                self.retired = (self.retired + [self.incarnation])[-self.RETIRED :]
-            self.incarnation = envelope.incarnation
-            self.next = 0
-        if envelope.sequence < self.next:
-            return f"sequence number {envelope.sequence} again: replayed or duplicated"
-        lost = envelope.sequence - self.next
-        self.next = envelope.sequence if is_end else envelope.sequence + 1
-        return lost, restarted
-
+        if run is None:
+            if len(self.runs) == self.RUNS:
+                oldest = min(self.runs, key=lambda i: self.runs[i][4])
+                old = self.runs.pop(oldest)
+                self.forgotten_lost += max(0, old[2] - old[1])
+            restarted = self.current is not None and self.current != envelope.incarnation
+            run = self.runs[envelope.incarnation] = [[], 0, 0, False, self.clock]
+        ranges = run[0]
+        s = envelope.sequence
+        if is_end:
+            if run[3]:
+                return f"the end again (incarnation {envelope.incarnation:016x}): replayed"
+            run[3] = True
+            run[2] = max(run[2], s)
+        else:
+            i = bisect.bisect_right(ranges, [s, float("inf")])
+            if i > 0 and ranges[i - 1][0] <= s < ranges[i - 1][1]:
+                return f"sequence number {s} again: replayed or duplicated"
+            if i > 0 and ranges[i - 1][1] == s:
+                ranges[i - 1][1] = s + 1
+                if i < len(ranges) and ranges[i][0] == s + 1:
+                    ranges[i - 1][1] = ranges[i][1]
+                    del ranges[i]
+            elif i < len(ranges) and ranges[i][0] == s + 1:
+                ranges[i][0] = s
+            else:
+                ranges.insert(i, [s, s + 1])
+                if len(ranges) > self.RANGES:
+                    ranges.pop()
+            run[1] += 1
+            run[2] = max(run[2], s + 1)
+        run[4] = self.clock
+        self.current = envelope.incarnation
+        return max(0, self.lost() - before), restarted

@@ -217,15 +217,31 @@ class Envelopes(unittest.TestCase):
         plain_envelope = envelope.seal(key, payload, "a", 1, 0, unfinished=True)
         self.assertEqual(envelope.open_(plain_envelope, key, payload), envelope.Envelope("a", 1, 0, True, False))
 
-    def test_sequence_numbers_move_forward(self):
+    def test_sequence_numbers_count_gaps_and_refuse_replays(self):
         seq = _Sequence()
         e = lambda inc, n: envelope.Envelope("a", inc, n)  # noqa: E731
         self.assertEqual(seq.accept(e(1, 0), False), (0, False))
         self.assertEqual(seq.accept(e(1, 3), False), (2, False))
         self.assertIsInstance(seq.accept(e(1, 3), False), str)
         self.assertEqual(seq.accept(e(2, 0), False), (0, True))
-        self.assertIsInstance(seq.accept(e(1, 9), False), str)
+        # A run of the producer seen before goes on (messages are never shut out) ...
+        self.assertEqual(seq.accept(e(1, 9), False), (5, False))
+        # ... and what it sent is still refused when it comes again.
+        self.assertIsInstance(seq.accept(e(1, 0), False), str)
         self.assertEqual(seq.accept(e(2, 1), True), (0, False))
+        self.assertIsInstance(seq.accept(e(2, 1), True), str)
+        self.assertEqual(seq.lost(), 7)
+
+    def test_a_forged_sequence_number_never_shuts_the_producer_out(self):
+        seq = _Sequence()
+        e = lambda inc, n: envelope.Envelope("a", inc, n)  # noqa: E731
+        for n in range(10):
+            seq.accept(e(1, n), False)
+        seq.accept(e(1, 2**64 - 2), False)
+        seq.accept(e(99, 5), False)
+        for n in range(10, 500):
+            self.assertIsInstance(seq.accept(e(1, n), False), tuple, n)
+        self.assertIsInstance(seq.accept(e(1, 300), False), str)
 
     def test_the_secret_is_read_from_a_keys_folder(self):
         import tempfile

@@ -185,6 +185,7 @@ impl RunReport {
         for stream in transport.received_nothing() {
             out.push(format!("nothing arrived on `{stream}` from another host"));
         }
+        out.extend(transport.end_not_confirmed());
         out
     }
 }
@@ -292,10 +293,23 @@ pub async fn execute(
             return Err(RunError::Build(errors));
         }
     };
+    // A transport that cannot go on (a clash with another run of this host) stops the run.
+    let transport_watch = transport.as_ref().map(|transport| TransportWatch::watch(transport, &stop));
+    let stop_all = || {
+        stop_watching();
+        if let Some(watch) = &transport_watch {
+            watch.task.abort();
+        }
+    };
     let remote_feeds = wire_edges(plan, &mut tasks, &stats);
     let mut join = JoinSet::new();
     if let Some(transport) = &transport {
-        connect_remote(plan, transport, &mut tasks, remote_feeds, &stats, &stop, &mut join).await?;
+        if let Err(e) =
+            connect_remote(plan, transport, &mut tasks, remote_feeds, &stats, &stop, &mut join).await
+        {
+            stop_all();
+            return Err(e);
+        }
     }
     stats.set_endless(
         tasks
@@ -305,13 +319,16 @@ pub async fn execute(
             .collect(),
     );
     spawn_processes(spec, tasks, config, &clock, &stats, &stop, end, &mut join);
-    let (failures, strict_failure) = join_processes(&mut join, &stop).await;
+    let (mut failures, strict_failure) = join_processes(&mut join, &stop).await;
+    if let Some(why) = transport_watch.as_ref().and_then(TransportWatch::failure) {
+        failures.push(format!("transport: {why}"));
+    }
 
     let signal = signals.received();
     let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))
         && signal.is_none()
         && !strict_failure;
-    stop_watching();
+    stop_all();
     let transport_report = match transport {
         Some(transport) => {
             transport.clone().close().await;
@@ -362,6 +379,33 @@ impl Signals {
 
     fn received(&self) -> Option<Signal> {
         self.received.lock().ok().and_then(|s| *s)
+    }
+}
+
+/// Watches the transport for a failure it cannot go on after: the first one stops the run and is
+/// remembered for its report.
+struct TransportWatch {
+    task: tokio::task::JoinHandle<()>,
+    failure: Arc<std::sync::Mutex<Option<String>>>,
+}
+
+impl TransportWatch {
+    fn watch(transport: &Arc<dyn Transport>, stop: &StopSignal) -> TransportWatch {
+        let failure: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
+        let (transport, stop, slot) = (transport.clone(), stop.clone(), failure.clone());
+        let task = tokio::spawn(async move {
+            let why = transport.failed().await;
+            tracing::error!("{why}");
+            if let Ok(mut slot) = slot.lock() {
+                *slot = Some(why);
+            }
+            stop.interrupt();
+        });
+        TransportWatch { task, failure }
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.failure.lock().ok().and_then(|mut f| f.take())
     }
 }
 

@@ -95,6 +95,11 @@ pub trait Transport: Send + Sync {
     /// there, all streams at once, saying who is missing while it waits. The run may drop this
     /// future (Ctrl-C).
     fn start(&self) -> BoxFuture<'_, ()>;
+    /// Resolves when the transport cannot go on (another process runs this host of the same
+    /// deployment): why. The run then stops and reports it as a failure. Never, by default.
+    fn failed(&self) -> BoxFuture<'_, String> {
+        Box::pin(std::future::pending())
+    }
     /// What happened between the hosts so far.
     fn report(&self) -> TransportReport;
     /// Closes the session.
@@ -126,6 +131,18 @@ impl TransportReport {
             .filter_map(|s| match &s.ending {
                 InboundEnding::CutShort(why) => Some(format!("`{}` from host `{}`: {why}", s.stream, s.from)),
                 _ => None,
+            })
+            .collect()
+    }
+
+    /// The streams sent to other hosts whose end some consuming host did not confirm.
+    pub fn end_not_confirmed(&self) -> Vec<String> {
+        self.outbound
+            .iter()
+            .filter(|s| !s.end_not_confirmed.is_empty())
+            .map(|s| {
+                let hosts: Vec<String> = s.end_not_confirmed.iter().map(|h| format!("`{h}`")).collect();
+                format!("the end of `{}` was not confirmed by host(s) {}", s.stream, hosts.join(", "))
             })
             .collect()
     }
@@ -171,6 +188,25 @@ pub struct InboundReport {
     pub refused: u64,
     pub refused_examples: Vec<Malformed>,
     pub ending: InboundEnding,
+    /// What arrived of each run of the producer (a restart is a new run), in the order they
+    /// were first seen; `received` and `lost` above are their sums.
+    pub runs: Vec<InboundRun>,
+}
+
+/// What arrived of one run of a producer.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct InboundRun {
+    /// The run's incarnation, 16 hexadecimal digits (the producer's `OutboundReport::incarnation`).
+    pub incarnation: String,
+    /// The sequence number of the first sample that arrived: what the run published before was
+    /// published before this host subscribed (counted in `lost`).
+    pub joined_at: u64,
+    pub received: u64,
+    /// Samples of the run that never arrived (as far as this host knows: with the run's end,
+    /// every sample it published).
+    pub lost: u64,
+    /// Whether the run's end arrived (then `received + lost` is what it published).
+    pub ended: bool,
 }
 
 /// How a stream from another host ended.
@@ -190,6 +226,8 @@ pub enum InboundEnding {
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct OutboundReport {
     pub stream: String,
+    /// This run's incarnation, 16 hexadecimal digits (what consumers report of it in `runs`).
+    pub incarnation: String,
     /// Samples published.
     pub published: u64,
     /// For each consuming host: samples published while it was not subscribed (lost for it).
@@ -197,4 +235,7 @@ pub struct OutboundReport {
     /// Consuming hosts that did not confirm they had the end of the stream before this host
     /// stopped waiting (`KPL_ZENOH_WAIT`).
     pub end_not_confirmed: Vec<String>,
+    /// Acknowledgments refused: not from a consuming host of this deployment (no or a wrong
+    /// envelope or tag).
+    pub refused_acks: u64,
 }

@@ -114,6 +114,14 @@ pub fn encode_end(published: u64) -> Vec<u8> {
     out
 }
 
+/// Whether `payload` is an end message (by its header alone, without decoding it).
+pub fn is_end(payload: &[u8]) -> bool {
+    payload.len() == END_LEN
+        && payload.starts_with(MAGIC)
+        && matches!(payload[3], 1 | 2)
+        && payload[4] == KIND_END
+}
+
 fn header(out: &mut Vec<u8>, kind: u8) {
     out.extend_from_slice(MAGIC);
     out.push(VERSION);

@@ -58,6 +58,13 @@ pub struct ZenohOptions {
     /// The deployment's keys folder (`--keys`, `KPL_KEYS`): mutual TLS between the hosts, access
     /// control, and authentication tags on every message.
     pub keys: Option<PathBuf>,
+    /// Without a keys folder, the keys made on first use for this deployment
+    /// ([`crate::credentials::default_dir`]): authentication tags on every message, `tcp/` links
+    /// by default.
+    pub first_use_keys: Option<PathBuf>,
+    /// No keys at all (`kpl run --insecure`): anyone who reaches a host's port can send it
+    /// samples, end its streams, or pretend to be a host of the deployment.
+    pub insecure: bool,
 }
 
 impl Default for ZenohOptions {
@@ -69,6 +76,8 @@ impl Default for ZenohOptions {
             give_up: DEFAULT_GIVE_UP,
             queue: DEFAULT_QUEUE,
             keys: None,
+            first_use_keys: None,
+            insecure: false,
         }
     }
 }

@@ -74,6 +74,9 @@ impl Secret {
 #[derive(Debug, Clone)]
 pub struct Credentials {
     pub dir: PathBuf,
+    /// Made on first use for hosts started without a keys folder: links stay `tcp/` by default
+    /// (messages are authenticated, not encrypted); a given keys folder makes them `tls/`.
+    pub made_on_first_use: bool,
     pub ca: PathBuf,
     pub certificate: PathBuf,
     pub private_key: PathBuf,
@@ -104,7 +107,71 @@ impl Credentials {
         let secret = Secret::parse(&text).map_err(|e| {
             TransportError(format!("{} is not a deployment secret: {e}", secret_path.display()))
         })?;
-        Ok(Credentials { dir: dir.to_path_buf(), ca, certificate, private_key, secret })
+        Ok(Credentials {
+            dir: dir.to_path_buf(),
+            made_on_first_use: false,
+            ca,
+            certificate,
+            private_key,
+            secret,
+        })
+    }
+}
+
+/// The folder of a deployment's keys made on first use, when no keys folder is given:
+/// `STATE/keys/SPEC-HASH/DEPLOYMENT`, where `STATE` is `KPL_STATE_DIR`, else
+/// `$XDG_STATE_HOME/kpl`, else `~/.local/state/kpl`, `SPEC` the spec's file stem and `HASH` 16
+/// hexadecimal digits of the SHA-256 of the spec's canonical path. Every host of one deployment of
+/// one spec file on this machine finds the same folder, so they agree on its keys without being
+/// told; two copies of a spec elsewhere get different keys.
+pub fn default_dir(spec_dir: &Path, spec_name: &str, deployment: &str) -> PathBuf {
+    let state = std::env::var_os("KPL_STATE_DIR")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("XDG_STATE_HOME").filter(|v| !v.is_empty()).map(|d| PathBuf::from(d).join("kpl"))
+        })
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .filter(|v| !v.is_empty())
+                .map(|h| PathBuf::from(h).join(".local/state/kpl"))
+        })
+        .unwrap_or_else(|| std::env::temp_dir().join("kpl-state"));
+    let dir = if spec_dir.as_os_str().is_empty() { Path::new(".") } else { spec_dir };
+    let path = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf()).join(format!("{spec_name}.kpl"));
+    let digest = ring::digest::digest(&ring::digest::SHA256, path.to_string_lossy().as_bytes());
+    let hash: String = digest.as_ref()[..8].iter().map(|b| format!("{b:02x}")).collect();
+    state
+        .join("keys")
+        .join(format!("{}-{hash}", crate::keys::escape_chunk(spec_name)))
+        .join(crate::keys::escape_chunk(deployment))
+}
+
+/// The keys of `hosts` in `dir`, made there first if `dir` does not exist yet. Several hosts
+/// starting at once make them once: each makes its own in a folder beside `dir` and renames it to
+/// `dir`, and a host that finds `dir` taken uses what is there.
+pub fn made_on_first_use(dir: &Path, deployment: &str, hosts: &[String]) -> Result<bool, KeysError> {
+    if dir.join(SECRET).is_file() {
+        // Hosts added to the spec since get their files.
+        make(dir, deployment, hosts)?;
+        return Ok(false);
+    }
+    let parent = dir.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|error| KeysError::Io { path: parent.to_path_buf(), error })?;
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let draft = parent.join(format!(".{name}.{}-{:x}", std::process::id(), crate::transport::random_u64()));
+    make(&draft, deployment, hosts)?;
+    match std::fs::rename(&draft, dir) {
+        Ok(()) => Ok(true),
+        Err(_) if dir.join(SECRET).is_file() => {
+            let _ = std::fs::remove_dir_all(&draft);
+            make(dir, deployment, hosts)?;
+            Ok(false)
+        }
+        Err(error) => {
+            let _ = std::fs::remove_dir_all(&draft);
+            Err(KeysError::Io { path: dir.to_path_buf(), error })
+        }
     }
 }
 
@@ -255,6 +322,30 @@ mod tests {
             assert_eq!(mode & 0o777, 0o600);
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn keys_made_on_first_use_are_made_once_by_hosts_starting_together() {
+        let dir = fresh("first-use").join("keys").join("default");
+        let hosts = vec!["a".to_string(), "b".to_string()];
+        let made: Vec<bool> = std::thread::scope(|scope| {
+            let handles: Vec<_> =
+                (0..4).map(|_| scope.spawn(|| made_on_first_use(&dir, "default", &hosts).unwrap())).collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert_eq!(made.iter().filter(|m| **m).count(), 1, "{made:?}");
+        Credentials::load(&dir, "b").unwrap();
+        let leftovers = std::fs::read_dir(dir.parent().unwrap()).unwrap().count();
+        assert_eq!(leftovers, 1, "no drafts are left beside the keys");
+        std::fs::remove_dir_all(dir.parent().unwrap().parent().unwrap()).unwrap();
+        let a = default_dir(Path::new("specs/zenoh"), "two_hosts", "default");
+        assert!(
+            a.ends_with("default") && a.to_string_lossy().contains("/keys/two_hosts-"),
+            "{}",
+            a.display()
+        );
+        assert_ne!(a, default_dir(Path::new("specs/zenoh"), "two_hosts", "other"));
+        assert_ne!(a, default_dir(Path::new("specs"), "two_hosts", "default"));
     }
 
     #[test]

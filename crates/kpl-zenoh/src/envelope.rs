@@ -14,10 +14,12 @@
 //! | 22..22+n | the producing host's name, UTF-8 |
 //! | 22+n..54+n | with keys: HMAC-SHA256, with the deployment's secret, of `kpl-envelope-1`, the key expression, a zero byte, the envelope before the tag, and the payload |
 //!
-//! The receiver ([`Sequence`]) accepts a message only if its envelope names the host the spec
-//! places the stream's producer on, its tag verifies (with keys), and its sequence number moves
-//! forward within its incarnation; a new incarnation is the producer starting again. Gaps are
-//! samples lost on the way (published while this host was down, or before it subscribed).
+//! The receiver accepts a message only if its envelope names the host the spec places the
+//! stream's producer on and its tag verifies (with keys); [`Sequence`] then refuses what it has
+//! accepted before (a replay or a duplicate). A new incarnation is the producer starting again;
+//! gaps are samples that never arrived (published while this host was down, or before it
+//! subscribed). Nothing a sender claims (a far sequence number, a new incarnation) shuts the
+//! producer's own messages out.
 
 use crate::credentials::Secret;
 
@@ -152,61 +154,189 @@ pub enum Refusal {
     WrongHost { from: String, expected: String },
     #[error("sequence number {sequence} again (incarnation {incarnation:016x}): replayed or duplicated")]
     Replayed { incarnation: u64, sequence: u64 },
-    #[error("from an earlier run of the producer (incarnation {0:016x}): replayed")]
-    OldIncarnation(u64),
 }
 
 /// What a stream's receiver makes of an accepted envelope.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Accepted {
-    /// Samples of this incarnation that never arrived before this message.
-    pub lost: u64,
-    /// The producer started again (a new incarnation after another one).
+    /// The producer started again: the first message of an incarnation seen after another one.
     pub restarted: bool,
+    /// The message's sequence number is not right after the last one of its incarnation (a gap:
+    /// samples that never arrived; or it fills an earlier gap).
+    pub out_of_line: bool,
 }
 
-/// The sequence numbers a receiver has seen of one stream.
+/// What a receiver has seen of one run (incarnation) of a stream's producer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Run {
+    pub incarnation: u64,
+    /// The sequence number the first accepted message had: samples before it were published
+    /// before this host subscribed (or while it was away).
+    pub joined_at: u64,
+    /// Samples accepted.
+    pub received: u64,
+    /// One past the highest sequence number accepted (the count of samples published so far,
+    /// as far as this host knows); with the end, the count the end says.
+    pub frontier: u64,
+    /// Whether the end of this run arrived (then `frontier` is the count published).
+    pub ended: bool,
+    /// Accepted sequence numbers, as sorted disjoint ranges `[start, end)`.
+    seen: Vec<(u64, u64)>,
+    /// The order of last activity among the runs (to forget the least recent).
+    touched: u64,
+}
+
+impl Run {
+    /// Samples of this run that never arrived: published (as far as this host knows) and not
+    /// received.
+    pub fn lost(&self) -> u64 {
+        self.frontier.saturating_sub(self.received)
+    }
+
+    fn contains(&self, sequence: u64) -> bool {
+        let i = self.seen.partition_point(|(_, end)| *end <= sequence);
+        self.seen.get(i).is_some_and(|(start, _)| *start <= sequence)
+    }
+
+    /// Records `sequence`; false when it was seen before.
+    fn insert(&mut self, sequence: u64) -> bool {
+        let i = self.seen.partition_point(|(_, end)| *end < sequence);
+        // `i`: the first range that ends at or after `sequence`.
+        if let Some((start, end)) = self.seen.get(i).copied() {
+            if start <= sequence && sequence < end {
+                return false;
+            }
+            if end == sequence {
+                // Extends range i upwards; it may now touch range i + 1.
+                self.seen[i].1 = sequence + 1;
+                if let Some((next_start, next_end)) = self.seen.get(i + 1).copied()
+                    && next_start == sequence + 1
+                {
+                    self.seen[i].1 = next_end;
+                    self.seen.remove(i + 1);
+                }
+                return true;
+            }
+            if start == sequence + 1 {
+                self.seen[i].0 = sequence;
+                return true;
+            }
+        }
+        self.seen.insert(i, (sequence, sequence + 1));
+        if self.seen.len() > RANGES {
+            // The highest ranges are the least likely to be the producer's (its numbers grow one
+            // by one from where it is): forget the highest.
+            self.seen.pop();
+        }
+        true
+    }
+}
+
+/// The sequence numbers a receiver has seen of one stream, per run of its producer.
+///
+/// A message is accepted unless its (incarnation, sequence number) was accepted before: a replay
+/// or a duplicate. Nothing a sender claims can shut the producer out: a message with a huge
+/// sequence number, or of a new incarnation, does not make the producer's next messages look
+/// old; they are still accepted (in a deployment without keys anyone can send well-formed
+/// messages, and only the counts show it).
 #[derive(Debug, Clone, Default)]
 pub struct Sequence {
-    incarnation: Option<u64>,
-    next: u64,
-    /// Incarnations the producer has left behind: their messages are replays.
-    retired: Vec<u64>,
+    runs: Vec<Run>,
+    /// The incarnation of the last accepted message.
+    current: Option<u64>,
+    /// Samples lost and received of runs forgotten (more than [`RUNS`] of them).
+    forgotten_lost: u64,
+    forgotten_received: u64,
+    clock: u64,
 }
 
-/// How many earlier incarnations a receiver remembers.
-const RETIRED: usize = 64;
+/// How many runs of a producer a receiver remembers.
+const RUNS: usize = 16;
+/// How many disjoint ranges of sequence numbers a run keeps.
+const RANGES: usize = 1024;
 
 impl Sequence {
     /// Checks the place of a message (a sample, or an end with `is_end`) in its stream.
     pub fn accept(&mut self, envelope: &Envelope, is_end: bool) -> Result<Accepted, Refusal> {
-        let mut restarted = false;
-        if self.incarnation != Some(envelope.incarnation) {
-            if self.retired.contains(&envelope.incarnation) {
-                return Err(Refusal::OldIncarnation(envelope.incarnation));
-            }
-            if let Some(previous) = self.incarnation {
-                restarted = true;
-                if self.retired.len() == RETIRED {
-                    self.retired.remove(0);
+        self.clock += 1;
+        let index = match self.runs.iter().position(|r| r.incarnation == envelope.incarnation) {
+            Some(i) => i,
+            None => {
+                if self.runs.len() == RUNS {
+                    // Forget the run least recently active.
+                    if let Some(oldest) = (0..self.runs.len()).min_by_key(|i| self.runs[*i].touched) {
+                        let run = self.runs.remove(oldest);
+                        self.forgotten_lost += run.lost();
+                        self.forgotten_received += run.received;
+                    }
                 }
-                self.retired.push(previous);
+                self.runs.push(Run {
+                    incarnation: envelope.incarnation,
+                    joined_at: envelope.sequence,
+                    received: 0,
+                    frontier: 0,
+                    ended: false,
+                    seen: Vec::new(),
+                    touched: self.clock,
+                });
+                self.runs.len() - 1
             }
-            self.incarnation = Some(envelope.incarnation);
-            self.next = 0;
+        };
+        let restarted = self.runs[index].received == 0
+            && !self.runs[index].ended
+            && self.current.is_some_and(|c| c != envelope.incarnation);
+        let run = &mut self.runs[index];
+        if is_end {
+            // An end carries the count of samples published: the number the next sample would
+            // have had. A second end of the same run is a replay.
+            if run.ended {
+                return Err(Refusal::Replayed {
+                    incarnation: envelope.incarnation,
+                    sequence: envelope.sequence,
+                });
+            }
+            run.ended = true;
+            let out_of_line = envelope.sequence != run.frontier;
+            run.frontier = run.frontier.max(envelope.sequence);
+            run.touched = self.clock;
+            self.current = Some(envelope.incarnation);
+            return Ok(Accepted { restarted, out_of_line });
         }
-        if envelope.sequence < self.next {
+        if run.contains(envelope.sequence) || !run.insert(envelope.sequence) {
             return Err(Refusal::Replayed { incarnation: envelope.incarnation, sequence: envelope.sequence });
         }
-        let lost = envelope.sequence - self.next;
-        // An end carries the count of samples published, the number the next sample would have.
-        self.next = if is_end { envelope.sequence } else { envelope.sequence.saturating_add(1) };
-        Ok(Accepted { lost, restarted })
+        let out_of_line = envelope.sequence != run.frontier;
+        run.received += 1;
+        run.frontier = run.frontier.max(envelope.sequence.saturating_add(1));
+        run.touched = self.clock;
+        self.current = Some(envelope.incarnation);
+        Ok(Accepted { restarted, out_of_line })
     }
 
     /// The incarnation of the producer as last seen.
     pub fn incarnation(&self) -> Option<u64> {
-        self.incarnation
+        self.current
+    }
+
+    /// The run of the producer as last seen.
+    pub fn current(&self) -> Option<&Run> {
+        let current = self.current?;
+        self.runs.iter().find(|r| r.incarnation == current)
+    }
+
+    /// The runs of the producer this receiver remembers, in the order they were first seen.
+    pub fn runs(&self) -> &[Run] {
+        &self.runs
+    }
+
+    /// Samples that never arrived, over every run of the producer.
+    pub fn lost(&self) -> u64 {
+        self.forgotten_lost + self.runs.iter().map(Run::lost).sum::<u64>()
+    }
+
+    /// How often the producer started again (runs after the first).
+    pub fn restarts(&self) -> u64 {
+        self.runs.len().saturating_sub(1) as u64
     }
 }
 
@@ -252,19 +382,59 @@ mod tests {
     #[test]
     fn sequences_count_gaps_restarts_and_refuse_replays() {
         let mut s = Sequence::default();
-        assert_eq!(s.accept(&envelope(1, 0), false), Ok(Accepted { lost: 0, restarted: false }));
-        assert_eq!(s.accept(&envelope(1, 1), false), Ok(Accepted { lost: 0, restarted: false }));
-        assert_eq!(s.accept(&envelope(1, 5), false), Ok(Accepted { lost: 3, restarted: false }));
+        let ok = |restarted, out_of_line| Ok(Accepted { restarted, out_of_line });
+        assert_eq!(s.accept(&envelope(1, 0), false), ok(false, false));
+        assert_eq!(s.accept(&envelope(1, 1), false), ok(false, false));
+        assert_eq!(s.accept(&envelope(1, 5), false), ok(false, true));
+        assert_eq!(s.lost(), 3);
         assert!(matches!(s.accept(&envelope(1, 5), false), Err(Refusal::Replayed { .. })));
-        assert!(matches!(s.accept(&envelope(1, 2), false), Err(Refusal::Replayed { .. })));
+        assert!(matches!(s.accept(&envelope(1, 1), false), Err(Refusal::Replayed { .. })));
+        // A late sample fills its gap: it was counted lost, it is not any more.
+        assert_eq!(s.accept(&envelope(1, 2), false), ok(false, true));
+        assert_eq!(s.lost(), 2);
         // The producer starts again.
-        assert_eq!(s.accept(&envelope(2, 0), false), Ok(Accepted { lost: 0, restarted: true }));
-        assert_eq!(s.accept(&envelope(1, 9), false), Err(Refusal::OldIncarnation(1)));
+        assert_eq!(s.accept(&envelope(2, 0), false), ok(true, false));
+        assert_eq!(s.restarts(), 1);
         // The end carries the count published: two samples missed before it.
-        assert_eq!(s.accept(&envelope(2, 3), true), Ok(Accepted { lost: 2, restarted: false }));
-        // A subscriber that came late counts what it missed.
+        assert_eq!(s.accept(&envelope(2, 3), true), ok(false, true));
+        assert!(matches!(s.accept(&envelope(2, 3), true), Err(Refusal::Replayed { .. })));
+        assert_eq!(s.lost(), 4);
+        assert_eq!(s.runs()[1], Run { seen: vec![(0, 1)], touched: 8, ..s.runs()[1].clone() });
+        assert_eq!((s.runs()[1].received, s.runs()[1].frontier, s.runs()[1].ended), (1, 3, true));
+        // A subscriber that came late counts what it missed, and where it joined.
         let mut late = Sequence::default();
-        assert_eq!(late.accept(&envelope(3, 1000), false), Ok(Accepted { lost: 1000, restarted: false }));
+        assert_eq!(late.accept(&envelope(3, 1000), false), ok(false, true));
+        assert_eq!((late.lost(), late.runs()[0].joined_at), (1000, 1000));
+    }
+
+    #[test]
+    fn a_forged_sequence_number_or_incarnation_never_shuts_the_producer_out() {
+        let mut s = Sequence::default();
+        for k in 0..10 {
+            s.accept(&envelope(1, k), false).unwrap();
+        }
+        // A forger's far sequence number, and a forger's new incarnation ...
+        s.accept(&envelope(1, u64::MAX - 1), false).unwrap();
+        s.accept(&envelope(99, 5), false).unwrap();
+        // ... and the producer's next samples are still accepted, once each.
+        for k in 10..2000 {
+            assert!(s.accept(&envelope(1, k), false).is_ok(), "sample {k}");
+        }
+        assert!(matches!(s.accept(&envelope(1, 1500), false), Err(Refusal::Replayed { .. })));
+        // Ranges are bounded: a forger's scattered numbers are forgotten first, the producer's kept.
+        for k in 0..5000u64 {
+            let _ = s.accept(&envelope(1, 1_000_000 + 2 * k), false);
+        }
+        assert!(s.runs()[0].seen.len() <= RANGES);
+        assert!(matches!(s.accept(&envelope(1, 42), false), Err(Refusal::Replayed { .. })));
+        assert!(s.accept(&envelope(1, 2000), false).is_ok());
+        // Many forged incarnations: the producer's active run is kept.
+        for i in 100..200 {
+            s.accept(&envelope(i, 0), false).unwrap();
+            s.accept(&envelope(1, 2001 + i), false).unwrap();
+        }
+        assert!(s.runs().iter().any(|r| r.incarnation == 1));
+        assert!(matches!(s.accept(&envelope(1, 7), false), Err(Refusal::Replayed { .. })));
     }
 
     proptest::proptest! {

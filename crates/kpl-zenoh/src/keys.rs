@@ -13,11 +13,13 @@
 //!   consuming host, and counts what it publishes while one is away);
 //! - `<stream>/@publisher/<host>`: the producing host is there (a subscriber notices when it goes
 //!   away and comes back);
-//! - `<stream>/@done/<host>`: a consuming host has the stream's end (the producing host waits for
-//!   it before it leaves);
 //! - `<stream>/@end`: the producing host answers queries with the end of the stream once it has
 //!   ended, for a host that subscribes late or was away when the end went out;
-//! - `kpl/<deployment>/<spec>/@host/<host>`: the host runs.
+//! - `<stream>/@ack/<host>`: a consuming host acknowledges, with its envelope, how far it has
+//!   taken the stream (the producer's credit) and that it has the end;
+//! - `kpl/<deployment>/<spec>/@host/<host>`: the host runs;
+//! - `kpl/<deployment>/<spec>/@hello/<host>`: the host says, with its envelope, which process runs
+//!   it (two processes of one host at once are a clash).
 //!
 //! `@` chunks are verbatim in zenoh: no wildcard matches them, so an outside program subscribing
 //! to `kpl/<deployment>/<spec>/**` sees the data of every stream and none of the tokens.
@@ -62,14 +64,25 @@ pub fn publisher_tokens(key: &StreamKey) -> String {
     format!("{}/@publisher/*", stream(key))
 }
 
-/// The liveliness token a consuming host declares once it has the end of a stream.
-pub fn done_token(key: &StreamKey, host: &str) -> String {
-    format!("{}/@done/{}", stream(key), escape_chunk(host))
+/// Where a consuming host acknowledges what it has of a stream (credit for the producer, and
+/// the end once it has it).
+pub fn ack(key: &StreamKey, host: &str) -> String {
+    format!("{}/@ack/{}", stream(key), escape_chunk(host))
 }
 
-/// Matches the done tokens of a stream.
-pub fn done_tokens(key: &StreamKey) -> String {
-    format!("{}/@done/*", stream(key))
+/// Matches the acknowledgments of every consuming host of a stream.
+pub fn acks(key: &StreamKey) -> String {
+    format!("{}/@ack/*", stream(key))
+}
+
+/// Where a host of a deployment says, with its envelope, that it runs (and which process it is).
+pub fn hello(deployment_name: &str, spec: &str, host: &str) -> String {
+    format!("{}/@hello/{}", deployment(deployment_name, spec), escape_chunk(host))
+}
+
+/// Matches the hellos of every host of a deployment.
+pub fn hellos(deployment_name: &str, spec: &str) -> String {
+    format!("{}/@hello/*", deployment(deployment_name, spec))
 }
 
 /// Where the producing host answers with the end of a stream.
@@ -191,9 +204,11 @@ mod tests {
         let other = StreamKey { deployment: "site-3/b".into(), ..key("s", "p", None) };
         assert_eq!(stream(&other), "kpl/site-3%2Fb/s/p");
         assert_eq!(subscriber_token(&key("s", "p", None), "ground"), "kpl/trial/s/p/@subscriber/ground");
-        assert_eq!(done_token(&key("s", "p", Some("o")), "g"), "kpl/trial/s/p/o/@done/g");
+        assert_eq!(ack(&key("s", "p", Some("o")), "g"), "kpl/trial/s/p/o/@ack/g");
         assert_eq!(end(&key("s", "p", None)), "kpl/trial/s/p/@end");
         assert_eq!(host_token("trial", "s", "uav"), "kpl/trial/s/@host/uav");
+        assert_eq!(ack(&key("s", "p", None), "g"), "kpl/trial/s/p/@ack/g");
+        assert_eq!(hello("trial", "s", "uav"), "kpl/trial/s/@hello/uav");
         assert_eq!(token_host("kpl/trial/s/p/@subscriber/gr%C3%B6und").as_deref(), Some("gröund"));
     }
 
@@ -205,6 +220,8 @@ mod tests {
             publisher_token(&key("s", "p", Some("o")), "g"),
             end(&key("s", "p", None)),
             host_token("trial", "s", "g"),
+            ack(&key("s", "p", None), "g"),
+            hello("trial", "s", "g"),
         ] {
             let token = zenoh::key_expr::KeyExpr::try_from(token).unwrap();
             assert!(!all.intersects(&token), "{token}");

@@ -6,6 +6,7 @@
 //!   tokens;
 //! - [`codec`]: the wire format, one encode and one decode function (docs/streams.md);
 //! - [`envelope`]: who sent a message, its place in its stream, and its authentication tag;
+//! - [`flow`]: consuming hosts acknowledge what they took; producers keep a window of credit;
 //! - [`config`]: each host's endpoints (the deploy section, or loopback defaults) and its session's
 //!   configuration: peer mode, multicast scouting off, explicit endpoints, and with keys mutual TLS
 //!   and access control;
@@ -28,6 +29,7 @@ pub mod codec;
 pub mod config;
 pub mod credentials;
 pub mod envelope;
+pub mod flow;
 pub mod keys;
 mod outside;
 mod session;

@@ -103,11 +103,17 @@ impl Sessions {
             }
             return Ok(open);
         }
-        let credentials = match (&options.keys, host) {
-            (Some(dir), Some(host)) => Some(Credentials::load(dir, host)?),
+        let credentials = match (&options.keys, &options.first_use_keys, host) {
+            (Some(dir), _, Some(host)) => Some(Credentials::load(dir, host)?),
+            (None, Some(dir), Some(host)) => {
+                Some(Credentials { made_on_first_use: true, ..Credentials::load(dir, host)? })
+            }
             _ => None,
         };
-        let endpoints = config::endpoints(deploy, host, options.port_base, credentials.is_some())?;
+        // A given keys folder makes the loopback defaults `tls/`; keys made on first use keep them
+        // `tcp/` (tagged messages; programs outside the deployment still link as before).
+        let tls = credentials.as_ref().is_some_and(|c| !c.made_on_first_use);
+        let endpoints = config::endpoints(deploy, host, options.port_base, tls)?;
         let security = credentials
             .clone()
             .map(|credentials| Security { credentials, access_control: access_control.clone() });

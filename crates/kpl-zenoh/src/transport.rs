@@ -12,13 +12,22 @@
 //! - **Start-up waits run at once.** [`Transport::start`] waits for the hosts consuming every
 //!   stream this host sends, all streams together, saying every five seconds who is missing.
 //! - **The end is durable.** A producer that finishes answers queries for its stream's end and
-//!   waits (up to `KPL_ZENOH_WAIT`) until every consuming host confirms it has the end, so a host
+//!   waits (up to `KPL_ZENOH_WAIT`) until every consuming host acknowledges the end, so a host
 //!   that subscribes late, or was away when the end went out, still ends its input.
 //! - **Strangers are refused and counted.** A receiver accepts a message only from the host the
-//!   spec places the producer on, with a valid tag when the deployment has keys, and with a
-//!   sequence number that moves forward; everything else is refused and counted.
-//! - **Nothing is dropped under load.** Publishers use zenoh's `Block` congestion control and
-//!   subscribers a bounded queue: a slow consumer slows its producer down.
+//!   spec places the producer on, with a valid tag when the deployment has keys, and only once
+//!   (its incarnation and sequence number); everything else is refused and counted. Nothing a
+//!   sender claims shuts the producer out.
+//! - **Nothing is dropped under load, and zenoh never waits on a consumer.** A subscription queues
+//!   what arrives at once; consuming hosts acknowledge what they took ([`crate::flow`]), and a
+//!   producer keeps at most a window unacknowledged per consuming host: a slow consumer slows its
+//!   producer down without stalling the link. Consuming hosts count as there only while their
+//!   authenticated acknowledgments come.
+//! - **The end is acknowledged on arrival.** A consuming host tells the producer it has the end as
+//!   soon as it arrives, and asks for it every 2 s while the stream is open and its producer there.
+//! - **Two runs of one host meet: both stop.** Each host says every second which process runs it
+//!   (its hello, authenticated); hearing another process run this host is an error naming both.
+//! - **A host that waits says for what**, every few seconds.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
@@ -30,8 +39,8 @@ use kpl_runtime::process::BoxFuture;
 use kpl_runtime::run::{RunConfig, TransportFactory};
 use kpl_runtime::stats::Malformed;
 use kpl_runtime::transport::{
-    HostReport, InboundEnding, InboundReport, OutboundReport, Remote, RemoteReceiver, RemoteSender,
-    StreamKey, Transport, TransportError, TransportReport,
+    HostReport, InboundEnding, InboundReport, InboundRun, OutboundReport, Remote, RemoteReceiver,
+    RemoteSender, StreamKey, Transport, TransportError, TransportReport,
 };
 use kpl_semantic::hir;
 use zenoh::Wait;
@@ -74,9 +83,27 @@ impl TransportFactory for ZenohFactory {
                 .host
                 .as_deref()
                 .ok_or_else(|| TransportError("streams between hosts need a host (--host)".into()))?;
-            let plan = Plan::new(spec, host, &config.deployment(spec), &config.spec_name);
-            let keys = self.sessions.options()?.keys.is_some();
-            let access_control = keys.then(|| plan.access_control());
+            let deployment = config.deployment(spec);
+            let plan = Plan::new(spec, host, &deployment, &config.spec_name);
+            let options = self.sessions.options()?;
+            if options.keys.is_none() && !options.insecure {
+                let dir = crate::credentials::default_dir(&config.spec_dir, &config.spec_name, &deployment);
+                let made = crate::credentials::made_on_first_use(&dir, &deployment, &plan.hosts).map_err(|e| {
+                    TransportError(format!(
+                        "cannot make the keys of deployment `{deployment}` in {}: {e} (give a keys folder with --keys, \
+                         or run without keys with --insecure)",
+                        dir.display()
+                    ))
+                })?;
+                tracing::info!(
+                    "host `{host}`: keys of deployment `{deployment}` {} {} (hosts on other machines: `kpl keys` and --keys)",
+                    if made { "made in" } else { "from" },
+                    dir.display()
+                );
+                self.sessions.configure(|o| o.first_use_keys = Some(dir));
+            }
+            // Access control tells hosts apart by their certificates: it is for `tls/` links.
+            let access_control = options.keys.is_some().then(|| plan.access_control());
             let session = self.sessions.open_with(spec.deploy.as_ref(), Some(host), access_control).await?;
             let transport: Arc<dyn Transport> = Arc::new(ZenohTransport::new(session, plan).await?);
             Ok(transport)
@@ -163,18 +190,15 @@ impl Plan {
         let subjects: Vec<serde_json::Value> = self
             .hosts
             .iter()
-            .filter(|h| **h != self.host)
             .map(|h| serde_json::json!({ "id": subject(h), "cert_common_names": [h] }))
             .collect();
         let mut rules = Vec::new();
         let mut policies = Vec::new();
         for (i, (stream, producer_host)) in self.inbound.iter().enumerate() {
-            let others: Vec<String> = self
-                .hosts
-                .iter()
-                .filter(|h| *h != producer_host && **h != self.host)
-                .map(|h| subject(h))
-                .collect();
+            // Every host but the producer's, this one included: a peer showing this host's own
+            // certificate is not this host.
+            let others: Vec<String> =
+                self.hosts.iter().filter(|h| *h != producer_host).map(|h| subject(h)).collect();
             if others.is_empty() {
                 continue;
             }
@@ -213,10 +237,117 @@ pub struct ZenohTransport {
     /// Tokens kept until the session closes: this host's own, the ends it confirmed, and its
     /// publishers' (zenoh sends an undeclaration ahead of data still queued).
     tokens: Arc<Mutex<Vec<LivelinessToken>>>,
+    /// The end queryables of this host's streams, kept until the session closes: the runtime
+    /// drops a stream's sender once its end went out, but a host that comes later asks for it.
+    ends: Mutex<Vec<Queryable<()>>>,
     hosts: Arc<HostWatch>,
     outbound: Mutex<Vec<Arc<Outbound>>>,
     inbound: Mutex<Vec<Arc<Mutex<InboundReport>>>>,
+    /// Another process running this host of the deployment, once heard of.
+    clash: Arc<Clash>,
+    hello: tokio::task::JoinHandle<()>,
+    _hellos: Subscriber<()>,
     _host_watch: Subscriber<()>,
+}
+
+/// This process's hello, and what it hears of other processes claiming its host.
+///
+/// Every host says every second, on `kpl/DEPLOYMENT/SPEC/@hello/HOST` with its envelope (tagged
+/// with the deployment's secret), which process runs it: the envelope's incarnation is random for
+/// each process, the payload `KPH`, version 1, and the process id (u32). A hello naming this host
+/// from another process, tagged with the deployment's keys, is two deployments of one spec with
+/// the same name and keys meeting (two runs of the same spec on one machine, linked): both stop
+/// with an error naming the other, before either records the other's samples.
+struct Clash {
+    host: String,
+    key: String,
+    instance: u64,
+    secret: Option<Secret>,
+    found: Mutex<Option<String>>,
+    heard: tokio::sync::Notify,
+    deployment: String,
+    spec: String,
+}
+
+impl Clash {
+    fn new(plan: &Plan, secret: Option<Secret>) -> Clash {
+        Clash {
+            host: plan.host.clone(),
+            key: keys::hello(&plan.deployment, &plan.spec_name, &plan.host),
+            instance: random_u64(),
+            secret,
+            found: Mutex::new(None),
+            heard: tokio::sync::Notify::new(),
+            deployment: plan.deployment.clone(),
+            spec: plan.spec_name.clone(),
+        }
+    }
+
+    fn payload() -> Vec<u8> {
+        let mut out = b"KPH\x01".to_vec();
+        out.extend_from_slice(&std::process::id().to_le_bytes());
+        out
+    }
+
+    fn on_hello(&self, sample: &zenoh::sample::Sample) {
+        let key_expr = sample.key_expr().as_str();
+        if key_expr != self.key {
+            return;
+        }
+        let payload = sample.payload().to_bytes();
+        let attachment = sample.attachment().map(|a| a.to_bytes());
+        let Ok(envelope) = Envelope::open(attachment.as_deref(), key_expr, &payload, self.secret.as_ref())
+        else {
+            return;
+        };
+        if envelope.host != self.host || envelope.incarnation == self.instance || payload.len() != 8 {
+            return;
+        }
+        let mut pid = [0u8; 4];
+        pid.copy_from_slice(&payload[4..8]);
+        let why = format!(
+            "host `{}` of deployment `{}` of spec `{}` runs twice: in this process ({}) and in process {} \
+             (its run {:016x}); two runs of one spec with the same deployment name and keys met: give one \
+             of them another name (--deployment NAME)",
+            self.host,
+            self.deployment,
+            self.spec,
+            std::process::id(),
+            u32::from_le_bytes(pid),
+            envelope.incarnation
+        );
+        if let Ok(mut found) = self.found.lock()
+            && found.is_none()
+        {
+            *found = Some(why);
+            self.heard.notify_waiters();
+        }
+    }
+
+    fn found(&self) -> Option<String> {
+        self.found.lock().ok().and_then(|f| f.clone())
+    }
+}
+
+/// Says every second which process runs this host (until the transport closes).
+async fn say_hello(session: zenoh::Session, clash: Arc<Clash>) {
+    let payload = Clash::payload();
+    for number in 0u64.. {
+        let envelope = Envelope {
+            host: clash.host.clone(),
+            incarnation: clash.instance,
+            sequence: number,
+            unfinished: false,
+        };
+        let attachment = envelope.seal(&clash.key, &payload, clash.secret.as_ref());
+        if session.is_closed() {
+            return;
+        }
+        if let Err(e) = session.put(clash.key.clone(), payload.clone()).attachment(attachment).await {
+            tracing::debug!("cannot say hello: {e}");
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
 }
 
 impl std::fmt::Debug for ZenohTransport {
@@ -245,14 +376,27 @@ impl ZenohTransport {
             .declare_token(keys::host_token(&plan.deployment, &plan.spec_name, &plan.host))
             .await
             .map_err(|e| error("cannot declare this host's token", e))?;
+        let clash = Arc::new(Clash::new(&plan, session.credentials.as_ref().map(|c| c.secret.clone())));
+        let hears = clash.clone();
+        let hellos = session
+            .session
+            .declare_subscriber(keys::hellos(&plan.deployment, &plan.spec_name))
+            .callback(move |hello| hears.on_hello(&hello))
+            .await
+            .map_err(|e| error("cannot hear the other hosts", e))?;
+        let hello = tokio::spawn(say_hello(session.session.clone(), clash.clone()));
         Ok(ZenohTransport {
             session,
             plan,
             declared: tokio::sync::Mutex::new(None),
             tokens: Arc::new(Mutex::new(vec![token])),
+            ends: Mutex::new(Vec::new()),
             hosts,
             outbound: Mutex::new(Vec::new()),
             inbound: Mutex::new(Vec::new()),
+            clash,
+            hello,
+            _hellos: hellos,
             _host_watch: host_watch,
         })
     }
@@ -281,7 +425,6 @@ impl ZenohTransport {
                 &self.plan.host,
                 Some(producer_host.clone()),
                 report,
-                self.tokens.clone(),
             )
             .await?;
             receivers.insert(key, receiver);
@@ -294,7 +437,7 @@ impl ZenohTransport {
     fn missing(&self) -> BTreeMap<String, Vec<String>> {
         let mut missing: BTreeMap<String, Vec<String>> = BTreeMap::new();
         for outbound in self.outbound.lock().map(|o| o.clone()).unwrap_or_default() {
-            for host in outbound.absent() {
+            for host in outbound.awaited() {
                 missing.entry(host).or_default().push(outbound.key.stream_name());
             }
         }
@@ -328,6 +471,11 @@ impl Transport for ZenohTransport {
                 && let Ok(mut tokens) = self.tokens.lock()
             {
                 tokens.push(token);
+            }
+            if let Some(end) = sender.end_queryable.take()
+                && let Ok(mut ends) = self.ends.lock()
+            {
+                ends.push(end);
             }
             if let Ok(mut outbound) = self.outbound.lock() {
                 outbound.push(sender.state.clone());
@@ -394,6 +542,20 @@ impl Transport for ZenohTransport {
         })
     }
 
+    fn failed(&self) -> BoxFuture<'_, String> {
+        Box::pin(async move {
+            loop {
+                let heard = self.clash.heard.notified();
+                tokio::pin!(heard);
+                heard.as_mut().enable();
+                if let Some(why) = self.clash.found() {
+                    return why;
+                }
+                heard.await;
+            }
+        })
+    }
+
     fn report(&self) -> TransportReport {
         let snapshot = |list: &Mutex<Vec<Arc<Mutex<InboundReport>>>>| -> Vec<InboundReport> {
             list.lock()
@@ -416,9 +578,13 @@ impl Transport for ZenohTransport {
 
     fn close(self: Arc<Self>) -> BoxFuture<'static, ()> {
         Box::pin(async move {
+            self.hello.abort();
             self.declared.lock().await.take();
             if let Ok(mut tokens) = self.tokens.lock() {
                 tokens.clear();
+            }
+            if let Ok(mut ends) = self.ends.lock() {
+                ends.clear();
             }
             if let Err(e) = self.session.session.close().await {
                 tracing::warn!("closing the zenoh session of {}: {e}", self.session.describe());
@@ -511,62 +677,171 @@ impl HostWatch {
     }
 }
 
+/// A consuming host of a stream, as its producer sees it.
+#[derive(Debug, Default)]
+struct Consumer {
+    /// Its subscriber token is there.
+    token: bool,
+    /// When its last authenticated acknowledgment arrived.
+    last_ack: Option<Instant>,
+    /// Its receiver's run, and the last acknowledgment number from it (older ones are replays).
+    instance: Option<(u64, u64)>,
+    /// How far it took this run of the producer.
+    acked: Option<u64>,
+    /// It has the end of this run.
+    end: bool,
+    /// It has the end of an earlier run of this producer (it does not subscribe again).
+    ended_earlier: bool,
+    /// The producer's count of samples when the consumer was first heard from (its credit
+    /// starts there until it acknowledges a sample of this run).
+    joined_at: u64,
+    /// Whether it counted as present at the last look.
+    present: bool,
+}
+
 /// What a stream's publisher shares with the transport and zenoh's callbacks.
 struct Outbound {
     key: StreamKey,
+    ack_prefix: String,
     consumers: BTreeSet<String>,
-    /// The consuming hosts subscribed now.
-    present: Mutex<BTreeSet<String>>,
+    incarnation: u64,
+    secret: Option<Secret>,
+    /// Samples unacknowledged per consuming host at most.
+    window: u64,
+    published: std::sync::atomic::AtomicU64,
+    state: Mutex<BTreeMap<String, Consumer>>,
     /// The consuming hosts that subscribed at some point of this run.
     seen: Mutex<BTreeSet<String>>,
-    /// The consuming hosts that confirmed they have the end.
-    done: Mutex<BTreeSet<String>>,
     /// The end, once the stream finished: what the end queryable answers.
     ended: Mutex<Option<(Vec<u8>, Vec<u8>)>>,
     report: Mutex<OutboundReport>,
+    /// Woken by acknowledgments and tokens.
+    changed: tokio::sync::Notify,
 }
 
 impl Outbound {
+    fn present(consumer: &Consumer, now: Instant) -> bool {
+        consumer.token && consumer.last_ack.is_some_and(|t| now.duration_since(t) < crate::flow::STALE)
+    }
+
+    /// Updates who is present: `(credit limit, absent hosts)`. The limit is the count of samples
+    /// this producer may have published before it waits (`u64::MAX`: nobody to wait for).
+    fn credit(&self) -> (u64, Vec<String>) {
+        let now = Instant::now();
+        let published = self.published.load(std::sync::atomic::Ordering::Relaxed);
+        let mut limit = u64::MAX;
+        let mut absent = Vec::new();
+        let Ok(mut state) = self.state.lock() else { return (limit, absent) };
+        for host in &self.consumers {
+            let consumer = state.entry(host.clone()).or_default();
+            let present = Self::present(consumer, now);
+            if present && !consumer.present {
+                consumer.joined_at = published;
+            }
+            consumer.present = present;
+            if present {
+                if !consumer.end {
+                    let base =
+                        consumer.acked.unwrap_or(consumer.joined_at).max(consumer.joined_at.min(published));
+                    limit = limit.min(base.saturating_add(self.window));
+                }
+            } else {
+                absent.push(host.clone());
+            }
+        }
+        (limit, absent)
+    }
+
     fn absent(&self) -> Vec<String> {
-        let present = self.present.lock().map(|p| p.clone()).unwrap_or_default();
-        self.consumers.iter().filter(|h| !present.contains(*h)).cloned().collect()
+        self.credit().1
+    }
+
+    /// The consuming hosts the start-up waits for: absent, and without the end of an earlier
+    /// run of this stream (a host that has it does not subscribe again).
+    fn awaited(&self) -> Vec<String> {
+        let absent = self.absent();
+        let Ok(state) = self.state.lock() else { return absent };
+        absent.into_iter().filter(|h| !state.get(h).is_some_and(|c| c.ended_earlier)).collect()
     }
 
     fn on_subscriber_token(&self, token: &zenoh::sample::Sample) {
         let Some(host) = keys::token_host(token.key_expr().as_str()) else { return };
+        if !self.consumers.contains(&host) {
+            return;
+        }
         if token.kind() == SampleKind::Put
             && let Ok(mut seen) = self.seen.lock()
         {
             seen.insert(host.clone());
         }
-        if let Ok(mut present) = self.present.lock() {
-            match token.kind() {
-                SampleKind::Put => present.insert(host),
-                SampleKind::Delete => present.remove(&host),
-            };
+        if let Ok(mut state) = self.state.lock() {
+            state.entry(host).or_default().token = token.kind() == SampleKind::Put;
         }
+        self.changed.notify_waiters();
     }
 
-    fn on_done_token(&self, token: &zenoh::sample::Sample) {
-        if token.kind() == SampleKind::Put
-            && let Some(host) = keys::token_host(token.key_expr().as_str())
-            && let Ok(mut done) = self.done.lock()
-        {
-            done.insert(host);
+    /// An acknowledgment: taken only from a consuming host, with its envelope (and tag, with keys).
+    fn on_ack(&self, sample: &zenoh::sample::Sample) {
+        let key_expr = sample.key_expr().as_str();
+        let Some(host) = key_expr.strip_prefix(&self.ack_prefix).and_then(keys::unescape_chunk) else {
+            return;
+        };
+        if !self.consumers.contains(&host) {
+            return;
         }
+        let payload = sample.payload().to_bytes();
+        let attachment = sample.attachment().map(|a| a.to_bytes());
+        let refuse = |why: String| {
+            tracing::debug!(stream = %self.key.stream_name(), "acknowledgment from `{host}` refused: {why}");
+            if let Ok(mut report) = self.report.lock() {
+                report.refused_acks += 1;
+            }
+        };
+        let envelope = match Envelope::open(attachment.as_deref(), key_expr, &payload, self.secret.as_ref()) {
+            Ok(e) if e.host == host => e,
+            Ok(e) => return refuse(format!("it names host `{}`", e.host)),
+            Err(refusal) => return refuse(refusal.to_string()),
+        };
+        let Some(ack) = crate::flow::Ack::decode(&payload) else {
+            return refuse("not an acknowledgment".into());
+        };
+        let Ok(mut state) = self.state.lock() else { return };
+        let consumer = state.entry(host).or_default();
+        match consumer.instance {
+            Some((instance, number)) if instance == envelope.incarnation && envelope.sequence <= number => {
+                return;
+            }
+            Some((instance, _)) if instance == envelope.incarnation => {}
+            _ => {
+                // A new run of the consumer's receiver: its progress starts again.
+                consumer.acked = None;
+                consumer.end = false;
+            }
+        }
+        consumer.instance = Some((envelope.incarnation, envelope.sequence));
+        consumer.last_ack = Some(Instant::now());
+        match ack.run {
+            Some((incarnation, position)) if incarnation == self.incarnation => {
+                consumer.acked = Some(consumer.acked.unwrap_or(0).max(position));
+                consumer.end |= ack.end;
+            }
+            Some(_) => consumer.ended_earlier = ack.end,
+            None => {}
+        }
+        drop(state);
+        self.changed.notify_waiters();
     }
 
-    /// Counts a sample published while some consuming hosts were not subscribed.
-    fn count_missed(&self) {
-        let absent = self.absent();
+    /// Counts a sample published while some consuming hosts were not there.
+    fn count_missed(&self, absent: &[String]) {
         if absent.is_empty() {
             return;
         }
         if let Ok(mut report) = self.report.lock() {
             for host in absent {
-                match report.missed.iter_mut().find(|(h, _)| *h == host) {
+                match report.missed.iter_mut().find(|(h, _)| h == host) {
                     Some((_, n)) => *n += 1,
-                    None => report.missed.push((host, 1)),
+                    None => report.missed.push((host.clone(), 1)),
                 }
             }
         }
@@ -586,13 +861,18 @@ pub struct ZenohSender {
     /// Encoded size of the last sample, to size the next buffer.
     last_len: usize,
     failures: u64,
-    /// Whether every consuming host was subscribed at the last check (then a sample costs no
-    /// lock).
-    all_present: bool,
+    /// The count of samples this producer may reach before it looks at its credit again.
+    credit_until: u64,
+    /// The consuming hosts absent at the last look (then each sample is counted missed for them).
+    absent: Vec<String>,
     checked_at: u64,
     _subscribers: Subscriber<()>,
-    _done: Subscriber<()>,
-    _end: Queryable<()>,
+    _acks: Subscriber<()>,
+    /// The queryable that answers with the stream's end, once it has ended. Dropping it with the
+    /// sender (the runtime drops a stream's outputs once their end went out) would leave a host
+    /// that comes later without the end: keep it until the session closes, as
+    /// [`ZenohTransport`] does.
+    pub end_queryable: Option<Queryable<()>>,
     /// The producer's liveliness token. Dropping it (with the sender) right after the end can
     /// overtake the end: keep it until the session closes, as [`ZenohTransport`] does.
     pub token: Option<LivelinessToken>,
@@ -608,7 +888,7 @@ impl std::fmt::Debug for ZenohSender {
 }
 
 /// A random number for each run of a producer.
-fn random_u64() -> u64 {
+pub(crate) fn random_u64() -> u64 {
     let rng = ring::rand::SystemRandom::new();
     ring::rand::generate::<[u8; 8]>(&rng).map(|bytes| u64::from_le_bytes(bytes.expose())).unwrap_or_else(
         |_| {
@@ -622,7 +902,8 @@ fn random_u64() -> u64 {
 
 impl ZenohSender {
     /// Declares a publisher on `key` for the hosts `consumers`, the producer's liveliness token,
-    /// and the queryable that answers with the stream's end.
+    /// the subscription to their acknowledgments, and the queryable that answers with the
+    /// stream's end.
     pub async fn declare(
         session: &HostSession,
         key: &StreamKey,
@@ -631,14 +912,25 @@ impl ZenohSender {
     ) -> Result<ZenohSender, TransportError> {
         let key_expr = keys::stream(key);
         let error = |what: &str, e: zenoh::Error| TransportError(format!("{what} `{key_expr}`: {e}"));
+        let incarnation = random_u64();
+        let secret = session.credentials.as_ref().map(|c| c.secret.clone());
         let state = Arc::new(Outbound {
             key: key.clone(),
+            ack_prefix: keys::ack(key, "").trim_end_matches('%').to_string(),
             consumers,
-            present: Mutex::new(BTreeSet::new()),
+            incarnation,
+            secret: secret.clone(),
+            window: session.options.queue.max(1) as u64,
+            published: std::sync::atomic::AtomicU64::new(0),
+            state: Mutex::new(BTreeMap::new()),
             seen: Mutex::new(BTreeSet::new()),
-            done: Mutex::new(BTreeSet::new()),
             ended: Mutex::new(None),
-            report: Mutex::new(OutboundReport { stream: key.stream_name(), ..OutboundReport::default() }),
+            report: Mutex::new(OutboundReport {
+                stream: key.stream_name(),
+                incarnation: format!("{incarnation:016x}"),
+                ..OutboundReport::default()
+            }),
+            changed: tokio::sync::Notify::new(),
         });
         let publisher = session
             .session
@@ -656,14 +948,12 @@ impl ZenohSender {
             .await
             .map_err(|e| error("cannot watch the consumers of", e))?;
         let watch = state.clone();
-        let done = session
+        let acks = session
             .session
-            .liveliness()
-            .declare_subscriber(keys::done_tokens(key))
-            .history(true)
-            .callback(move |token| watch.on_done_token(&token))
+            .declare_subscriber(keys::acks(key))
+            .callback(move |ack| watch.on_ack(&ack))
             .await
-            .map_err(|e| error("cannot watch the consumers of", e))?;
+            .map_err(|e| error("cannot hear the consumers of", e))?;
         let answer = state.clone();
         let end_key = keys::end(key);
         let end = session
@@ -692,15 +982,16 @@ impl ZenohSender {
             state,
             wait: session.options.subscriber_wait,
             published: 0,
-            incarnation: random_u64(),
-            secret: session.credentials.as_ref().map(|c| c.secret.clone()),
+            incarnation,
+            secret,
             last_len: 64,
             failures: 0,
-            all_present: false,
+            credit_until: 0,
+            absent: Vec::new(),
             checked_at: 0,
             _subscribers: subscribers,
-            _done: done,
-            _end: end,
+            _acks: acks,
+            end_queryable: Some(end),
             token: Some(token),
         })
     }
@@ -727,12 +1018,47 @@ impl ZenohSender {
         }
     }
 
-    /// Waits until `n` of the consuming hosts subscribed (their liveliness tokens), or until the
-    /// wait is over. Returns how many did.
+    /// Looks at who is there and waits, if need be, until every consuming host that is there has
+    /// taken enough of the stream for one more sample (the window), saying so when it waits long.
+    async fn wait_for_credit(&mut self) {
+        let start = Instant::now();
+        let mut next_report = start + REPORT_EVERY;
+        loop {
+            let notified = self.state.changed.notified();
+            tokio::pin!(notified);
+            notified.as_mut().enable();
+            let (limit, absent) = self.state.credit();
+            self.absent = absent;
+            self.checked_at = self.published;
+            if limit > self.published {
+                self.credit_until = limit;
+                if Instant::now() >= start + REPORT_EVERY {
+                    tracing::info!(stream = %self.key_expr, "consumers took samples again after {:.1} s", start.elapsed().as_secs_f64());
+                }
+                return;
+            }
+            if Instant::now() >= next_report {
+                tracing::info!(
+                    "stream `{}`: waiting {:.0} s so far for the consuming host(s) to take samples ({} unacknowledged at most)",
+                    self.key_expr,
+                    start.elapsed().as_secs_f64(),
+                    self.state.window
+                );
+                next_report += REPORT_EVERY;
+            }
+            tokio::select! {
+                () = &mut notified => {}
+                () = tokio::time::sleep(Duration::from_millis(100)) => {}
+            }
+        }
+    }
+
+    /// Waits until `n` of the consuming hosts are there (subscribed and acknowledging), or until
+    /// the wait is over. Returns how many are.
     pub async fn wait_for_subscribers(&mut self, n: usize) -> usize {
         let deadline = Instant::now() + self.wait;
         loop {
-            let present = self.state.present.lock().map(|p| p.len()).unwrap_or(0);
+            let present = self.state.consumers.len() - self.state.absent().len();
             if present >= n || Instant::now() >= deadline {
                 return present;
             }
@@ -763,32 +1089,38 @@ impl ZenohSender {
         }
     }
 
-    /// Waits until every consuming host confirms it has the end (its done token), or until the
-    /// wait is over; meanwhile a host that subscribes late gets the end from the end queryable.
+    /// Waits until every consuming host seen during this run acknowledges it has the end, or
+    /// until the wait is over; meanwhile a host that subscribes late gets the end from the end
+    /// queryable.
     async fn wait_for_consumers_to_finish(&self) {
         let start = Instant::now();
         let deadline = start + self.wait;
+        let mut next_report = start + REPORT_EVERY;
         loop {
-            let done = self.state.done.lock().map(|d| d.clone()).unwrap_or_default();
             // A host never seen during this run has not started (or cannot reach this one): it
-            // is not waited for, and gives up on this host when it comes (KPL_ZENOH_GIVE_UP).
+            // is not waited for, and gets the end from the queryable while this host runs.
             let seen = self.state.seen.lock().map(|s| s.clone()).unwrap_or_default();
-            let missing: Vec<String> = self
-                .state
-                .consumers
-                .iter()
-                .filter(|h| seen.contains(*h) && !done.contains(*h))
-                .cloned()
-                .collect();
+            let missing: Vec<String> = match self.state.state.lock() {
+                Ok(state) => self
+                    .state
+                    .consumers
+                    .iter()
+                    .filter(|h| seen.contains(*h) && !state.get(*h).is_some_and(|c| c.end))
+                    .cloned()
+                    .collect(),
+                Err(_) => Vec::new(),
+            };
             if missing.is_empty() {
                 tracing::debug!(stream = %self.key_expr, waited = ?start.elapsed(), "every consumer has the end");
                 return;
             }
-            if Instant::now() >= deadline {
+            let now = Instant::now();
+            if now >= deadline {
                 tracing::warn!(
-                    "stream `{}`: host(s) {missing:?} did not confirm the end within {:.1} s; leaving anyway \
-                     (they give up on this host after KPL_ZENOH_WAIT; KPL_ZENOH_WAIT=SECONDS waits longer)",
+                    "stream `{}`: host(s) {} did not confirm the end within {:.1} s; leaving anyway \
+                     (KPL_ZENOH_WAIT=SECONDS waits longer); the run is incomplete",
                     self.key_expr,
+                    missing.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", "),
                     self.wait.as_secs_f64()
                 );
                 if let Ok(mut report) = self.state.report.lock() {
@@ -796,7 +1128,21 @@ impl ZenohSender {
                 }
                 return;
             }
-            tokio::time::sleep(Duration::from_millis(20)).await;
+            if now >= next_report {
+                tracing::info!(
+                    "stream `{}`: waiting for host(s) {} to confirm the end: {:.0} s of {:.0} s",
+                    self.key_expr,
+                    missing.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", "),
+                    (now - start).as_secs_f64(),
+                    self.wait.as_secs_f64()
+                );
+                next_report = now + REPORT_EVERY;
+            }
+            let notified = self.state.changed.notified();
+            tokio::select! {
+                () = notified => {}
+                () = tokio::time::sleep(Duration::from_millis(50)) => {}
+            }
         }
     }
 }
@@ -810,17 +1156,15 @@ impl RemoteSender for ZenohSender {
                 return;
             }
             self.last_len = bytes.len();
+            // Who is there changes rarely: look every 64 samples, or when the credit runs out.
+            if self.published >= self.credit_until || self.published >= self.checked_at + 64 {
+                self.wait_for_credit().await;
+            }
+            self.state.count_missed(&self.absent);
             let attachment = self.envelope(false).seal(&self.key_expr, &bytes, self.secret.as_ref());
-            // Who is subscribed changes rarely: look every 64 samples while everyone is there.
-            if !self.all_present || self.published >= self.checked_at + 64 {
-                self.all_present = self.state.absent().is_empty();
-                self.checked_at = self.published;
-            }
-            if !self.all_present {
-                self.state.count_missed();
-            }
             if self.put(bytes, attachment).await {
                 self.published += 1;
+                self.state.published.store(self.published, std::sync::atomic::Ordering::Relaxed);
                 if self.published.is_multiple_of(256)
                     && let Ok(mut report) = self.state.report.lock()
                 {
@@ -845,9 +1189,127 @@ enum Presence {
     Gone(Instant),
 }
 
+/// What zenoh delivered on a stream, queued at once (zenoh's threads never wait on a consumer).
+struct Inbox {
+    queue: Mutex<std::collections::VecDeque<zenoh::sample::Sample>>,
+    arrived: tokio::sync::Notify,
+    /// Past this many queued messages (twice the window: only a sender that ignores the credit
+    /// gets there), samples are dropped; their sequence numbers then count them as lost.
+    capacity: usize,
+    dropped: std::sync::atomic::AtomicU64,
+}
+
+impl Inbox {
+    fn push(&self, sample: zenoh::sample::Sample) {
+        let Ok(mut queue) = self.queue.lock() else { return };
+        // An end is always kept: it says how many samples the stream had.
+        if queue.len() >= self.capacity && !codec::is_end(&sample.payload().to_bytes()) {
+            self.dropped.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return;
+        }
+        queue.push_back(sample);
+        drop(queue);
+        self.arrived.notify_one();
+    }
+
+    fn pop(&self) -> Option<zenoh::sample::Sample> {
+        self.queue.lock().ok()?.pop_front()
+    }
+
+    fn is_empty(&self) -> bool {
+        self.queue.lock().map_or(true, |q| q.is_empty())
+    }
+}
+
+/// What a receiver acknowledges, shared with the task that sends the acknowledgments.
+#[derive(Default)]
+struct AckState {
+    ack: Mutex<crate::flow::Ack>,
+    /// Send now (progress, the end, or the receiver closing).
+    wake: tokio::sync::Notify,
+    closing: std::sync::atomic::AtomicBool,
+}
+
+impl AckState {
+    fn ack(&self) -> crate::flow::Ack {
+        self.ack.lock().map(|a| *a).unwrap_or_default()
+    }
+
+    /// The consumer took the producer's run `incarnation` up to `position`.
+    fn progress(&self, incarnation: u64, position: u64) {
+        if let Ok(mut ack) = self.ack.lock() {
+            match ack.run {
+                Some((i, p)) if i == incarnation => ack.run = Some((i, p.max(position))),
+                _ => *ack = crate::flow::Ack { run: Some((incarnation, position)), end: false },
+            }
+        }
+    }
+
+    /// The consumer has the end of run `incarnation`, which published `published` samples.
+    fn end(&self, incarnation: u64, published: u64) {
+        if let Ok(mut ack) = self.ack.lock() {
+            *ack = crate::flow::Ack { run: Some((incarnation, published)), end: true };
+        }
+        self.wake.notify_one();
+    }
+}
+
+/// Sends a receiver's acknowledgments: at once when woken, else every [`crate::flow::HEARTBEAT`].
+/// A receiver that closes without the end sends a last one and stops; one that has the end keeps
+/// saying so until the session closes, so that a producer that starts again does not wait for it.
+async fn acknowledge(
+    session: zenoh::Session,
+    key: StreamKey,
+    host: String,
+    secret: Option<Secret>,
+    state: Arc<AckState>,
+) {
+    let ack_key = keys::ack(&key, &host);
+    let publisher = match session
+        .declare_publisher(ack_key.clone())
+        .congestion_control(CongestionControl::Drop)
+        .priority(zenoh::qos::Priority::InteractiveHigh)
+        .await
+    {
+        Ok(p) => p,
+        Err(e) => {
+            tracing::warn!(stream = %keys::stream(&key), "cannot acknowledge: {e}");
+            return;
+        }
+    };
+    let instance = random_u64();
+    let mut number = 0u64;
+    loop {
+        let closing = state.closing.load(std::sync::atomic::Ordering::Relaxed);
+        let ack = state.ack();
+        let payload = ack.encode();
+        let envelope =
+            Envelope { host: host.clone(), incarnation: instance, sequence: number, unfinished: false };
+        let attachment = envelope.seal(&ack_key, &payload, secret.as_ref());
+        number += 1;
+        if let Err(e) = publisher.put(payload).attachment(attachment).await {
+            if session.is_closed() {
+                return;
+            }
+            tracing::debug!("cannot acknowledge on `{ack_key}`: {e}");
+        }
+        if closing && !ack.end {
+            return;
+        }
+        tokio::select! {
+            () = state.wake.notified() => {}
+            () = tokio::time::sleep(crate::flow::HEARTBEAT) => {}
+        }
+        if session.is_closed() {
+            return;
+        }
+    }
+}
+
 /// Receives one stream from another host.
 pub struct ZenohReceiver {
-    data: Subscriber<FifoChannelHandler<zenoh::sample::Sample>>,
+    inbox: Arc<Inbox>,
+    _data: Subscriber<()>,
     /// The producer's liveliness token: `Put` while it is there, `Delete` when it goes away.
     producers: Option<Subscriber<FifoChannelHandler<zenoh::sample::Sample>>>,
     session: zenoh::Session,
@@ -867,9 +1329,23 @@ pub struct ZenohReceiver {
     give_up: Duration,
     /// Replies to a query for the stream's end, while one is under way.
     end_query: Option<FifoChannelHandler<Reply>>,
+    /// When to ask for the end again (while the producer is there and the stream open).
+    next_end_query: Instant,
+    /// When something last arrived, and when to say next what this host waits for.
+    next_report: Instant,
+    acks: Arc<AckState>,
+    /// The position last told to the acknowledging task.
+    acked: u64,
+    window: u64,
     report: Arc<Mutex<InboundReport>>,
-    keeper: Arc<Mutex<Vec<LivelinessToken>>>,
     _token: LivelinessToken,
+}
+
+impl Drop for ZenohReceiver {
+    fn drop(&mut self) {
+        self.acks.closing.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.acks.wake.notify_one();
+    }
 }
 
 impl std::fmt::Debug for ZenohReceiver {
@@ -885,6 +1361,11 @@ enum Outcome {
     Skip,
 }
 
+/// How often a receiver asks the producing host for the end while the stream is open.
+const END_QUERY_EVERY: Duration = Duration::from_secs(2);
+/// How long a receiver waits in silence before it says what it waits for (then again as long).
+const SILENCE: Duration = Duration::from_secs(10);
+
 impl ZenohReceiver {
     /// Subscribes to `key`, decoding values with `ty`, and declares this host's subscriber token.
     /// Accepts messages from any host (no envelope check); the transport between the hosts of a
@@ -897,11 +1378,11 @@ impl ZenohReceiver {
     ) -> Result<ZenohReceiver, TransportError> {
         let report =
             Arc::new(Mutex::new(InboundReport { stream: key.stream_name(), ..InboundReport::default() }));
-        Self::declare_with(session, key, ty, host, None, report, Arc::default()).await
+        Self::declare_with(session, key, ty, host, None, report).await
     }
 
     /// As [`ZenohReceiver::declare`], accepting messages only from `producer_host` (when given),
-    /// counting into `report`, and keeping the token that confirms the end in `keeper`.
+    /// and counting into `report`.
     pub async fn declare_with(
         session: &HostSession,
         key: &StreamKey,
@@ -909,14 +1390,42 @@ impl ZenohReceiver {
         host: &str,
         producer_host: Option<String>,
         report: Arc<Mutex<InboundReport>>,
-        keeper: Arc<Mutex<Vec<LivelinessToken>>>,
     ) -> Result<ZenohReceiver, TransportError> {
         let key_expr = keys::stream(key);
         let error = |what: &str, e: zenoh::Error| TransportError(format!("{what} `{key_expr}`: {e}"));
+        let window = session.options.queue.max(1);
+        let inbox = Arc::new(Inbox {
+            queue: Mutex::new(std::collections::VecDeque::new()),
+            arrived: tokio::sync::Notify::new(),
+            capacity: 2 * window + 64,
+            dropped: std::sync::atomic::AtomicU64::new(0),
+        });
+        let secret = session.credentials.as_ref().map(|c| c.secret.clone());
+        let acks = Arc::new(AckState::default());
+        let (into, confirm, expected, tag_key, end_key) =
+            (inbox.clone(), acks.clone(), producer_host.clone(), secret.clone(), key_expr.clone());
         let data = session
             .session
             .declare_subscriber(key_expr.clone())
-            .with(zenoh::handlers::FifoChannel::new(session.options.queue))
+            .callback(move |sample| {
+                // The end is acknowledged as soon as it reaches this host, before the samples
+                // queued ahead of it are taken: the producer need not wait for a slow consumer.
+                let payload = sample.payload().to_bytes();
+                if codec::is_end(&payload)
+                    && let Some(expected) = &expected
+                    && let Ok(envelope) = Envelope::open(
+                        sample.attachment().map(|a| a.to_bytes()).as_deref(),
+                        &end_key,
+                        &payload,
+                        tag_key.as_ref(),
+                    )
+                    && envelope.host == *expected
+                    && !envelope.unfinished
+                {
+                    confirm.end(envelope.incarnation, envelope.sequence);
+                }
+                into.push(sample);
+            })
             .await
             .map_err(|e| error("cannot subscribe to", e))?;
         let producers = session
@@ -926,6 +1435,13 @@ impl ZenohReceiver {
             .history(true)
             .await
             .map_err(|e| error("cannot watch the producer of", e))?;
+        tokio::spawn(acknowledge(
+            session.session.clone(),
+            key.clone(),
+            host.to_string(),
+            secret.clone(),
+            acks.clone(),
+        ));
         // Declared after the subscriber: a publisher that sees the token finds the subscriber.
         let token = session
             .session
@@ -933,8 +1449,10 @@ impl ZenohReceiver {
             .declare_token(keys::subscriber_token(key, host))
             .await
             .map_err(|e| error("cannot declare the subscriber token of", e))?;
+        let now = Instant::now();
         let mut receiver = ZenohReceiver {
-            data,
+            inbox,
+            _data: data,
             producers: Some(producers),
             session: session.session.clone(),
             key: key.clone(),
@@ -942,14 +1460,18 @@ impl ZenohReceiver {
             ty,
             host: host.to_string(),
             producer_host,
-            secret: session.credentials.as_ref().map(|c| c.secret.clone()),
+            secret,
             sequence: Sequence::default(),
             messages: 0,
-            presence: Presence::Never(Instant::now()),
+            presence: Presence::Never(now),
             give_up: session.options.give_up,
             end_query: None,
+            next_end_query: now + END_QUERY_EVERY,
+            next_report: now + SILENCE,
+            acks,
+            acked: 0,
+            window: window as u64,
             report,
-            keeper,
             _token: token,
         };
         // The stream may have ended before this host came.
@@ -962,6 +1484,7 @@ impl ZenohReceiver {
         if self.producer_host.is_none() {
             return;
         }
+        self.next_end_query = Instant::now() + END_QUERY_EVERY;
         match self
             .session
             .get(keys::end(&self.key))
@@ -987,6 +1510,26 @@ impl ZenohReceiver {
         }
     }
 
+    /// Copies what the sequence numbers say into the report.
+    fn update_report(&self) {
+        if let Ok(mut report) = self.report.lock() {
+            report.lost = self.sequence.lost();
+            report.producer_restarts = self.sequence.restarts();
+            report.runs = self
+                .sequence
+                .runs()
+                .iter()
+                .map(|r| InboundRun {
+                    incarnation: format!("{:016x}", r.incarnation),
+                    joined_at: r.joined_at,
+                    received: r.received,
+                    lost: r.lost(),
+                    ended: r.ended,
+                })
+                .collect();
+        }
+    }
+
     fn on_message(&mut self, payload: &[u8], attachment: Option<&[u8]>) -> Outcome {
         self.messages += 1;
         let envelope = match &self.producer_host {
@@ -1002,28 +1545,39 @@ impl ZenohReceiver {
                     return Outcome::Skip;
                 }
             },
-            None => None,
+            // Outside a deployment the envelope is not checked, but it still says how far the
+            // stream went (for the acknowledgments).
+            None => Envelope::open(attachment, &self.key_expr, payload, self.secret.as_ref()).ok(),
         };
         let decoded = codec::decode(payload, &self.ty);
         // A message from the producer that does not decode still takes its place in the stream.
         let is_end = matches!(decoded, Ok(Message::End { .. }));
         if let Some(envelope) = &envelope {
-            match self.sequence.accept(envelope, is_end) {
-                Ok(accepted) => {
-                    if let Ok(mut report) = self.report.lock() {
-                        report.lost += accepted.lost;
-                        report.producer_restarts += u64::from(accepted.restarted);
+            if self.producer_host.is_some() {
+                let lost_before = self.sequence.lost();
+                match self.sequence.accept(envelope, is_end) {
+                    Ok(accepted) => {
+                        if accepted.restarted {
+                            tracing::warn!(stream = %self.key_expr, "the producer started again");
+                        }
+                        let lost = self.sequence.lost();
+                        if lost > lost_before {
+                            tracing::warn!(stream = %self.key_expr, "{} sample(s) lost on the way", lost - lost_before);
+                        }
+                        self.update_report();
                     }
-                    if accepted.restarted {
-                        tracing::warn!(stream = %self.key_expr, "the producer started again");
-                    }
-                    if accepted.lost > 0 {
-                        tracing::warn!(stream = %self.key_expr, "{} sample(s) lost on the way", accepted.lost);
+                    Err(refusal) => {
+                        self.refuse(&refusal);
+                        return Outcome::Skip;
                     }
                 }
-                Err(refusal) => {
-                    self.refuse(&refusal);
-                    return Outcome::Skip;
+            }
+            if !is_end {
+                let position = envelope.sequence.saturating_add(1);
+                self.acks.progress(envelope.incarnation, position);
+                if position >= self.acked + self.window / 4 || position < self.acked {
+                    self.acked = position;
+                    self.acks.wake.notify_one();
                 }
             }
         }
@@ -1068,21 +1622,11 @@ impl ZenohReceiver {
                 if let Ok(mut report) = self.report.lock() {
                     report.ending = InboundEnding::End;
                 }
-                self.confirm_end();
+                if let Some(envelope) = &envelope {
+                    self.acks.end(envelope.incarnation, envelope.sequence);
+                }
                 Outcome::Deliver(Remote::End)
             }
-        }
-    }
-
-    /// Tells the producing host this one has the end (a token it keeps until its session closes).
-    fn confirm_end(&self) {
-        match self.session.liveliness().declare_token(keys::done_token(&self.key, &self.host)).wait() {
-            Ok(token) => {
-                if let Ok(mut keeper) = self.keeper.lock() {
-                    keeper.push(token);
-                }
-            }
-            Err(e) => tracing::warn!(stream = %self.key_expr, "cannot confirm the end: {e}"),
         }
     }
 
@@ -1118,23 +1662,77 @@ impl ZenohReceiver {
             }
         }
     }
+
+    /// Says, after a silence, what this host is waiting for on this stream.
+    fn report_silence(&mut self) {
+        let producer = self.producer_host.clone().unwrap_or_default();
+        let state = match self.presence {
+            Presence::Never(since) => {
+                format!(
+                    "not seen yet ({:.0} s of {:.0} s)",
+                    since.elapsed().as_secs_f64(),
+                    self.give_up.as_secs_f64()
+                )
+            }
+            Presence::Here => "up".to_string(),
+            Presence::Gone(since) => {
+                format!(
+                    "away for {:.0} s of {:.0} s",
+                    since.elapsed().as_secs_f64(),
+                    self.give_up.as_secs_f64()
+                )
+            }
+        };
+        let received = self.report.lock().map(|r| r.received).unwrap_or(0);
+        tracing::info!(
+            "host `{}`: waiting for stream `{}` from host `{producer}` ({state}): {received} sample(s) so far, no end yet",
+            self.host,
+            self.key.stream_name()
+        );
+        self.next_report = Instant::now() + SILENCE;
+    }
 }
 
 enum Event {
-    Message(Option<zenoh::sample::Sample>),
+    Message(zenoh::sample::Sample),
     Token(Option<zenoh::sample::Sample>),
     Reply(Option<Reply>),
     GiveUp,
+    AskForTheEnd,
+    Silence,
 }
 
 impl RemoteReceiver for ZenohReceiver {
     fn recv(&mut self) -> BoxFuture<'_, Option<Remote>> {
         Box::pin(async move {
             loop {
+                if let Some(message) = self.inbox.pop() {
+                    self.next_report = Instant::now() + SILENCE;
+                    if let Outcome::Deliver(remote) = self.handle(&message) {
+                        return Some(remote);
+                    }
+                    continue;
+                }
+                let dropped = self.inbox.dropped.swap(0, std::sync::atomic::Ordering::Relaxed);
+                if dropped > 0 {
+                    tracing::warn!(stream = %self.key_expr, "{dropped} sample(s) dropped: more arrived than the window allows");
+                }
                 let give_up_at = match (self.producer_host.is_some(), self.presence) {
                     (true, Presence::Never(since) | Presence::Gone(since)) => Some(since + self.give_up),
                     _ => None,
                 };
+                let ask_at = (self.producer_host.is_some()
+                    && matches!(self.presence, Presence::Here)
+                    && self.end_query.is_none())
+                .then_some(self.next_end_query);
+                let report_at = self.producer_host.is_some().then_some(self.next_report);
+                let inbox = self.inbox.clone();
+                let arrived = inbox.arrived.notified();
+                tokio::pin!(arrived);
+                arrived.as_mut().enable();
+                if !self.inbox.is_empty() {
+                    continue;
+                }
                 let producers = async {
                     match &self.producers {
                         Some(p) => p.recv_async().await.ok(),
@@ -1147,25 +1745,28 @@ impl RemoteReceiver for ZenohReceiver {
                         None => std::future::pending().await,
                     }
                 };
-                let give_up = async {
-                    match give_up_at {
+                let at = |when: Option<Instant>| async move {
+                    match when {
                         Some(at) => tokio::time::sleep_until(at.into()).await,
                         None => std::future::pending().await,
                     }
                 };
                 let event = tokio::select! {
                     biased;
-                    message = self.data.recv_async() => Event::Message(message.ok()),
+                    () = &mut arrived => match inbox.pop() {
+                        Some(message) => Event::Message(message),
+                        None => continue,
+                    },
                     token = producers => Event::Token(token),
                     reply = replies => Event::Reply(reply),
-                    () = give_up => Event::GiveUp,
+                    () = at(give_up_at) => Event::GiveUp,
+                    () = at(ask_at) => Event::AskForTheEnd,
+                    () = at(report_at) => Event::Silence,
                 };
                 match event {
-                    Event::Message(None) => return None,
-                    Event::Message(Some(message)) => {
-                        let payload = message.payload().to_bytes();
-                        let attachment = message.attachment().map(|a| a.to_bytes());
-                        if let Outcome::Deliver(remote) = self.on_message(&payload, attachment.as_deref()) {
+                    Event::Message(message) => {
+                        self.next_report = Instant::now() + SILENCE;
+                        if let Outcome::Deliver(remote) = self.handle(&message) {
                             return Some(remote);
                         }
                     }
@@ -1189,12 +1790,22 @@ impl RemoteReceiver for ZenohReceiver {
                     }
                     Event::GiveUp => {
                         // Samples that arrived before the give-up are delivered first.
-                        if self.data.is_empty() {
+                        if self.inbox.is_empty() {
                             return Some(self.cut_short());
                         }
                     }
+                    Event::AskForTheEnd => self.query_end().await,
+                    Event::Silence => self.report_silence(),
                 }
             }
         })
+    }
+}
+
+impl ZenohReceiver {
+    fn handle(&mut self, message: &zenoh::sample::Sample) -> Outcome {
+        let payload = message.payload().to_bytes();
+        let attachment = message.attachment().map(|a| a.to_bytes());
+        self.on_message(&payload, attachment.as_deref())
     }
 }

@@ -79,17 +79,10 @@ async fn receiver_from(
     producer_host: &str,
 ) -> (ZenohReceiver, Arc<Mutex<InboundReport>>) {
     let report = Arc::new(Mutex::new(InboundReport::default()));
-    let receiver = ZenohReceiver::declare_with(
-        session,
-        key,
-        ty,
-        host,
-        Some(producer_host.into()),
-        report.clone(),
-        Arc::default(),
-    )
-    .await
-    .unwrap();
+    let receiver =
+        ZenohReceiver::declare_with(session, key, ty, host, Some(producer_host.into()), report.clone())
+            .await
+            .unwrap();
     (receiver, report)
 }
 

@@ -19,7 +19,7 @@ use kpl_core::Time;
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl launch specs/zenoh/two_hosts.kpl --out out/two\n  kpl launch specs/zenoh/two_hosts.kpl --tls --for 10s\n  kpl launch specs/zenoh/two_hosts.kpl --dry-run      # only print each host's command\n\nHosts without endpoints in the deploy section use loopback ports from KPL_ZENOH_PORT_BASE (7447);\nwhen those are taken, launch picks free ones. Outputs go to OUT/HOST, logs to OUT/HOST/kpl.log, the\ncombined summary to OUT/launch.json.\nExit status: 0 every host done, else the first host's failing status (1 failed, 3 incomplete),\n130 / 143 when interrupted by Ctrl-C / SIGTERM, 1 the spec has errors, 2 usage or I/O errors."
+    after_help = "Examples:\n  kpl launch specs/zenoh/two_hosts.kpl --out out/two\n  kpl launch specs/zenoh/two_hosts.kpl --tls --for 10s\n  kpl launch specs/zenoh/two_hosts.kpl --dry-run      # only print each host's command\n\nHosts without endpoints in the deploy section use loopback ports from KPL_ZENOH_PORT_BASE (7447);\nwhen those are taken (by anything, or by another launch still running), launch picks free ones.\nOne launch at a time per --out folder. Without --keys, --tls or --insecure the hosts use the keys\nmade on first use for the spec's deployment (as `kpl run --host` does). Outputs go to OUT/HOST, logs to OUT/HOST/kpl.log, the\ncombined summary to OUT/launch.json.\nExit status: 0 every host done, else the first host's failing status (1 failed, 3 incomplete),\n130 / 143 when interrupted by Ctrl-C / SIGTERM, 1 the spec has errors, 2 usage or I/O errors."
 )]
 pub struct Args {
     /// The spec to launch (it needs a deploy section).
@@ -40,6 +40,10 @@ pub struct Args {
     /// Make keys for this launch in OUT/keys (kept for the next launch) and use them.
     #[arg(long)]
     pub tls: bool,
+    /// Run every host without keys (`kpl run --insecure`). Without --keys, --tls or this, the
+    /// hosts authenticate each other with the keys made on first use for the spec's deployment.
+    #[arg(long, conflicts_with_all = ["keys", "tls"])]
+    pub insecure: bool,
     /// Seed of every random process.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -97,6 +101,9 @@ pub fn run(args: Args) -> ExitCode {
         if let Some(keys) = &keys {
             a.extend(["--keys".to_string(), keys.display().to_string()]);
         }
+        if args.insecure {
+            a.push("--insecure".into());
+        }
         if let Some(d) = args.duration {
             a.extend(["--for".to_string(), format!("{d}us")]);
         }
@@ -132,6 +139,14 @@ pub fn run(args: Args) -> ExitCode {
         crate::report::io_error(&out, &err);
         return ExitCode::from(2);
     }
+    // One launch per output folder: a second one would write into the first one's files.
+    let _lock = match claim(&out.join("launch.lock"), &args.spec.display().to_string()) {
+        Ok(lock) => lock,
+        Err(err) => {
+            eprintln!("error: {err}");
+            return ExitCode::from(2);
+        }
+    };
     if args.tls
         && let Some(keys) = &keys
         && let Err(err) = kpl_zenoh::credentials::make(keys, &deployment, &hosts)
@@ -139,7 +154,7 @@ pub fn run(args: Args) -> ExitCode {
         eprintln!("error: cannot make the keys in {}: {err}", keys.display());
         return ExitCode::from(2);
     }
-    let port_base = match port_base(hosts.len()) {
+    let (port_base, _ports) = match port_base(hosts.len()) {
         Ok(base) => base,
         Err(err) => {
             eprintln!("error: {err}");
@@ -306,29 +321,91 @@ fn describe(deployment: &str, out: &Path, outcomes: &[HostOutcome]) -> String {
     text
 }
 
+/// A file that says a process holds something (an output folder, a port): made with
+/// `create_new`, holding the process id and what it is for; removed when dropped. A claim whose
+/// process is gone is taken over.
+struct Claim(PathBuf);
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// Whether process `pid` runs (on Linux; elsewhere every claim is taken as held).
+fn alive(pid: u32) -> bool {
+    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// Claims `path` for this process (`what`: said to a process that finds it taken).
+fn claim(path: &Path, what: &str) -> Result<Claim, String> {
+    for _ in 0..3 {
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(path) {
+            Ok(mut file) => {
+                let _ = writeln!(file, "{} {what}", std::process::id());
+                return Ok(Claim(path.to_path_buf()));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                let mut words = text.trim().splitn(2, ' ');
+                let pid = words.next().and_then(|p| p.parse::<u32>().ok());
+                match pid {
+                    Some(pid) if alive(pid) => {
+                        return Err(format!(
+                            "{} is held by another kpl launch (process {pid}, {}); give this one another --out",
+                            path.parent().unwrap_or(path).display(),
+                            words.next().unwrap_or("")
+                        ));
+                    }
+                    // Its process is gone: take it over.
+                    _ => {
+                        let _ = std::fs::remove_file(path);
+                    }
+                }
+            }
+            Err(e) => return Err(format!("cannot create {}: {e}", path.display())),
+        }
+    }
+    Err(format!("cannot claim {}", path.display()))
+}
+
 /// The first of `n` loopback ports for hosts without endpoints: `KPL_ZENOH_PORT_BASE` when set,
-/// else 7447 when its ports are free, else free ones.
-fn port_base(n: usize) -> Result<u16, String> {
+/// else 7447 when its ports are free, else free ones. The ports are claimed (a file per port in
+/// the temporary folder's `kpl-ports`) until this launch ends, so two launches started at once
+/// never pick the same ones.
+fn port_base(n: usize) -> Result<(u16, Vec<Claim>), String> {
     if let Ok(base) = std::env::var("KPL_ZENOH_PORT_BASE")
         && !base.is_empty()
     {
-        return base.trim().parse().map_err(|_| format!("KPL_ZENOH_PORT_BASE=`{base}` is not a port number"));
+        let base =
+            base.trim().parse().map_err(|_| format!("KPL_ZENOH_PORT_BASE=`{base}` is not a port number"))?;
+        return Ok((base, Vec::new()));
     }
     let n = u16::try_from(n).map_err(|_| "too many hosts".to_string())?;
-    let free = |base: u16| {
-        base.checked_add(n).is_some()
-            && (0..n).all(|i| std::net::TcpListener::bind(("127.0.0.1", base + i)).is_ok())
+    let claims = std::env::temp_dir().join("kpl-ports");
+    std::fs::create_dir_all(&claims).map_err(|e| format!("cannot create {}: {e}", claims.display()))?;
+    let take = |base: u16| -> Option<Vec<Claim>> {
+        base.checked_add(n)?;
+        let mut held = Vec::new();
+        for port in base..base + n {
+            let claim = claim(&claims.join(port.to_string()), "kpl launch").ok()?;
+            if std::net::TcpListener::bind(("127.0.0.1", port)).is_err() {
+                return None;
+            }
+            held.push(claim);
+        }
+        Some(held)
     };
-    if free(kpl_zenoh::config::DEFAULT_PORT_BASE) {
-        return Ok(kpl_zenoh::config::DEFAULT_PORT_BASE);
+    if let Some(held) = take(kpl_zenoh::config::DEFAULT_PORT_BASE) {
+        return Ok((kpl_zenoh::config::DEFAULT_PORT_BASE, held));
     }
     for _ in 0..100 {
         let base = std::net::TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
             .map_err(|e| format!("cannot find free ports: {e}"))?
             .port();
-        if free(base) {
-            return Ok(base);
+        if let Some(held) = take(base) {
+            return Ok((base, held));
         }
     }
     Err(format!("no {n} free consecutive ports on 127.0.0.1"))

@@ -43,6 +43,12 @@ pub struct Args {
     /// control, authenticated messages. Also KPL_KEYS.
     #[arg(long, requires = "host")]
     pub keys: Option<PathBuf>,
+    /// Run this host without keys: no authentication between the hosts (anyone who reaches a
+    /// host's port can send it samples, end its streams or pretend to be a host). Without --keys
+    /// and without this, the deployment's keys are made on first use and every message is
+    /// authenticated.
+    #[arg(long, requires = "host", conflicts_with = "keys")]
+    pub insecure: bool,
     /// Which clock drives the run.
     #[arg(long, value_enum, default_value = "sim")]
     pub clock: ClockArg,
@@ -140,7 +146,14 @@ pub fn run(args: Args) -> ExitCode {
         return ExitCode::from(2);
     }
     let registry = crate::registry::registry();
-    let transport = crate::transport::factory(args.keys.as_deref());
+    if args.insecure {
+        eprintln!(
+            "warning: host `{}` runs without keys (--insecure): any program that reaches its port can send it \
+             samples, end its streams or pretend to be a host of the deployment",
+            args.host.as_deref().unwrap_or_default()
+        );
+    }
+    let transport = crate::transport::factory(args.keys.as_deref(), args.insecure);
     #[allow(clippy::disallowed_methods)] // when the command started, for summary.json (not a sample's time)
     let started = SystemTime::now();
     let progress = (!args.quiet).then(|| {

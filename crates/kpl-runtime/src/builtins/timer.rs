@@ -17,13 +17,30 @@ impl Source for Timer {
         Box::pin(async move {
             let start = ctx.clock.now();
             let mut k: i64 = 0;
+            // How far behind its period the timer fell at worst (a tick emitted late).
+            let mut worst_lag: Time = 0;
             while self.count == 0 || k < self.count {
                 let t = start + k * self.period;
                 if !ctx.wait_until(t).await {
                     break;
                 }
+                worst_lag = worst_lag.max(ctx.now() - t);
                 ctx.emit(t, Value::Int(k)).await;
                 k += 1;
+            }
+            // A tick is late when the one after it was due before it went out: the timer did not
+            // keep its period (its consumers, or the machine, were slower). Jitter of a loaded
+            // machine (below 10 ms) is not worth a warning.
+            if worst_lag > self.period && worst_lag > 10_000 {
+                let elapsed = ctx.now() - start;
+                let due = (elapsed / self.period + 1).min(if self.count > 0 { self.count } else { i64::MAX });
+                ctx.warn(format!(
+                    "could not keep its period of {}: it made {k} tick(s) in {}, its period implies {due}; \
+                     at worst a tick went out {} late (each tick keeps its scheduled valid time)",
+                    seconds(self.period),
+                    seconds(elapsed),
+                    seconds(worst_lag)
+                ));
             }
             Ok(())
         })
@@ -31,6 +48,15 @@ impl Source for Timer {
 
     fn ends_by_itself(&self) -> bool {
         self.count > 0
+    }
+}
+
+/// A duration in microseconds, as a person reads it: `10 us`, `2.5 ms`, `12.0 s`.
+fn seconds(us: Time) -> String {
+    match us {
+        ..1_000 => format!("{us} us"),
+        1_000..1_000_000 => format!("{:.1} ms", us as f64 / 1e3),
+        _ => format!("{:.1} s", us as f64 / 1e6),
     }
 }
 
