@@ -9,6 +9,10 @@
 //! nested messages are their fields in order; an empty message is one `uint8`. Nothing pads the
 //! end.
 //!
+//! The padding bytes carry nothing: kpl writes zeros, Fast-CDR (rclpy, rmw_zenoh) leaves whatever
+//! its buffer held, so two encodings of one message are equal once their padding is zeroed
+//! ([`canonical`]).
+//!
 //! Decoding never panics and never allocates more than the input can hold: a count larger than
 //! the bytes left, a string without its NUL or not UTF-8, a bool other than 0 or 1, a bounded
 //! sequence over its bound, or a truncated message is a [`CdrError`].
@@ -102,8 +106,35 @@ pub fn decode(schema: &Schema, bytes: &[u8]) -> Result<MsgValue, CdrError> {
         (0, 0) => false,
         (a, b) => return Err(CdrError::Encapsulation(a, b)),
     };
-    let mut r = Reader { data: &bytes[4..], pos: 0, little, path: Vec::new() };
+    let mut r = Reader { data: &bytes[4..], pos: 0, little, path: Vec::new(), pads: None };
     r.read_struct(schema, schema.root_index())
+}
+
+/// The message with its padding bytes zeroed (and the decoded value), so that encodings by
+/// different writers compare byte for byte.
+pub fn canonical(schema: &Schema, bytes: &[u8]) -> Result<(Vec<u8>, MsgValue), CdrError> {
+    let (pads, value) = padding(schema, bytes)?;
+    let mut out = bytes.to_vec();
+    for (at, len) in pads {
+        out[at..at + len].fill(0);
+    }
+    Ok((out, value))
+}
+
+/// Where a message's padding bytes are: (offset from the start, length), and the decoded value.
+pub fn padding(schema: &Schema, bytes: &[u8]) -> Result<(Vec<(usize, usize)>, MsgValue), CdrError> {
+    if bytes.len() < 4 {
+        return Err(CdrError::NoHeader);
+    }
+    let little = match (bytes[0], bytes[1]) {
+        (0, 1) => true,
+        (0, 0) => false,
+        (a, b) => return Err(CdrError::Encapsulation(a, b)),
+    };
+    let mut r = Reader { data: &bytes[4..], pos: 0, little, path: Vec::new(), pads: Some(Vec::new()) };
+    let value = r.read_struct(schema, schema.root_index())?;
+    let pads = r.pads.unwrap_or_default().into_iter().map(|(at, len)| (at + 4, len)).collect();
+    Ok((pads, value))
 }
 
 struct Writer<'a> {
@@ -257,6 +288,8 @@ struct Reader<'a> {
     pos: usize,
     little: bool,
     path: Vec<&'a str>,
+    /// Where the padding is (offset, length), when asked for.
+    pads: Option<Vec<(usize, usize)>>,
 }
 
 impl<'a> Reader<'a> {
@@ -268,6 +301,11 @@ impl<'a> Reader<'a> {
         let pad = (n - self.pos % n) % n;
         if self.pos + pad > self.data.len() {
             return Err(self.malformed("the message ends early"));
+        }
+        if pad > 0
+            && let Some(pads) = &mut self.pads
+        {
+            pads.push((self.pos, pad));
         }
         self.pos += pad;
         Ok(())
