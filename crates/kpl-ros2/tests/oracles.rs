@@ -261,3 +261,73 @@ fn copy_tree(from: &Path, to: &Path) {
         }
     }
 }
+
+/// Keys, tokens, QoS and attachments against zenoh-ros2-sdk and pamoja-ros2
+/// (`tests/oracle/rmw_zenoh_wire.py`).
+#[test]
+fn wire_matches_independent_rmw_zenoh_implementations() {
+    use kpl_ros2::wire::{self, Attachment, EntityKind, Node, Qos};
+    let Some(python) = python() else { return };
+    let defs = Definitions::builtin();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let topics = ["/tracker/markers", "/kpl/cars", "/chatter", "/robot_1/camera/detections"];
+    let types = ["visualization_msgs/msg/MarkerArray", "geometry_msgs/msg/PoseStamped", "std_msgs/msg/String", "vision_msgs/msg/Detection2DArray"];
+    let namespaces = ["/", "/robot_1", "/a/b"];
+    let mut cases = Vec::new();
+    let mut ours = Vec::new();
+    for i in 0..40 {
+        let ty = types[i % types.len()];
+        let schema = defs.schema_of(ty).unwrap();
+        let hash = schema.type_hash();
+        let node = Node {
+            domain: rng.random_range(0..233),
+            session_id: hex(&rng.random::<[u8; 16]>()),
+            node_id: rng.random_range(0..100),
+            namespace: namespaces[i % namespaces.len()].to_string(),
+            name: format!("kpl_{i}"),
+        };
+        let qos = Qos {
+            reliable: rng.random(),
+            transient_local: rng.random(),
+            depth: if rng.random_bool(0.8) { Some(rng.random_range(1..100)) } else { None },
+        };
+        let kind = if i % 2 == 0 { EntityKind::Publisher } else { EntityKind::Subscription };
+        let topic = topics[i % topics.len()];
+        let entity_id = node.node_id + 1 + rng.random_range(0..10);
+        let attachment = Attachment { sequence_number: rng.random_range(0..i64::MAX), source_timestamp: rng.random_range(0..i64::MAX), gid: rng.random() };
+        cases.push(serde_json::json!({
+            "domain": node.domain, "session": node.session_id, "node_id": node.node_id,
+            "namespace": node.namespace, "node": node.name, "entity_id": entity_id, "kind": kind.code(),
+            "topic": topic, "type": ty, "hash": hash,
+            "qos": {"reliable": qos.reliable, "transient_local": qos.transient_local, "depth": qos.depth},
+            "seq": attachment.sequence_number, "stamp_ns": attachment.source_timestamp, "gid": attachment.gid.to_vec(),
+        }));
+        let dds = schema.name().dds_name();
+        ours.push((
+            wire::topic_key(node.domain, topic, &dds, &hash),
+            dds.clone(),
+            hash.trim_start_matches("RIHS01_").to_string(),
+            node.token(),
+            node.endpoint_token(entity_id, kind, topic, &dds, &hash, &qos),
+            qos.encode(),
+            hex(&attachment.encode()),
+        ));
+    }
+    let dir = scratch("rmw_zenoh_wire");
+    let (input, output) = (dir.join("cases.json"), dir.join("theirs.json"));
+    std::fs::write(&input, serde_json::to_vec(&cases).unwrap()).unwrap();
+    run(&python, "rmw_zenoh_wire.py", &[&input, &output], &[]);
+    let theirs: Vec<Json> = serde_json::from_slice(&std::fs::read(&output).unwrap()).unwrap();
+    assert_eq!(theirs.len(), ours.len());
+    for (t, (key, dds, digest, node_token, endpoint_token, qos, attachment)) in theirs.iter().zip(&ours) {
+        assert_eq!(t["key"], *key);
+        assert_eq!(t["key_pamoja"], *key);
+        assert_eq!(t["dds_pamoja"], *dds);
+        assert_eq!(t["digest_pamoja"], *digest);
+        assert_eq!(t["node_token"], *node_token);
+        assert_eq!(t["endpoint_token"], *endpoint_token);
+        assert_eq!(t["qos"], *qos);
+        assert_eq!(t["attachment"], *attachment);
+        assert_eq!(attachment.len(), 66);
+    }
+}
