@@ -6,6 +6,7 @@
 //!   user's folders; [`Schema`]: one type with everything it uses, resolved;
 //! - [`hash`]: RIHS01 type hashes;
 //! - [`cdr`]: the dynamic CDR codec (with the encapsulation header), [`json`]: messages as JSON;
+//! - [`mapping`]: fields of messages into KPL values and back, as a spec declares it;
 //! - [`wire`]: rmw_zenoh's keys, attachment, liveliness tokens and QoS.
 //!
 //! The sources and sinks that use a zenoh session live in `kpl-zenoh`; docs/ros2.md describes
@@ -16,6 +17,7 @@ pub mod cdr;
 pub mod definitions;
 pub mod hash;
 pub mod json;
+pub mod mapping;
 pub mod msg;
 pub mod wire;
 
