@@ -13,6 +13,8 @@
 //! - [`Sessions`]: the one zenoh session of a host process;
 //! - [`ZenohFactory`] / [`ZenohTransport`]: what `kpl run --host` sends streams through;
 //! - `zenoh.subscribe` and `zenoh.publish` ([`register`]);
+//! - [`ros2`]: `ros2.subscribe` and `ros2.publish`, ROS 2 topics over rmw_zenoh (the wire is
+//!   `kpl-ros2`'s);
 //! - [`bench`]: `kpl bench zenoh`, against bare zenoh code.
 //!
 //! zenoh needs a multi-threaded tokio runtime: `kpl run` uses one with `--clock wall`, which is
@@ -25,6 +27,7 @@ pub mod credentials;
 pub mod envelope;
 pub mod keys;
 mod outside;
+pub mod ros2;
 mod session;
 mod transport;
 
@@ -44,6 +47,7 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
 pub fn register_with(registry: &mut kpl_runtime::Registry, sessions: Arc<Sessions>) {
     registry.set_link_protocols(config::protocols());
     outside::register(registry, sessions);
+    ros2::register(registry);
 }
 
 /// The transport of `kpl run --host`, on this process's session ([`Sessions::process`]).

@@ -43,6 +43,11 @@ pub struct Args {
     /// control, authenticated messages. Also KPL_KEYS.
     #[arg(long, requires = "host")]
     pub keys: Option<PathBuf>,
+    /// The zenoh router (or peer) that the spec's ROS 2 topics (`ros2.subscribe`,
+    /// `ros2.publish`) go through, over the spec's `router` (default: rmw_zenoh's,
+    /// tcp/localhost:7447).
+    #[arg(long = "ros2-router", value_name = "ENDPOINT")]
+    pub ros2_router: Option<String>,
     /// Which clock drives the run.
     #[arg(long, value_enum, default_value = "sim")]
     pub clock: ClockArg,
@@ -65,6 +70,14 @@ pub struct Args {
     /// stdout.
     #[arg(long, value_enum, default_value = "text")]
     pub format: report::OutputFormat,
+}
+
+/// Whether a process of the spec is a ROS 2 topic (so that `--ros2-router` does something).
+fn uses_ros2(spec: &kpl_semantic::hir::Spec) -> bool {
+    spec.processes.iter().any(|p| match &p.kind {
+        kpl_semantic::hir::ProcessKind::Source(call) | kpl_semantic::hir::ProcessKind::Sink(call) => call.entry.starts_with("ros2."),
+        _ => false,
+    })
 }
 
 pub(crate) fn parse_duration(text: &str) -> Result<Time, String> {
@@ -124,6 +137,10 @@ pub fn run(args: Args) -> ExitCode {
         );
         return ExitCode::from(2);
     }
+    if args.ros2_router.is_some() && !uses_ros2(&spec) {
+        eprintln!("warning: --ros2-router has no effect: the spec has no ROS 2 topic (ros2.subscribe, ros2.publish)");
+    }
+    kpl_zenoh::ros2::set_router(args.ros2_router.clone());
     let registry = crate::registry::registry();
     let transport = crate::transport::factory(args.keys.as_deref());
     let started = SystemTime::now();
