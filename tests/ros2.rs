@@ -60,21 +60,32 @@ fn markers_in_cars_out_with_a_ros2_node() {
         .unwrap();
     std::thread::sleep(Duration::from_millis(500));
     let out = dir.join("out");
-    let mut kpl = common::kpl_command(&["run", "specs/ros2/markers.kpl", "--clock", "wall", "--ros2-router", &endpoint, "--out"])
-        .arg(&out)
-        .args(["--for", "120s", "--quiet"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut kpl = common::kpl_command(&[
+        "run",
+        "specs/ros2/markers.kpl",
+        "--clock",
+        "wall",
+        "--ros2-router",
+        &endpoint,
+        "--out",
+    ])
+    .arg(&out)
+    .args(["--for", "120s", "--quiet"])
+    .stdin(Stdio::null())
+    .stdout(Stdio::null())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
     let (kpl_code, kpl_err) = wait(&mut kpl, "kpl run");
     let (node_code, node_err) = wait(&mut node, "the ROS 2 node");
     assert_eq!(node_code, 0, "the ROS 2 node failed:\n{node_err}");
     assert_eq!(kpl_code, 0, "kpl run failed:\n{kpl_err}");
 
     let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(summary["ending"], "sources_ended", "kpl ends when the publisher has gone, not at --for: {summary:#}");
+    assert_eq!(
+        summary["ending"], "sources_ended",
+        "kpl ends when the publisher has gone, not at --for: {summary:#}"
+    );
     let result: Value = serde_json::from_slice(&std::fs::read(&result_path).unwrap()).unwrap();
 
     // kpl's recording: every car symbol and the percepts it read.
@@ -83,18 +94,27 @@ fn markers_in_cars_out_with_a_ros2_node() {
     for line in lines(&out.join("tracks.jsonl")) {
         let objects = line["value"].as_array().cloned().unwrap_or_default();
         match line["stream"].as_str() {
-            Some("onroad_car") => recorded_cars.extend(objects.iter().map(|o| o["id"].as_str().unwrap().to_string())),
+            Some("onroad_car") => {
+                recorded_cars.extend(objects.iter().map(|o| o["id"].as_str().unwrap().to_string()))
+            }
             Some("markers") => percepts += objects.len(),
             _ => {}
         }
     }
-    assert_eq!(percepts as u64, result["published_markers"].as_u64().unwrap(), "every marker became a percept");
+    assert_eq!(
+        percepts as u64,
+        result["published_markers"].as_u64().unwrap(),
+        "every marker became a percept"
+    );
     assert!(recorded_cars.len() >= 10, "only {} cars anchored", recorded_cars.len());
 
     // What the node received: every recorded car, with a number that stays with its symbol.
     let mut numbers: BTreeMap<String, BTreeSet<i64>> = BTreeMap::new();
     for car in result["cars"].as_array().unwrap() {
-        numbers.entry(car["ns"].as_str().unwrap().to_string()).or_default().insert(car["id"].as_i64().unwrap());
+        numbers
+            .entry(car["ns"].as_str().unwrap().to_string())
+            .or_default()
+            .insert(car["id"].as_i64().unwrap());
         assert_eq!(car["frame"], "map");
         assert_eq!(car["length"], 5.0);
     }
@@ -103,14 +123,21 @@ fn markers_in_cars_out_with_a_ros2_node() {
     for (symbol, ids) in &numbers {
         assert_eq!(ids.len(), 1, "{symbol} changed its number: {ids:?}");
     }
-    let detected: BTreeSet<String> =
-        result["detections"].as_array().unwrap().iter().map(|d| d["id"].as_str().unwrap().to_string()).collect();
+    let detected: BTreeSet<String> = result["detections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].as_str().unwrap().to_string())
+        .collect();
     assert_eq!(detected, recorded_cars, "the cars on /kpl/detections are those of kpl's recording");
     assert_eq!(result["bad_attachments"], 0, "kpl's messages carry rmw_zenoh's 33-byte attachment");
 
     // kpl is in the ROS 2 graph: its node, its subscription and its two publishers.
-    let graph: Vec<String> = result["graph"].as_array().unwrap().iter().map(|g| g.as_str().unwrap().to_string()).collect();
-    for (kind, topic) in [("NN", ""), ("MS", "%tracker%markers"), ("MP", "%kpl%cars"), ("MP", "%kpl%detections")] {
+    let graph: Vec<String> =
+        result["graph"].as_array().unwrap().iter().map(|g| g.as_str().unwrap().to_string()).collect();
+    for (kind, topic) in
+        [("NN", ""), ("MS", "%tracker%markers"), ("MP", "%kpl%cars"), ("MP", "%kpl%detections")]
+    {
         assert!(
             graph.iter().any(|g| g.contains(&format!("/{kind}/")) && g.contains("/kpl") && g.contains(topic)),
             "no {kind} token for `{topic}` in {graph:#?}"
@@ -125,5 +152,8 @@ fn markers_in_cars_out_with_a_ros2_node() {
         .filter(|p| p["process"] == "markers")
         .map(|p| p["malformed"].as_u64().unwrap_or(0))
         .sum();
-    assert_eq!(malformed, 3, "kpl counts the message without attachment, the wrong hash and the cut CDR: {summary:#}");
+    assert_eq!(
+        malformed, 3,
+        "kpl counts the message without attachment, the wrong hash and the cut CDR: {summary:#}"
+    );
 }

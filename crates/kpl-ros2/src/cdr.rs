@@ -178,7 +178,12 @@ impl Writer<'_> {
         Ok(())
     }
 
-    fn write_field(&mut self, schema: &Schema, field: &SchemaField, value: &MsgValue) -> Result<(), CdrError> {
+    fn write_field(
+        &mut self,
+        schema: &Schema,
+        field: &SchemaField,
+        value: &MsgValue,
+    ) -> Result<(), CdrError> {
         match field.array {
             ArrayKind::Single => self.write_base(schema, field.base, value),
             ArrayKind::Fixed(n) => self.write_elements(schema, field.base, value, Some(n as usize), None),
@@ -365,7 +370,9 @@ impl<'a> Reader<'a> {
         // Every element takes at least one byte: a count beyond what is left is malformed, and
         // nothing is allocated for it.
         if count > self.data.len() - self.pos {
-            return Err(self.malformed(format!("{count} elements, but {} bytes left", self.data.len() - self.pos)));
+            return Err(
+                self.malformed(format!("{count} elements, but {} bytes left", self.data.len() - self.pos))
+            );
         }
         if let SchemaBase::Primitive(p) = field.base
             && p.is_octet()

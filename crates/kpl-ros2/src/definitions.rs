@@ -135,21 +135,18 @@ impl Definitions {
         if !self.types.contains_key(name) {
             return Err(self.unknown(&name.to_string()));
         }
-        let mut builder = SchemaBuilder { defs: self, index: HashMap::new(), structs: Vec::new(), stack: Vec::new() };
+        let mut builder =
+            SchemaBuilder { defs: self, index: HashMap::new(), structs: Vec::new(), stack: Vec::new() };
         let root = builder.add(name)?;
         Ok(Arc::new(Schema { root, structs: builder.structs }))
     }
 
     fn unknown(&self, name: &str) -> DefError {
         let short = name.rsplit('/').next().unwrap_or(name);
-        let hint = self
-            .types
-            .keys()
-            .find(|t| &*t.name == short)
-            .map(|t| format!("did you mean `{t}`?"))
-            .or_else(|| {
-                (!name.contains('/')).then(|| "name a message type as `package/msg/Name`".to_string())
-            });
+        let hint =
+            self.types.keys().find(|t| &*t.name == short).map(|t| format!("did you mean `{t}`?")).or_else(
+                || (!name.contains('/')).then(|| "name a message type as `package/msg/Name`".to_string()),
+            );
         DefError::Unknown { name: name.to_string(), hint }
     }
 }
@@ -290,7 +287,15 @@ mod tests {
             let schema = defs.schema(name).unwrap();
             assert_eq!(schema.name(), name);
         }
-        for package in ["builtin_interfaces", "std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "visualization_msgs", "vision_msgs"] {
+        for package in [
+            "builtin_interfaces",
+            "std_msgs",
+            "geometry_msgs",
+            "sensor_msgs",
+            "nav_msgs",
+            "visualization_msgs",
+            "vision_msgs",
+        ] {
             assert!(defs.names().any(|n| &*n.package == package), "{package}");
         }
     }

@@ -70,7 +70,14 @@ fn write_struct(out: &mut String, schema: &Schema, s: &StructDef) {
     out.push_str("]}");
 }
 
-fn write_field(out: &mut String, name: &str, type_id: u32, capacity: u32, string_capacity: u32, nested: &str) {
+fn write_field(
+    out: &mut String,
+    name: &str,
+    type_id: u32,
+    capacity: u32,
+    string_capacity: u32,
+    nested: &str,
+) {
     let _ = write!(
         out,
         "{{\"name\": \"{name}\", \"type\": {{\"type_id\": {type_id}, \"capacity\": {capacity}, \"string_capacity\": {string_capacity}, \"nested_type_name\": \"{nested}\"}}}}"

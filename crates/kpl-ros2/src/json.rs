@@ -25,7 +25,9 @@ fn struct_to_json(schema: &Schema, index: usize, value: &MsgValue) -> Json {
 
 fn field_to_json(schema: &Schema, field: &SchemaField, value: &MsgValue) -> Json {
     match value {
-        MsgValue::List(items) => Json::Array(items.iter().map(|v| base_to_json(schema, field.base, v)).collect()),
+        MsgValue::List(items) => {
+            Json::Array(items.iter().map(|v| base_to_json(schema, field.base, v)).collect())
+        }
         MsgValue::Bytes(bytes) => Json::Array(bytes.iter().map(|&b| Json::from(b)).collect()),
         _ => base_to_json(schema, field.base, value),
     }
@@ -62,7 +64,12 @@ fn struct_from_json(schema: &Schema, index: usize, json: &Json, path: &str) -> R
     Ok(MsgValue::Struct(values))
 }
 
-fn field_from_json(schema: &Schema, field: &SchemaField, json: &Json, path: &str) -> Result<MsgValue, String> {
+fn field_from_json(
+    schema: &Schema,
+    field: &SchemaField,
+    json: &Json,
+    path: &str,
+) -> Result<MsgValue, String> {
     if field.array == ArrayKind::Single {
         return base_from_json(schema, field.base, json, path);
     }
@@ -72,11 +79,15 @@ fn field_from_json(schema: &Schema, field: &SchemaField, json: &Json, path: &str
     if let SchemaBase::Primitive(p) = field.base
         && p.is_octet()
     {
-        let bytes: Option<Vec<u8>> = items.iter().map(|j| j.as_u64().and_then(|u| u8::try_from(u).ok())).collect();
+        let bytes: Option<Vec<u8>> =
+            items.iter().map(|j| j.as_u64().and_then(|u| u8::try_from(u).ok())).collect();
         return bytes.map(MsgValue::Bytes).ok_or_else(|| format!("at `{path}`: expected bytes"));
     }
-    let items: Result<Vec<MsgValue>, String> =
-        items.iter().enumerate().map(|(i, j)| base_from_json(schema, field.base, j, &format!("{path}[{i}]"))).collect();
+    let items: Result<Vec<MsgValue>, String> = items
+        .iter()
+        .enumerate()
+        .map(|(i, j)| base_from_json(schema, field.base, j, &format!("{path}[{i}]")))
+        .collect();
     Ok(MsgValue::List(items?))
 }
 

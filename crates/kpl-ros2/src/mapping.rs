@@ -91,7 +91,14 @@ enum End {
 }
 
 /// Resolves `a.b.c` from struct `start`; `range` is where the path is in its text.
-fn resolve(schema: &Schema, start: usize, text: &str, param: &'static str, entry: Option<usize>, offset: usize) -> Result<Path, MapError> {
+fn resolve(
+    schema: &Schema,
+    start: usize,
+    text: &str,
+    param: &'static str,
+    entry: Option<usize>,
+    offset: usize,
+) -> Result<Path, MapError> {
     let mut index = start;
     let mut indices = Vec::new();
     let mut at = offset;
@@ -105,22 +112,38 @@ fn resolve(schema: &Schema, start: usize, text: &str, param: &'static str, entry
             let hint = closest(part, &names)
                 .map(|n| format!("did you mean `{n}`?"))
                 .unwrap_or_else(|| format!("`{}` has: {}", def.def.name, names.join(", ")));
-            return Err(MapError::new(param, entry, range, format!("`{}` has no field `{part}`", def.def.name)).hint(hint));
+            return Err(MapError::new(
+                param,
+                entry,
+                range,
+                format!("`{}` has no field `{part}`", def.def.name),
+            )
+            .hint(hint));
         };
         indices.push(fi);
         let field = &def.fields[fi];
         let last = i + 1 == parts.len();
         if field.array != ArrayKind::Single {
             if !last {
-                return Err(MapError::new(param, entry, range, format!("`{part}` is an array ({})", field_type(schema, index, fi)))
-                    .hint("only `each` goes into an array"));
+                return Err(MapError::new(
+                    param,
+                    entry,
+                    range,
+                    format!("`{part}` is an array ({})", field_type(schema, index, fi)),
+                )
+                .hint("only `each` goes into an array"));
             }
             return Ok(Path { indices, end: End::Array(fi) });
         }
         match field.base {
             SchemaBase::Primitive(p) => {
                 if !last {
-                    return Err(MapError::new(param, entry, range, format!("`{part}` is a {}, it has no fields", p.msg_name())));
+                    return Err(MapError::new(
+                        param,
+                        entry,
+                        range,
+                        format!("`{part}` is a {}, it has no fields", p.msg_name()),
+                    ));
                 }
                 return Ok(Path { indices, end: End::Primitive(p) });
             }
@@ -183,7 +206,11 @@ fn describe_end(schema: &Schema, end: End) -> String {
 }
 
 fn closest<'a>(word: &str, names: &[&'a str]) -> Option<&'a str> {
-    names.iter().copied().filter(|n| edit_distance(word, n) <= 2.max(word.len() / 3)).min_by_key(|n| edit_distance(word, n))
+    names
+        .iter()
+        .copied()
+        .filter(|n| edit_distance(word, n) <= 2.max(word.len() / 3))
+        .min_by_key(|n| edit_distance(word, n))
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {
@@ -202,9 +229,19 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// Splits `left = right`, trimmed, with the offset of each side in the text.
-fn split_entry<'a>(text: &'a str, param: &'static str, i: usize) -> Result<((usize, &'a str), (usize, &'a str)), MapError> {
+fn split_entry<'a>(
+    text: &'a str,
+    param: &'static str,
+    i: usize,
+) -> Result<((usize, &'a str), (usize, &'a str)), MapError> {
     let Some(eq) = text.find('=') else {
-        return Err(MapError::new(param, Some(i), (0, text.len()), format!("`{text}` is not `name = value`")).hint("write e.g. `pos = pose.position`"));
+        return Err(MapError::new(
+            param,
+            Some(i),
+            (0, text.len()),
+            format!("`{text}` is not `name = value`"),
+        )
+        .hint("write e.g. `pos = pose.position`"));
     };
     fn trimmed(s: &str, base: usize) -> (usize, &str) {
         (base + (s.len() - s.trim_start().len()), s.trim())
@@ -217,12 +254,22 @@ fn each_array(schema: &Schema, each: Option<&str>) -> Result<Option<(Vec<usize>,
     let Some(each) = each else { return Ok(None) };
     let path = resolve(schema, schema.root_index(), each, "each", None, 0)?;
     let End::Array(fi) = path.end else {
-        return Err(MapError::new("each", None, (0, each.len()), format!("`{each}` is not an array of messages")));
+        return Err(MapError::new(
+            "each",
+            None,
+            (0, each.len()),
+            format!("`{each}` is not an array of messages"),
+        ));
     };
     let parent = parent_struct(schema, &path.indices);
     match schema.get(parent).fields[fi].base {
         SchemaBase::Struct(s) => Ok(Some((path.indices, s))),
-        SchemaBase::Primitive(p) => Err(MapError::new("each", None, (0, each.len()), format!("`{each}` is an array of {}, not of messages", p.msg_name()))),
+        SchemaBase::Primitive(p) => Err(MapError::new(
+            "each",
+            None,
+            (0, each.len()),
+            format!("`{each}` is an array of {}, not of messages", p.msg_name()),
+        )),
     }
 }
 
@@ -269,17 +316,32 @@ impl InMap {
         let record = match (output, &each) {
             (ValueType::List(inner), Some(_)) => inner.as_ref(),
             (ValueType::List(_), None) => {
-                return Err(MapError::new("each", None, (0, 0), "the stream is a list, but the mapping has no `each`".into())
-                    .hint("name the array whose elements are the list's objects: `each: \"markers\"`"));
+                return Err(MapError::new(
+                    "each",
+                    None,
+                    (0, 0),
+                    "the stream is a list, but the mapping has no `each`".into(),
+                )
+                .hint("name the array whose elements are the list's objects: `each: \"markers\"`"));
             }
             (_, Some(_)) => {
-                return Err(MapError::new("each", None, (0, 0), "with `each` the stream is a list of objects".into())
-                    .hint("declare the source's type as `list<T>`"));
+                return Err(MapError::new(
+                    "each",
+                    None,
+                    (0, 0),
+                    "with `each` the stream is a list of objects".into(),
+                )
+                .hint("declare the source's type as `list<T>`"));
             }
             (ty, None) => ty,
         };
         let ValueType::Record(ty) = record else {
-            return Err(MapError::new("each", None, (0, 0), format!("a ROS 2 message maps onto an object type, not `{record}`")));
+            return Err(MapError::new(
+                "each",
+                None,
+                (0, 0),
+                format!("a ROS 2 message maps onto an object type, not `{record}`"),
+            ));
         };
         let element = each.as_ref().map_or(schema.root_index(), |(_, s)| *s);
         let mut attributes: Vec<(Arc<str>, Path, ValueType)> = Vec::new();
@@ -287,14 +349,24 @@ impl InMap {
             let ((aat, attribute), (pat, path_text)) = split_entry(text, "map", i)?;
             let Some(field) = ty.field(attribute) else {
                 let names: Vec<&str> = ty.fields.iter().map(|f| &*f.name).collect();
-                let e = MapError::new("map", Some(i), (aat, aat + attribute.len()), format!("`{}` has no attribute `{attribute}`", ty.name));
+                let e = MapError::new(
+                    "map",
+                    Some(i),
+                    (aat, aat + attribute.len()),
+                    format!("`{}` has no attribute `{attribute}`", ty.name),
+                );
                 return Err(match closest(attribute, &names) {
                     Some(n) => e.hint(format!("did you mean `{n}`?")),
                     None => e.hint(format!("`{}` has: {}", ty.name, names.join(", "))),
                 });
             };
             if attributes.iter().any(|(a, ..)| **a == *attribute) {
-                return Err(MapError::new("map", Some(i), (aat, aat + attribute.len()), format!("`{attribute}` is mapped twice")));
+                return Err(MapError::new(
+                    "map",
+                    Some(i),
+                    (aat, aat + attribute.len()),
+                    format!("`{attribute}` is mapped twice"),
+                ));
             }
             let path = resolve(schema, element, path_text, "map", Some(i), pat)?;
             if !converts(path.end, &field.ty) {
@@ -302,23 +374,43 @@ impl InMap {
                     "map",
                     Some(i),
                     (pat, pat + path_text.len()),
-                    format!("`{path_text}` is {}, which does not fit `{attribute}: {}`", describe_end(schema, path.end), field.ty),
+                    format!(
+                        "`{path_text}` is {}, which does not fit `{attribute}: {}`",
+                        describe_end(schema, path.end),
+                        field.ty
+                    ),
                 )
                 .hint(conversion_hint(&field.ty)));
             }
             attributes.push((field.name.clone(), path, field.ty.clone()));
         }
         for field in &ty.fields {
-            if !attributes.iter().any(|(a, ..)| *a == field.name) && kpl_core::object_status_type(&field.name).is_none() {
-                return Err(MapError::new("map", None, (0, 0), format!("nothing sets `{}` of `{}`", field.name, ty.name))
-                    .hint(format!("add an entry `{} = <field of the message>`", field.name)));
+            if !attributes.iter().any(|(a, ..)| *a == field.name)
+                && kpl_core::object_status_type(&field.name).is_none()
+            {
+                return Err(MapError::new(
+                    "map",
+                    None,
+                    (0, 0),
+                    format!("nothing sets `{}` of `{}`", field.name, ty.name),
+                )
+                .hint(format!("add an entry `{} = <field of the message>`", field.name)));
             }
         }
         let identity = match &spec.identity {
             Some(text) => {
                 let path = resolve(schema, element, text, "identity", None, 0)?;
-                if !matches!(path.end, End::Primitive(p) if p != Primitive::Bool && !matches!(p, Primitive::Float32 | Primitive::Float64)) {
-                    return Err(MapError::new("identity", None, (0, text.len()), format!("`{text}` is {}: an identity is an integer or a string", describe_end(schema, path.end))));
+                if !matches!(path.end, End::Primitive(p) if p != Primitive::Bool && !matches!(p, Primitive::Float32 | Primitive::Float64))
+                {
+                    return Err(MapError::new(
+                        "identity",
+                        None,
+                        (0, text.len()),
+                        format!(
+                            "`{text}` is {}: an identity is an integer or a string",
+                            describe_end(schema, path.end)
+                        ),
+                    ));
                 }
                 Some(path)
             }
@@ -330,7 +422,12 @@ impl InMap {
             root => match resolve(schema, element, &stamp_text, "stamp", None, 0) {
                 Ok(path) if path.end == End::Time && each.is_some() => Some((false, path)),
                 Ok(path) => {
-                    return Err(MapError::new("stamp", None, (0, stamp_text.len()), format!("`{stamp_text}` is {}, not a time", describe_end(schema, path.end))));
+                    return Err(MapError::new(
+                        "stamp",
+                        None,
+                        (0, stamp_text.len()),
+                        format!("`{stamp_text}` is {}, not a time", describe_end(schema, path.end)),
+                    ));
                 }
                 // No header: the valid time is when the message arrived, unless a stamp was asked for.
                 Err(e) if spec.stamp.is_some() => return Err(root.err().unwrap_or(e)),
@@ -365,7 +462,9 @@ impl InMap {
         match &self.each {
             None => self.record(msg),
             Some(each) => {
-                let Some(MsgValue::List(items)) = get(msg, each) else { return Err("the array is missing".into()) };
+                let Some(MsgValue::List(items)) = get(msg, each) else {
+                    return Err("the array is missing".into());
+                };
                 let records: Result<Vec<Value>, String> = items.iter().map(|m| self.record(m)).collect();
                 Ok(Value::List(records?.into()))
             }
@@ -408,8 +507,17 @@ fn converts(end: End, ty: &ValueType) -> bool {
     use Primitive::*;
     match (end, ty) {
         (_, ValueType::Any) => !matches!(end, End::Struct(_) | End::Array(_)),
-        (End::Primitive(Float32 | Float64 | Int8 | Int16 | Int32 | Int64 | UInt8 | UInt16 | UInt32 | UInt64 | Byte | Char), ValueType::Float) => true,
-        (End::Primitive(Int8 | Int16 | Int32 | Int64 | UInt8 | UInt16 | UInt32 | UInt64 | Byte | Char), ValueType::Int) => true,
+        (
+            End::Primitive(
+                Float32 | Float64 | Int8 | Int16 | Int32 | Int64 | UInt8 | UInt16 | UInt32 | UInt64 | Byte
+                | Char,
+            ),
+            ValueType::Float,
+        ) => true,
+        (
+            End::Primitive(Int8 | Int16 | Int32 | Int64 | UInt8 | UInt16 | UInt32 | UInt64 | Byte | Char),
+            ValueType::Int,
+        ) => true,
         (End::Primitive(Bool), ValueType::Bool) => true,
         (End::Primitive(String(_)), ValueType::Str) => true,
         (End::Xy(..), ValueType::Vec2) => true,
@@ -421,7 +529,9 @@ fn converts(end: End, ty: &ValueType) -> bool {
 
 fn conversion_hint(ty: &ValueType) -> String {
     match ty {
-        ValueType::Vec2 => "a vec2 reads a message with `x` and `y` (a geometry_msgs/Point, Vector3, ...)".into(),
+        ValueType::Vec2 => {
+            "a vec2 reads a message with `x` and `y` (a geometry_msgs/Point, Vector3, ...)".into()
+        }
         ValueType::Float => "a float reads a number field".into(),
         ValueType::Int => "an int reads an integer field or a builtin_interfaces/Time (microseconds)".into(),
         ValueType::Str => "a string reads a string field".into(),
@@ -441,7 +551,9 @@ fn convert(v: &MsgValue, end: End, ty: &ValueType) -> Result<Value, String> {
         (End::Duration, _, v) => Value::Duration(time_of(v).ok_or("not a duration")?),
         (_, ValueType::Float, v) => Value::Float(finite(v.as_f64().ok_or("not a number")?)?),
         (_, ValueType::Int | ValueType::Any, MsgValue::Int(i)) => Value::Int(*i),
-        (_, ValueType::Int | ValueType::Any, MsgValue::UInt(u)) => Value::Int(i64::try_from(*u).map_err(|_| format!("{u} is too large"))?),
+        (_, ValueType::Int | ValueType::Any, MsgValue::UInt(u)) => {
+            Value::Int(i64::try_from(*u).map_err(|_| format!("{u} is too large"))?)
+        }
         (_, ValueType::Any, MsgValue::Float(x)) => Value::Float(finite(*x)?),
         (_, _, MsgValue::Bool(b)) => Value::Bool(*b),
         (_, _, MsgValue::Str(s)) => Value::str(s),
@@ -477,8 +589,13 @@ impl OutMap {
         let record = match (input, &each) {
             (ValueType::List(inner), Some(_)) => inner.as_ref().clone(),
             (ValueType::List(_), None) => {
-                return Err(MapError::new("each", None, (0, 0), "the stream is a list, but the mapping has no `each`".into())
-                    .hint("name the array that gets one element per object: `each: \"markers\"`"));
+                return Err(MapError::new(
+                    "each",
+                    None,
+                    (0, 0),
+                    "the stream is a list, but the mapping has no `each`".into(),
+                )
+                .hint("name the array that gets one element per object: `each: \"markers\"`"));
             }
             (ValueType::Any, _) => ValueType::Any,
             (ty, _) => ty.clone(),
@@ -496,33 +613,56 @@ impl OutMap {
                 (Source::Number, End::Primitive(p)) => p.size().is_some() && !matches!(p, Primitive::Bool),
                 (Source::Literal(lit), end) => literal_fits(lit, end),
                 (Source::Attribute(a), end) => match &record {
-                    ValueType::Record(ty) => match ty.field(a).map(|f| &f.ty).or_else(|| kpl_core::object_status_type(a)) {
-                        Some(aty) => fits(aty, end),
-                        None => {
-                            let names: Vec<&str> = ty.fields.iter().map(|f| &*f.name).collect();
-                            let e = MapError::new("map", Some(i), srange, format!("`{}` has no attribute `{a}`", ty.name));
-                            return Err(match closest(a, &names) {
+                    ValueType::Record(ty) => {
+                        match ty.field(a).map(|f| &f.ty).or_else(|| kpl_core::object_status_type(a)) {
+                            Some(aty) => fits(aty, end),
+                            None => {
+                                let names: Vec<&str> = ty.fields.iter().map(|f| &*f.name).collect();
+                                let e = MapError::new(
+                                    "map",
+                                    Some(i),
+                                    srange,
+                                    format!("`{}` has no attribute `{a}`", ty.name),
+                                );
+                                return Err(match closest(a, &names) {
                                 Some(n) => e.hint(format!("did you mean `{n}`?")),
                                 None => e.hint("a value is an attribute, `symbol`, `number` or a literal (\"map\", 1.0, true)"),
                             });
+                            }
                         }
-                    },
+                    }
                     _ => true,
                 },
                 _ => false,
             };
             if !ok {
-                return Err(MapError::new("map", Some(i), srange, format!("`{source_text}` does not fit `{path_text}`, which is {}", describe_end(&schema, path.end)))
-                    .hint("`symbol` fills a string, `number` an integer or float, a vec2 a message with x and y"));
+                return Err(MapError::new(
+                    "map",
+                    Some(i),
+                    srange,
+                    format!(
+                        "`{source_text}` does not fit `{path_text}`, which is {}",
+                        describe_end(&schema, path.end)
+                    ),
+                )
+                .hint(
+                    "`symbol` fills a string, `number` an integer or float, a vec2 a message with x and y",
+                ));
             }
             set_texts.push(path_text.to_string());
             entries.push((path, source));
         }
         let header_stamp = |start: usize| {
-            resolve(&schema, start, "header.stamp", "map", None, 0).ok().filter(|p| p.end == End::Time).map(|p| p.indices)
+            resolve(&schema, start, "header.stamp", "map", None, 0)
+                .ok()
+                .filter(|p| p.end == End::Time)
+                .map(|p| p.indices)
         };
         let root_stamp = header_stamp(schema.root_index());
-        let element_stamp = each.as_ref().and_then(|(_, s)| header_stamp(*s)).filter(|_| !set_texts.iter().any(|t| t == "header.stamp" || t == "header"));
+        let element_stamp = each
+            .as_ref()
+            .and_then(|(_, s)| header_stamp(*s))
+            .filter(|_| !set_texts.iter().any(|t| t == "header.stamp" || t == "header"));
         Ok(OutMap { schema, each, entries, root_stamp, element_stamp, numbers: HashMap::new() })
     }
 
@@ -563,7 +703,9 @@ impl OutMap {
         for (path, source) in &self.entries {
             let v = match source {
                 Source::Literal(lit) => lit.clone(),
-                Source::Symbol => MsgValue::Str(record.and_then(|r| r.id.as_deref()).unwrap_or_default().to_string()),
+                Source::Symbol => {
+                    MsgValue::Str(record.and_then(|r| r.id.as_deref()).unwrap_or_default().to_string())
+                }
                 Source::Number => {
                     let symbol: Arc<str> = record.and_then(|r| r.id.clone()).unwrap_or_else(|| Arc::from(""));
                     let n = number_of(&symbol, &mut self.numbers);
@@ -581,7 +723,11 @@ impl OutMap {
                         let kind = |f: &MsgValue| matches!(f, MsgValue::Float(_));
                         for (i, value) in [(x, &xy[0]), (y, &xy[1])] {
                             if let Some(field) = f.get_mut(i) {
-                                *field = if kind(field) { value.clone() } else { MsgValue::Int(value.as_f64().unwrap_or(0.0) as i64) };
+                                *field = if kind(field) {
+                                    value.clone()
+                                } else {
+                                    MsgValue::Int(value.as_f64().unwrap_or(0.0) as i64)
+                                };
                             }
                         }
                     }
@@ -599,8 +745,13 @@ fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
     if let Some(&n) = numbers.get(symbol) {
         return n;
     }
-    let digits: String = symbol.chars().rev().take_while(char::is_ascii_digit).collect::<Vec<_>>().into_iter().rev().collect();
-    let n = digits.parse::<i64>().ok().filter(|n| *n <= i64::from(i32::MAX)).unwrap_or_else(|| 1_000_000 + numbers.len() as i64);
+    let digits: String =
+        symbol.chars().rev().take_while(char::is_ascii_digit).collect::<Vec<_>>().into_iter().rev().collect();
+    let n = digits
+        .parse::<i64>()
+        .ok()
+        .filter(|n| *n <= i64::from(i32::MAX))
+        .unwrap_or_else(|| 1_000_000 + numbers.len() as i64);
     numbers.insert(symbol.clone(), n);
     n
 }
@@ -608,7 +759,9 @@ fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
 fn number_value(n: f64, end: End) -> MsgValue {
     match end {
         End::Primitive(Primitive::Float32 | Primitive::Float64) => MsgValue::Float(n),
-        End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64) => MsgValue::Int(n as i64),
+        End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64) => {
+            MsgValue::Int(n as i64)
+        }
         _ => MsgValue::UInt(n as u64),
     }
 }
@@ -622,7 +775,10 @@ fn set_time(msg: &mut MsgValue, path: &[usize], t: Time) {
 fn time_value(t: Time) -> MsgValue {
     let sec = t.div_euclid(1_000_000);
     let nanosec = t.rem_euclid(1_000_000) * 1000;
-    MsgValue::Struct(vec![MsgValue::Int(sec.clamp(i64::from(i32::MIN), i64::from(i32::MAX))), MsgValue::UInt(nanosec as u64)])
+    MsgValue::Struct(vec![
+        MsgValue::Int(sec.clamp(i64::from(i32::MIN), i64::from(i32::MAX))),
+        MsgValue::UInt(nanosec as u64),
+    ])
 }
 
 fn parse_source(text: &str) -> Source {
@@ -631,7 +787,10 @@ fn parse_source(text: &str) -> Source {
         "number" => Source::Number,
         "true" => Source::Literal(MsgValue::Bool(true)),
         "false" => Source::Literal(MsgValue::Bool(false)),
-        _ if text.len() >= 2 && (text.starts_with('"') && text.ends_with('"') || text.starts_with('\'') && text.ends_with('\'')) => {
+        _ if text.len() >= 2
+            && (text.starts_with('"') && text.ends_with('"')
+                || text.starts_with('\'') && text.ends_with('\'')) =>
+        {
             Source::Literal(MsgValue::Str(text[1..text.len() - 1].to_string()))
         }
         _ => match (text.parse::<i64>(), text.parse::<f64>()) {
@@ -675,7 +834,10 @@ fn to_msg(v: &Value, end: End) -> Option<MsgValue> {
         (End::Time, Value::Int(t)) => time_value(*t),
         (End::Duration, Value::Duration(t)) => time_value(*t),
         (End::Primitive(Primitive::Float32 | Primitive::Float64), v) => MsgValue::Float(v.as_f64()?),
-        (End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64), Value::Int(i)) => MsgValue::Int(*i),
+        (
+            End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64),
+            Value::Int(i),
+        ) => MsgValue::Int(*i),
         (End::Primitive(p), Value::Int(i)) if p.size().is_some() => MsgValue::UInt(u64::try_from(*i).ok()?),
         (End::Primitive(Primitive::Bool), Value::Bool(b)) => MsgValue::Bool(*b),
         (End::Primitive(Primitive::String(_)), Value::Str(s)) => MsgValue::Str(s.to_string()),
@@ -703,7 +865,12 @@ mod tests {
     fn markers_in(entries: &[&str]) -> Result<InMap, MapError> {
         let defs = Definitions::builtin();
         let schema = defs.schema_of("visualization_msgs/msg/MarkerArray").unwrap();
-        let spec = InSpec { each: Some("markers".into()), identity: Some("id".into()), stamp: None, entries: entries.iter().map(|s| s.to_string()).collect() };
+        let spec = InSpec {
+            each: Some("markers".into()),
+            identity: Some("id".into()),
+            stamp: None,
+            entries: entries.iter().map(|s| s.to_string()).collect(),
+        };
         InMap::compile(&schema, &spec, &percept())
     }
 
@@ -715,11 +882,24 @@ mod tests {
         let car = record_list("Car", "co");
         let out_spec = OutSpec {
             each: Some("markers".into()),
-            entries: ["ns = symbol", "id = number", "pose.position = pos", "scale.x = size", "header.frame_id = \"map\"", "pose.orientation.w = 1.0"].map(String::from).to_vec(),
+            entries: [
+                "ns = symbol",
+                "id = number",
+                "pose.position = pos",
+                "scale.x = size",
+                "header.frame_id = \"map\"",
+                "pose.orientation.w = 1.0",
+            ]
+            .map(String::from)
+            .to_vec(),
         };
         let mut out = OutMap::compile(schema.clone(), &out_spec, &car).unwrap();
         let cars = Value::List(
-            vec![Value::Record(Arc::new(Record { id: Some("co12".into()), fields: vec![("pos".into(), Value::vec2(3.5, -2.0)), ("size".into(), Value::Float(4.5))] }))].into(),
+            vec![Value::Record(Arc::new(Record {
+                id: Some("co12".into()),
+                fields: vec![("pos".into(), Value::vec2(3.5, -2.0)), ("size".into(), Value::Float(4.5))],
+            }))]
+            .into(),
         );
         let msg = out.apply(1_500_000, &cars).unwrap();
         let bytes = crate::cdr::encode(&schema, &msg).unwrap();

@@ -239,10 +239,18 @@ pub fn parse(package: &str, name: &str, text: &str) -> Result<MessageDef, MsgErr
         message,
     };
     if !is_package_name(package) {
-        return Err(err(0, 0, format!("`{package}` is not a package name (lower case letters, digits, `_`)")));
+        return Err(err(
+            0,
+            0,
+            format!("`{package}` is not a package name (lower case letters, digits, `_`)"),
+        ));
     }
     if !is_type_name(name) {
-        return Err(err(0, 0, format!("`{name}` is not a message name (starts upper case; letters and digits)")));
+        return Err(err(
+            0,
+            0,
+            format!("`{name}` is not a message name (starts upper case; letters and digits)"),
+        ));
     }
     let mut def = MessageDef {
         name: TypeName::new(package, name),
@@ -271,7 +279,11 @@ pub fn parse(package: &str, name: &str, text: &str) -> Result<MessageDef, MsgErr
             }
             let constant = constant.trim();
             if !is_constant_name(constant) {
-                return Err(err(index, rest_column, format!("`{constant}` is not a constant name (upper case letters, digits, `_`)")));
+                return Err(err(
+                    index,
+                    rest_column,
+                    format!("`{constant}` is not a constant name (upper case letters, digits, `_`)"),
+                ));
             }
             let value = match p {
                 Primitive::String(_) | Primitive::WString(_) => value.trim(),
@@ -289,7 +301,9 @@ pub fn parse(package: &str, name: &str, text: &str) -> Result<MessageDef, MsgErr
             return Err(err(
                 index,
                 rest_column,
-                format!("`{field}` is not a field name (lower case letter first; lower case letters, digits, single `_`)"),
+                format!(
+                    "`{field}` is not a field name (lower case letter first; lower case letters, digits, single `_`)"
+                ),
             ));
         }
         if def.fields.iter().any(|f| &*f.name == field) {
@@ -398,10 +412,7 @@ mod tests {
         assert_eq!(def.constants[0].value, "0");
         assert_eq!(def.constants[1].value, "a # b");
         let types: Vec<String> = def.fields.iter().map(|f| f.ty.to_string()).collect();
-        assert_eq!(
-            types,
-            ["std_msgs/msg/Header", "pkg/msg/Point[]", "string<=5", "float64[9]", "int8[<=3]"]
-        );
+        assert_eq!(types, ["std_msgs/msg/Header", "pkg/msg/Point[]", "string<=5", "float64[9]", "int8[<=3]"]);
         assert_eq!(def.fields[2].default.as_deref(), Some("\"x\""));
         assert_eq!(def.fields[1].line, 5);
     }

@@ -84,7 +84,11 @@ impl Attachment {
         seq.copy_from_slice(&bytes[..8]);
         ts.copy_from_slice(&bytes[8..16]);
         gid.copy_from_slice(&bytes[17..]);
-        Ok(Attachment { sequence_number: i64::from_le_bytes(seq), source_timestamp: i64::from_le_bytes(ts), gid })
+        Ok(Attachment {
+            sequence_number: i64::from_le_bytes(seq),
+            source_timestamp: i64::from_le_bytes(ts),
+            gid,
+        })
     }
 }
 
@@ -134,7 +138,15 @@ impl Node {
 
     /// A publisher's or subscription's token: the node's fields, then the topic, its DDS type,
     /// its type hash and its QoS.
-    pub fn endpoint_token(&self, entity_id: u64, kind: EntityKind, topic: &str, dds_type: &str, type_hash: &str, qos: &Qos) -> String {
+    pub fn endpoint_token(
+        &self,
+        entity_id: u64,
+        kind: EntityKind,
+        topic: &str,
+        dds_type: &str,
+        type_hash: &str,
+        qos: &Qos,
+    ) -> String {
         format!(
             "{ADMIN_SPACE}/{}/{}/{}/{entity_id}/{}/%/{}/{}/{}/{dds_type}/{type_hash}/{}",
             self.domain,
@@ -241,7 +253,9 @@ pub fn check_topic(name: &str) -> Result<(), String> {
         let mut chars = token.chars();
         match chars.next() {
             None => return Err(format!("`{name}`: an empty token (`//` or a trailing `/`)")),
-            Some(c) if c.is_ascii_digit() => return Err(format!("`{name}`: a token cannot start with a digit")),
+            Some(c) if c.is_ascii_digit() => {
+                return Err(format!("`{name}`: a token cannot start with a digit"));
+            }
             _ => {}
         }
         if !token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {

@@ -186,8 +186,8 @@ fn cdr_matches_rclpy_both_ways() {
         let name = case["type"].as_str().unwrap();
         let schema = defs.schema_of(name).unwrap();
         // Fast-CDR leaves its padding bytes as its buffer had them; kpl writes zeros.
-        let (bytes, decoded) =
-            cdr::canonical(&schema, &unhex(case["cdr"].as_str().unwrap())).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (bytes, decoded) = cdr::canonical(&schema, &unhex(case["cdr"].as_str().unwrap()))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(json::to_json(&schema, &decoded), case["json"], "{name}: kpl decodes rclpy's bytes");
         assert_eq!(json::from_json(&schema, &case["json"]).unwrap(), decoded, "{name}");
         // rclpy's buffer may run past the message (rmw_fastrtps sizes it by an estimate).
@@ -230,7 +230,11 @@ fn hashes_and_cdr_match_rosbags() {
         if ROSBAGS_CHAR.contains(&key.as_str()) {
             // rosbags gives `char` the type id of IDL's char (13); rosidl maps a .msg `char` to
             // uint8 (3), and its hash is the one ROS 2 uses (checked below).
-            assert_ne!(result["hashes"][&key].as_str(), Some(ours.as_str()), "rosbags now agrees on {key}: drop it from ROSBAGS_CHAR");
+            assert_ne!(
+                result["hashes"][&key].as_str(),
+                Some(ours.as_str()),
+                "rosbags now agrees on {key}: drop it from ROSBAGS_CHAR"
+            );
             assert!(result["official"][&key].is_string(), "{key} needs rosidl's hash");
         } else {
             assert_eq!(result["hashes"][&key].as_str(), Some(ours.as_str()), "rosbags' hash of {key}");
@@ -271,7 +275,12 @@ fn wire_matches_independent_rmw_zenoh_implementations() {
     let defs = Definitions::builtin();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let topics = ["/tracker/markers", "/kpl/cars", "/chatter", "/robot_1/camera/detections"];
-    let types = ["visualization_msgs/msg/MarkerArray", "geometry_msgs/msg/PoseStamped", "std_msgs/msg/String", "vision_msgs/msg/Detection2DArray"];
+    let types = [
+        "visualization_msgs/msg/MarkerArray",
+        "geometry_msgs/msg/PoseStamped",
+        "std_msgs/msg/String",
+        "vision_msgs/msg/Detection2DArray",
+    ];
     let namespaces = ["/", "/robot_1", "/a/b"];
     let mut cases = Vec::new();
     let mut ours = Vec::new();
@@ -294,7 +303,11 @@ fn wire_matches_independent_rmw_zenoh_implementations() {
         let kind = if i % 2 == 0 { EntityKind::Publisher } else { EntityKind::Subscription };
         let topic = topics[i % topics.len()];
         let entity_id = node.node_id + 1 + rng.random_range(0..10);
-        let attachment = Attachment { sequence_number: rng.random_range(0..i64::MAX), source_timestamp: rng.random_range(0..i64::MAX), gid: rng.random() };
+        let attachment = Attachment {
+            sequence_number: rng.random_range(0..i64::MAX),
+            source_timestamp: rng.random_range(0..i64::MAX),
+            gid: rng.random(),
+        };
         cases.push(serde_json::json!({
             "domain": node.domain, "session": node.session_id, "node_id": node.node_id,
             "namespace": node.namespace, "node": node.name, "entity_id": entity_id, "kind": kind.code(),

@@ -116,7 +116,10 @@ pub(crate) fn register(registry: &mut Registry) {
 fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
     match ctx.clock {
         ClockKind::Wall => Ok(()),
-        ClockKind::Sim => Err(ctx.error("ROS 2 topics are exchanged with other programs in real time; run with --clock wall")),
+        ClockKind::Sim => {
+            Err(ctx
+                .error("ROS 2 topics are exchanged with other programs in real time; run with --clock wall"))
+        }
     }
 }
 
@@ -133,7 +136,9 @@ fn list_param(ctx: &BuildContext<'_>, name: &str) -> Vec<String> {
 
 fn map_error(ctx: &BuildContext<'_>, entries: &[String], e: &MapError) -> BuildError {
     let at = match e.entry {
-        Some(i) => format!("`{}` of `map` (\"{}\")", &entries[i].get(e.range.0..e.range.1).unwrap_or(""), entries[i]),
+        Some(i) => {
+            format!("`{}` of `map` (\"{}\")", &entries[i].get(e.range.0..e.range.1).unwrap_or(""), entries[i])
+        }
         None => format!("`{}`", e.param),
     };
     let hint = e.hint.as_ref().map(|h| format!("; {h}")).unwrap_or_default();
@@ -158,7 +163,9 @@ impl Common {
         let str_param = |name: &str| ctx.param(name).and_then(Value::as_str).unwrap_or("").to_string();
         let namespace = str_param("namespace");
         if !namespace.starts_with('/') || (namespace.len() > 1 && wire::check_topic(&namespace).is_err()) {
-            return Err(ctx.error(format!("`namespace`: `{namespace}` is not a ROS 2 namespace (`/`, `/robot`)")));
+            return Err(
+                ctx.error(format!("`namespace`: `{namespace}` is not a ROS 2 namespace (`/`, `/robot`)"))
+            );
         }
         let topic = str_param("topic");
         wire::check_topic(&topic).map_err(|e| ctx.error(format!("`topic`: {e}")))?;
@@ -167,7 +174,10 @@ impl Common {
             return Err(ctx.error(format!("`node`: `{node}` is not a ROS 2 node name")));
         }
         let domain = ctx.param("domain").and_then(Value::as_i64).unwrap_or(0);
-        let domain = u32::try_from(domain).ok().filter(|d| *d <= 232).ok_or_else(|| ctx.error(format!("`domain`: {domain} is not a ROS 2 domain id (0 to 232)")))?;
+        let domain = u32::try_from(domain)
+            .ok()
+            .filter(|d| *d <= 232)
+            .ok_or_else(|| ctx.error(format!("`domain`: {domain} is not a ROS 2 domain id (0 to 232)")))?;
         let mut defs = Definitions::builtin();
         let msgs = str_param("msgs");
         if !msgs.is_empty() {
@@ -183,7 +193,10 @@ impl Common {
             ctx.error(format!("`type`: {e}{hint}"))
         })?;
         let depth = ctx.param("depth").and_then(Value::as_i64).unwrap_or(10);
-        let depth = u32::try_from(depth).ok().filter(|d| *d > 0).ok_or_else(|| ctx.error(format!("`depth`: {depth} is not a history depth (1 or more)")))?;
+        let depth = u32::try_from(depth)
+            .ok()
+            .filter(|d| *d > 0)
+            .ok_or_else(|| ctx.error(format!("`depth`: {depth} is not a history depth (1 or more)")))?;
         let qos = Qos {
             reliable: str_param("reliability") != "best_effort",
             transient_local: str_param("durability") == "transient_local",
@@ -242,7 +255,10 @@ impl Ros2Session {
             ("connect/endpoints", format!("[{}]", json(router))),
             ("listen/endpoints", "[]".to_string()),
             ("scouting/multicast/enabled", "false".to_string()),
-            ("connect/retry", "{ period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2.0 }".to_string()),
+            (
+                "connect/retry",
+                "{ period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2.0 }".to_string(),
+            ),
         ] {
             config
                 .insert_json5(key, &value)
@@ -253,7 +269,8 @@ impl Ros2Session {
             .map_err(|e| ProcessError::failed(format!("cannot connect to the ROS 2 router {router}: {e}")))?;
         tracing::info!(router, "ROS 2 session open");
         let zid = session.zid().to_string();
-        let session = Arc::new(Ros2Session { session, zid, next_id: AtomicU64::new(0), nodes: Default::default() });
+        let session =
+            Arc::new(Ros2Session { session, zid, next_id: AtomicU64::new(0), nodes: Default::default() });
         open.insert(router.to_string(), Arc::downgrade(&session));
         Ok(session)
     }
@@ -266,21 +283,20 @@ impl Ros2Session {
     async fn node(&self, common: &Common) -> Result<Node, ProcessError> {
         let mut nodes = self.nodes.lock().await;
         let key = (common.domain, common.namespace.clone(), common.node.clone());
-        let node_id = match nodes.get(&key) {
-            Some((id, _)) => *id,
-            None => {
-                let id = self.next_id();
-                let node = self.describe_node(common, id);
-                let token = self
-                    .session
-                    .liveliness()
-                    .declare_token(node.token())
-                    .await
-                    .map_err(|e| ProcessError::failed(format!("cannot declare the ROS 2 node: {e}")))?;
-                nodes.insert(key, (id, token));
-                id
-            }
-        };
+        let node_id =
+            match nodes.get(&key) {
+                Some((id, _)) => *id,
+                None => {
+                    let id = self.next_id();
+                    let node = self.describe_node(common, id);
+                    let token =
+                        self.session.liveliness().declare_token(node.token()).await.map_err(|e| {
+                            ProcessError::failed(format!("cannot declare the ROS 2 node: {e}"))
+                        })?;
+                    nodes.insert(key, (id, token));
+                    id
+                }
+            };
         Ok(self.describe_node(common, node_id))
     }
 
@@ -294,16 +310,17 @@ impl Ros2Session {
         }
     }
 
-    async fn endpoint_token(&self, common: &Common, kind: EntityKind) -> Result<(u64, LivelinessToken), ProcessError> {
+    async fn endpoint_token(
+        &self,
+        common: &Common,
+        kind: EntityKind,
+    ) -> Result<(u64, LivelinessToken), ProcessError> {
         let node = self.node(common).await?;
         let id = self.next_id();
         let key = node.endpoint_token(id, kind, &common.topic, &common.dds, &common.hash, &common.qos);
-        let token = self
-            .session
-            .liveliness()
-            .declare_token(key)
-            .await
-            .map_err(|e| ProcessError::failed(format!("cannot declare the ROS 2 endpoint of `{}`: {e}", common.topic)))?;
+        let token = self.session.liveliness().declare_token(key).await.map_err(|e| {
+            ProcessError::failed(format!("cannot declare the ROS 2 endpoint of `{}`: {e}", common.topic))
+        })?;
         Ok((id, token))
     }
 }
@@ -344,14 +361,17 @@ impl Source for Subscribe {
                 .with(zenoh::handlers::RingChannel::new(depth))
                 .await
                 .map_err(|e| ProcessError::failed(format!("cannot subscribe to `{}`: {e}", c.topic)))?;
-            let publishers_key = format!("{}/{}/*/*/*/MP/*/*/*/{}/**", wire::ADMIN_SPACE, c.domain, wire::mangle(&c.topic));
+            let publishers_key =
+                format!("{}/{}/*/*/*/MP/*/*/*/{}/**", wire::ADMIN_SPACE, c.domain, wire::mangle(&c.topic));
             let publishers = session
                 .session
                 .liveliness()
                 .declare_subscriber(&publishers_key)
                 .history(true)
                 .await
-                .map_err(|e| ProcessError::failed(format!("cannot watch the publishers of `{}`: {e}", c.topic)))?;
+                .map_err(|e| {
+                    ProcessError::failed(format!("cannot watch the publishers of `{}`: {e}", c.topic))
+                })?;
             let (_id, _token) = session.endpoint_token(c, EntityKind::Subscription).await?;
             let mut alive: HashMap<String, ()> = HashMap::new();
             let mut seen_publisher = false;
@@ -440,7 +460,8 @@ impl Source for Subscribe {
             }
             ctx.stats.result("ROS 2 messages received", messages);
             if wrong_type + no_attachment > 0 {
-                ctx.stats.result("ROS 2 messages refused (type hash, attachment)", wrong_type + no_attachment);
+                ctx.stats
+                    .result("ROS 2 messages refused (type hash, attachment)", wrong_type + no_attachment);
             }
             if !seen_publisher {
                 ctx.warn(format!("`{}`: no ROS 2 publisher was seen", c.topic));
@@ -475,7 +496,11 @@ impl Publish {
             let publisher = session
                 .session
                 .declare_publisher(c.key(&c.hash))
-                .congestion_control(if c.qos.reliable { CongestionControl::Block } else { CongestionControl::Drop })
+                .congestion_control(if c.qos.reliable {
+                    CongestionControl::Block
+                } else {
+                    CongestionControl::Drop
+                })
                 .await
                 .map_err(|e| ProcessError::failed(format!("cannot publish on `{}`: {e}", c.topic)))?;
             let (id, token) = session.endpoint_token(c, EntityKind::Publisher).await?;
@@ -487,18 +512,27 @@ impl Publish {
 }
 
 impl AsyncUnit for Publish {
-    fn on_input<'a>(&'a mut self, input: &'a Input<'a>, _out: &'a mut Emitter) -> BoxFuture<'a, Result<(), ProcessError>> {
+    fn on_input<'a>(
+        &'a mut self,
+        input: &'a Input<'a>,
+        _out: &'a mut Emitter,
+    ) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
             let Trigger::Sample(port) = input.trigger else { return Ok(()) };
             let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
-            let msg = self.map.apply(sample.valid, &sample.value).map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
+            let msg = self
+                .map
+                .apply(sample.valid, &sample.value)
+                .map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
             let mut buffer = std::mem::take(&mut self.buffer);
-            cdr::encode_into(&self.common.schema, &msg, &mut buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
+            cdr::encode_into(&self.common.schema, &msg, &mut buffer)
+                .map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
             let now_ns = input.now.saturating_mul(1000);
             let topic = self.common.topic.clone();
             let open = self.open().await?;
             open.sequence += 1;
-            let attachment = Attachment { sequence_number: open.sequence, source_timestamp: now_ns, gid: open.gid };
+            let attachment =
+                Attachment { sequence_number: open.sequence, source_timestamp: now_ns, gid: open.gid };
             let result = open.publisher.put(buffer.clone()).attachment(attachment.encode().to_vec()).await;
             self.buffer = buffer;
             if let Err(e) = result {
@@ -518,7 +552,10 @@ impl AsyncUnit for Publish {
             }
             self.open = None;
             if self.failures > 0 {
-                return Err(ProcessError::failed(format!("{} message(s) could not be published on `{}`", self.failures, self.common.topic)));
+                return Err(ProcessError::failed(format!(
+                    "{} message(s) could not be published on `{}`",
+                    self.failures, self.common.topic
+                )));
             }
             Ok(())
         })

@@ -75,7 +75,9 @@ pub struct Args {
 /// Whether a process of the spec is a ROS 2 topic (so that `--ros2-router` does something).
 fn uses_ros2(spec: &kpl_semantic::hir::Spec) -> bool {
     spec.processes.iter().any(|p| match &p.kind {
-        kpl_semantic::hir::ProcessKind::Source(call) | kpl_semantic::hir::ProcessKind::Sink(call) => call.entry.starts_with("ros2."),
+        kpl_semantic::hir::ProcessKind::Source(call) | kpl_semantic::hir::ProcessKind::Sink(call) => {
+            call.entry.starts_with("ros2.")
+        }
         _ => false,
     })
 }
@@ -138,7 +140,9 @@ pub fn run(args: Args) -> ExitCode {
         return ExitCode::from(2);
     }
     if args.ros2_router.is_some() && !uses_ros2(&spec) {
-        eprintln!("warning: --ros2-router has no effect: the spec has no ROS 2 topic (ros2.subscribe, ros2.publish)");
+        eprintln!(
+            "warning: --ros2-router has no effect: the spec has no ROS 2 topic (ros2.subscribe, ros2.publish)"
+        );
     }
     kpl_zenoh::ros2::set_router(args.ros2_router.clone());
     let registry = crate::registry::registry();
