@@ -649,6 +649,26 @@ impl OutMap {
                     "`symbol` fills a string, `number` an integer or float, a vec2 a message with x and y",
                 ));
             }
+            let source = match (source, path.end) {
+                (
+                    Source::Literal(MsgValue::Int(n)),
+                    End::Primitive(Primitive::Float32 | Primitive::Float64),
+                ) => Source::Literal(MsgValue::Float(n as f64)),
+                (Source::Literal(MsgValue::Int(n)), End::Primitive(p)) if is_unsigned(p) => {
+                    match u64::try_from(n) {
+                        Ok(u) => Source::Literal(MsgValue::UInt(u)),
+                        Err(_) => {
+                            return Err(MapError::new(
+                                "map",
+                                Some(i),
+                                srange,
+                                format!("`{path_text}` is a {}: {n} is negative", p.msg_name()),
+                            ));
+                        }
+                    }
+                }
+                (source, _) => source,
+            };
             set_texts.push(path_text.to_string());
             entries.push((path, source));
         }
@@ -799,6 +819,18 @@ fn parse_source(text: &str) -> Source {
             _ => Source::Attribute(text.into()),
         },
     }
+}
+
+fn is_unsigned(p: Primitive) -> bool {
+    matches!(
+        p,
+        Primitive::Byte
+            | Primitive::Char
+            | Primitive::UInt8
+            | Primitive::UInt16
+            | Primitive::UInt32
+            | Primitive::UInt64
+    )
 }
 
 fn literal_fits(lit: &MsgValue, end: End) -> bool {

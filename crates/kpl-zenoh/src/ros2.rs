@@ -407,12 +407,6 @@ impl Source for Subscribe {
                         messages += 1;
                         let key = message.key_expr().as_str();
                         let where_ = || format!("ROS 2 `{}`, message {messages}", c.topic);
-                        if !key.ends_with(&c.hash) {
-                            wrong_type += 1;
-                            let hash = key.rsplit('/').next().unwrap_or("");
-                            ctx.malformed(where_(), format!("type hash {hash}, expected {} ({})", c.hash, c.schema.name()))?;
-                            continue;
-                        }
                         let attachment = match message.attachment().map(|a| a.to_bytes()) {
                             None => Err(wire::AttachmentError::Missing),
                             Some(bytes) => Attachment::decode(&bytes),
@@ -426,6 +420,12 @@ impl Source for Subscribe {
                             }
                         };
                         sequences.see(&attachment);
+                        if !key.ends_with(&c.hash) {
+                            wrong_type += 1;
+                            let hash = key.rsplit('/').next().unwrap_or("");
+                            ctx.malformed(where_(), format!("type hash {hash}, expected {} ({})", c.hash, c.schema.name()))?;
+                            continue;
+                        }
                         let payload = message.payload().to_bytes();
                         let decoded = cdr::decode(&c.schema, &payload).map_err(|e| e.to_string()).and_then(|msg| {
                             let value = self.map.apply(&msg)?;
