@@ -145,7 +145,7 @@ fn markers_in_cars_out_with_a_ros2_node() {
     }
 
     // The three bad messages: counted and reported, the run went on.
-    let malformed: u64 = summary["processes"]
+    let malformed: u64 = summary["summary"]["processes"]
         .as_array()
         .unwrap()
         .iter()
