@@ -228,12 +228,11 @@ fn edit_distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
+/// A side of an entry: where it starts in the entry's text, and the text.
+type Part<'a> = (usize, &'a str);
+
 /// Splits `left = right`, trimmed, with the offset of each side in the text.
-fn split_entry<'a>(
-    text: &'a str,
-    param: &'static str,
-    i: usize,
-) -> Result<((usize, &'a str), (usize, &'a str)), MapError> {
+fn split_entry<'a>(text: &'a str, param: &'static str, i: usize) -> Result<(Part<'a>, Part<'a>), MapError> {
     let Some(eq) = text.find('=') else {
         return Err(MapError::new(
             param,

@@ -10,6 +10,7 @@
 //!   for the types without an rclpy wheel (vision_msgs, the user's). (`tests/oracle/rosbags_types.py`)
 //!
 //! Skipped without `KPL_PYTHON` unless `KPL_REQUIRE_ORACLES=1`. `KPL_ROS2_CASES` changes the 1,000.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
