@@ -232,13 +232,17 @@ impl Common {
     }
 }
 
+/// A node: its domain, namespace and name.
+type NodeKey = (u32, String, String);
+
 /// A zenoh session for ROS 2, shared by the endpoints of a run that use the same router, with
 /// the nodes declared on it.
 struct Ros2Session {
     session: zenoh::Session,
     zid: String,
     next_id: AtomicU64,
-    nodes: tokio::sync::Mutex<HashMap<(u32, String, String), (u64, LivelinessToken)>>,
+    /// The declared nodes by (domain, namespace, name): their ids and tokens.
+    nodes: tokio::sync::Mutex<HashMap<NodeKey, (u64, LivelinessToken)>>,
 }
 
 impl Ros2Session {
