@@ -8,7 +8,7 @@
 //! among them, `ns` its symbol and `id` a number that stays with it. The node's three bad
 //! messages (no attachment, a wrong type hash, cut CDR) are counted, and kpl ends on its own
 //! once the publisher has gone. Skipped without `KPL_PYTHON` unless `KPL_REQUIRE_ORACLES=1`.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)] // tests
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;
 

@@ -8,7 +8,7 @@
 //! - hostile replay paths (a directory, `/dev/zero`, valid times near the end of 64 bits) give a
 //!   clear error, without spinning or growing;
 //! - `RUST_LOG` turns on the runtime's logs.
-#![allow(clippy::unwrap_used, clippy::expect_used)] // tests
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;
 

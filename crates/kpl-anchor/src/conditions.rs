@@ -5,22 +5,18 @@
 //! atoms and a lookup), and the **gate** of the reestablish condition: the distance within which
 //! a candidate pair is worth progressing at all.
 //!
-//! The gate is read off the formula: if `reestablish` can only become true when, at some state,
-//! `xydist(from.pos, to.pos) < c` (or `<=`, `dist`, `norm(from.pos - to.pos)`, objects instead
-//! of their `pos`), the gate is `c`. Formally, for the formula in negation normal form: an atom
-//! comparing the distance below `c` requires `c`; `and` requires the smallest requirement of its
-//! parts, `or` the largest (none if some part has none); `eventually`, `always` (non-vacuous:
-//! every window of a link condition starting at 0 contains the current state) and the right side
-//! of `until` pass theirs on; anything else requires nothing. A link whose reestablish condition
-//! has no such bound has no gate: every unlinked object is a candidate (quadratic; the engine
-//! reports it in its notes).
+//! The gate is read off the formula by `kpl_mtl::gate` (shared with the monitors' pair gate): if
+//! `reestablish` can only become true when, at some state, `xydist(from.pos, to.pos) < c` (or
+//! `<=`, `dist`, `norm(from.pos - to.pos)`, objects instead of their `pos`), the gate is `c`. A link
+//! whose reestablish condition has no such bound has no gate: every unlinked object is a candidate
+//! (quadratic; the engine reports it in its notes).
 
 use std::sync::Arc;
 
 use kpl_core::{Time, TimeUnit, Value};
+use kpl_mtl::gate::{Horizon, PairGate};
 use kpl_mtl::{
-    BinOp, CompileError, Context, EvalError, Formula, Function, InstanceId, Mtl, ProgressorGroup, SlotId,
-    State, Term,
+    CompileError, Context, EvalError, Formula, Function, InstanceId, Mtl, ProgressorGroup, SlotId, State,
 };
 use kpl_semantic::hir::{self, SPEC_TICK};
 use kpl_syntax::ast;
@@ -172,117 +168,10 @@ pub fn description_formula(description: &ast::Expr) -> Result<Arc<Formula>, Vec<
     lower_and_compile(description, &mut link_context(Vec::new())).map(|(_, formula)| formula)
 }
 
-/// The gate of a formula over `from` and `to` (module doc).
+/// The gate of a reestablish condition over `from` and `to`: the distance they must be within
+/// at some state for it to become true ([`kpl_mtl::gate`]).
 pub fn distance_gate(formula: &Mtl, context: &Context) -> Option<f64> {
-    let distance_functions: Vec<u32> =
-        ["xydist", "dist"].iter().filter_map(|name| context.function(name)).collect();
-    let norm = context.function("norm");
-    let analysis = Gate { distance_functions, norm };
-    analysis.requirement(formula, true).filter(|c| c.is_finite())
-}
-
-struct Gate {
-    distance_functions: Vec<u32>,
-    norm: Option<u32>,
-}
-
-/// `None`: no requirement. `Some(c)`: true only if the distance is below `c` at some state.
-type Requirement = Option<f64>;
-
-fn both(a: Requirement, b: Requirement) -> Requirement {
-    match (a, b) {
-        (Some(x), Some(y)) => Some(x.min(y)),
-        (x, None) | (None, x) => x,
-    }
-}
-
-fn either(a: Requirement, b: Requirement) -> Requirement {
-    match (a, b) {
-        (Some(x), Some(y)) => Some(x.max(y)),
-        _ => None,
-    }
-}
-
-impl Gate {
-    /// What `formula` (or its negation when `positive` is false) requires to be true.
-    fn requirement(&self, formula: &Mtl, positive: bool) -> Requirement {
-        match formula {
-            // `false` can never be true: a requirement no distance meets.
-            Mtl::Const(b) => (*b != positive).then_some(0.0),
-            Mtl::Atom(term) => self.atom(term, positive),
-            Mtl::Not(inner) => self.requirement(inner, !positive),
-            Mtl::And(items) | Mtl::Or(items) => {
-                let conjunction = matches!(formula, Mtl::And(_)) == positive;
-                let mut parts = items.iter().map(|f| self.requirement(f, positive));
-                let first = parts.next()?;
-                if conjunction { parts.fold(first, both) } else { parts.fold(first, either) }
-            }
-            Mtl::Implies(a, b) => {
-                let (na, pb) = (self.requirement(a, !positive), self.requirement(b, positive));
-                if positive { either(na, pb) } else { both(na, pb) }
-            }
-            Mtl::Eventually(_, body) | Mtl::Always(_, body) => self.requirement(body, positive),
-            Mtl::Until(_, _, rhs) if positive => self.requirement(rhs, true),
-            Mtl::Until(..) | Mtl::Forall(..) | Mtl::Exists(..) => None,
-        }
-    }
-
-    fn atom(&self, term: &Term, positive: bool) -> Requirement {
-        let Term::Binary(op, lhs, rhs) = term else { return None };
-        // Normalise to `distance OP constant`.
-        let (op, distance, constant) = match (self.is_distance(lhs), self.is_distance(rhs)) {
-            (true, false) => (*op, lhs, rhs),
-            (false, true) => (flip(*op)?, rhs, lhs),
-            _ => return None,
-        };
-        let _ = distance;
-        let Term::Const(c) = &**constant else { return None };
-        let c = c.as_f64()?;
-        // Positive `d < c` / `d <= c`, or negated `d > c` / `d >= c`, require d <= c.
-        match (op, positive) {
-            (BinOp::Lt | BinOp::Le, true) | (BinOp::Gt | BinOp::Ge, false) => Some(c),
-            _ => None,
-        }
-    }
-
-    fn is_distance(&self, term: &Term) -> bool {
-        match term {
-            Term::Call(f, args) if self.distance_functions.contains(f) && args.len() == 2 => {
-                let (a, b) = (object_slot(&args[0]), object_slot(&args[1]));
-                matches!((a, b), (Some(FROM), Some(TO)) | (Some(TO), Some(FROM)))
-            }
-            Term::Call(f, args) if Some(*f) == self.norm && args.len() == 1 => match &args[0] {
-                Term::Binary(BinOp::Sub, a, b) => {
-                    let (a, b) = (object_slot(a), object_slot(b));
-                    matches!((a, b), (Some(FROM), Some(TO)) | (Some(TO), Some(FROM)))
-                }
-                _ => false,
-            },
-            _ => false,
-        }
-    }
-}
-
-fn flip(op: BinOp) -> Option<BinOp> {
-    Some(match op {
-        BinOp::Lt => BinOp::Gt,
-        BinOp::Le => BinOp::Ge,
-        BinOp::Gt => BinOp::Lt,
-        BinOp::Ge => BinOp::Le,
-        _ => return None,
-    })
-}
-
-/// `from`/`to` or their `pos`: the slot of the object whose position the term is.
-fn object_slot(term: &Term) -> Option<SlotId> {
-    match term {
-        Term::Slot(s) => Some(*s),
-        Term::Field(inner, name) if &**name == "pos" => match &**inner {
-            Term::Slot(s) => Some(*s),
-            _ => None,
-        },
-        _ => None,
-    }
+    PairGate::new(context, FROM, TO).distance(formula, Horizon::SomeState)
 }
 
 #[cfg(test)]

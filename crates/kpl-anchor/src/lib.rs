@@ -19,7 +19,7 @@
 //! let text = r#"
 //!     type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 //!     type WorldObject   symbol wo { pos: vec2, vel: vec2 }
-//!     source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "bridge")
+//!     source tracker : list<VisionPercept> = engine.input()
 //!     link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
 //!       establish   eventually[1s, inf] true
 //!       reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
@@ -48,23 +48,25 @@
 //! ```
 //!
 //! Modules: [`engine`] (the engine and its step), [`link`] (link processes and their per-object
-//! instances), [`branches`] (the objects of a prediction's branches), [`store`] (objects and links), [`conditions`] (compiled conditions and gating),
-//! [`gate`] (the spatial index of gating), [`units`] (link units), [`stateful`] (what stateful
-//! units see: time, extra inputs, memory), [`kalman`] (the Kalman units), [`predict`] (prediction
-//! models), [`implementations`] (both by name), [`networks`] (road networks), [`change`] (change
-//! records), [`status`] (the `measured` / `predicted_since` attributes of object records),
-//! [`views`] (outputs), [`records`] (record helpers), [`registry`] (signatures for the
-//! checker), [`runtime`] (link processes on the stream runtime, `kpl run`), [`driver`] (runs a
-//! spec's simulated tracker straight into the engine), [`scale`] (the scale benchmark's workload).
+//! instances), [`branches`] (the objects of a prediction's branches), [`store`] (objects and
+//! links), [`conditions`] (compiled conditions and their gate, `kpl_mtl::gate`), [`units`] (link units), [`stateful`] (what stateful units see: time, extra inputs,
+//! memory), [`kalman`] (the Kalman units), [`predict`] (prediction models), [`implementations`]
+//! (both by name), [`networks`] (road networks), [`change`] (change records), [`status`] (the
+//! `measured` / `predicted_since` attributes of object records), [`views`] (outputs), [`records`]
+//! (record helpers), [`relations`] (traffic relations), [`attributes`] (the road attributes),
+//! [`registry`] (signatures for the checker).
+//!
+//! This crate is an engine: it knows nothing of the stream runtime, the simulators or the wire.
+//! Its runtime adapter (link processes as knowledge processes, `anchor.world_model`,
+//! `anchor.identify`) is `kpl_std::anchor`; `kpl_std::driver` feeds a spec's simulated trackers
+//! straight into it.
 
 pub mod attributes;
 pub mod branches;
 pub mod change;
 pub mod conditions;
-pub mod driver;
 pub mod engine;
 mod error;
-pub mod gate;
 pub mod implementations;
 pub mod kalman;
 pub mod link;
@@ -73,8 +75,6 @@ pub mod predict;
 pub mod records;
 pub mod registry;
 pub mod relations;
-pub mod runtime;
-pub mod scale;
 pub mod stateful;
 pub mod status;
 pub mod store;

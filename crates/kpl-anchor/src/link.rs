@@ -27,12 +27,12 @@ use crate::change::{Cause, Change, ChangeKind};
 pub use crate::conditions::Condition;
 use crate::conditions::{LinkConditions, LinkState};
 use crate::engine::{Anchoring, Identification, StepCtx};
-use crate::gate::GateGrid;
 use crate::records::{position, value_position, velocity};
 use crate::stateful::{UnitCall, UnitMemory};
 use crate::status;
 use crate::store::{LinkId, ObjectKey, Origin, StateOrigin, TypeId};
 use crate::units::LinkUnit;
+use kpl_mtl::gate::GateGrid;
 
 /// The groups that hold the link's conditions, one per formula: every object's establish
 /// condition is an instance of one group, every pair's reestablish condition of another, every

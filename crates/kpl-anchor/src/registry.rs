@@ -1,9 +1,7 @@
 //! Signatures for the checker (`kpl check`, `kpl list`): the link units and prediction models
-//! this crate implements ([`entries`]), and the registry `kpl` runs with ([`runtime_registry`],
-//! [`signatures`]), so that this crate's tests, benchmarks and driver check specs as the command
-//! does.
-
-use std::fmt::Write as _;
+//! this crate implements ([`entries`]), and what the engine's own specs are checked against
+//! without a runtime ([`signatures`], [`check_text`]). The registry `kpl` runs with is assembled
+//! in `kpl-std`.
 
 use kpl_core::{Value, ValueType};
 use kpl_semantic::hir;
@@ -159,45 +157,37 @@ pub fn entries() -> Vec<Entry> {
     ]
 }
 
-/// The registry `kpl` runs with: the runtime's built-ins, the standard processes (`kpl-std`:
-/// `sim.uav_tracker`, ...) and anchoring ([`crate::runtime::register`]).
-pub fn runtime_registry() -> kpl_runtime::Registry {
-    let mut registry = kpl_runtime::Registry::with_builtins();
-    kpl_std::register(&mut registry);
-    crate::runtime::register(&mut registry);
+/// The name of the source the engine's own specs declare ([`signatures`]): objects the caller
+/// hands to [`crate::Anchoring::step`] as snapshots. Specs that `kpl` runs name real sources
+/// (`sim.uav_tracker`, `file.jsonl`, ...) instead.
+pub const INPUT_SOURCE: &str = "engine.input";
+
+/// What the engine checks its specs against, without a runtime: the built-in formula functions,
+/// the traffic relations ([`crate::relations::signatures`]), the link units and prediction models
+/// ([`entries`]) and [`INPUT_SOURCE`], a source of any objects.
+pub fn signatures() -> Registry {
+    let mut registry = Registry::with_builtin_functions();
+    for function in crate::relations::signatures() {
+        registry.add_function(function);
+    }
+    for entry in entries() {
+        registry.add(entry);
+    }
+    registry.add(
+        Entry::new(
+            EntryKind::Source,
+            INPUT_SOURCE,
+            "Objects handed to the anchoring engine by its caller (Anchoring::step's snapshots).",
+        )
+        .output(TypeReq::Any),
+    );
     registry
 }
 
-/// The signatures of [`runtime_registry`]: what specs are checked against.
-pub fn signatures() -> Registry {
-    runtime_registry().signatures().clone()
-}
-
-/// A spec's errors as text, one per line (`line:column: message`).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("the spec has errors:\n{0}")]
-pub struct SpecErrors(pub String);
-
-/// Parses and checks a spec against [`signatures`].
-pub fn check_text(text: &str) -> Result<hir::Spec, SpecErrors> {
-    let parse = kpl_syntax::parse(text);
-    let index = kpl_syntax::LineIndex::new(text);
-    let render = |diagnostics: &[kpl_syntax::Diagnostic]| {
-        let mut out = String::new();
-        for d in diagnostics.iter().filter(|d| d.is_error()) {
-            let (line, column) = index.line_col(text, d.span.start);
-            let _ = writeln!(out, "{line}:{column}: {} {}", d.code, d.message);
-        }
-        out
-    };
-    if parse.has_errors() {
-        return Err(SpecErrors(render(&parse.diagnostics)));
-    }
-    let checked = kpl_semantic::check(&parse.spec, &signatures());
-    match checked.spec {
-        Some(spec) if !checked.has_errors() => Ok(spec),
-        _ => Err(SpecErrors(render(&checked.diagnostics))),
-    }
+/// Parses and checks a spec against [`signatures`] (the engine's own: its sources are
+/// [`INPUT_SOURCE`]).
+pub fn check_text(text: &str) -> Result<hir::Spec, kpl_semantic::SpecErrors> {
+    kpl_semantic::check_text(text, &signatures())
 }
 
 #[cfg(test)]

@@ -147,6 +147,10 @@ fn pair(name: &'static str, relation: Pair) -> Function {
     })
 }
 
+/// What `close(a, b, d)` adds to `d` for a gate in the plane: `close` measures along the road,
+/// between the centres of lanes that may lie side by side.
+pub const CLOSE_LATERAL_MARGIN_M: f64 = 15.0;
+
 /// The implementations, for monitors and link conditions.
 pub fn functions() -> Vec<Function> {
     vec![
@@ -166,7 +170,10 @@ pub fn functions() -> Vec<Function> {
                 .as_f64()
                 .ok_or_else(|| format!("close needs a distance, found {}", args[2].kind()))?;
             Ok(Value::Bool(same_road(&a, &b) && ahead(&a, &b).abs() <= d))
-        }),
+        })
+        // Measured along the road, between lane centres that may lie side by side: in the plane
+        // the two are within `d` plus this much (the gate of a pair monitor, `kpl_mtl::gate`).
+        .within(CLOSE_LATERAL_MARGIN_M),
         Function::new("approaching", (2, Some(2)), |args| {
             let a = object(&args[0], "approaching")?;
             let b = object(&args[1], "approaching")?;

@@ -15,7 +15,7 @@ use proptest::prelude::*;
 const SPEC: &str = r#"
 type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 type WorldObject   symbol wo { pos: vec2, vel: vec2 }
-source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "crossing")
+source tracker : list<VisionPercept> = engine.input()
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
   establish   eventually[200ms, inf] true
   reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0

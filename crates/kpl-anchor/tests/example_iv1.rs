@@ -18,7 +18,7 @@ type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
 type WorldObject   symbol wo { pos: vec2, vel: vec2 }
 type OnRoadObject  : WorldObject symbol oo { road: int, lane_offset: float }
 
-source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "bridge")
+source tracker : list<VisionPercept> = engine.input()
 
 // A percept is a new world object if it stays big enough for half a second and nothing known
 // was reacquired within a second; it is a known world object if it stays within 10 m of it for

@@ -17,7 +17,7 @@ type WorldObject   symbol wo { pos: vec2, vel: vec2 }
 type OnRoadObject  : WorldObject symbol oo { road: int, lane_offset: float }
 type Car           : OnRoadObject symbol co { }
 
-source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "bridge")
+source tracker : list<VisionPercept> = engine.input()
 
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
   establish   eventually[1s, inf] true

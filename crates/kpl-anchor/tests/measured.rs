@@ -15,7 +15,7 @@ fn spec(onroad_establish: &str) -> String {
 type VisionPercept symbol vp {{ pos: vec2, vel: vec2, size: float }}
 type WorldObject   symbol wo {{ pos: vec2, vel: vec2 }}
 type OnRoadObject  : WorldObject symbol oo {{ road: int, lane_offset: float }}
-source tracker : list<VisionPercept> = sim.uav_tracker(scenario: "bridge")
+source tracker : list<VisionPercept> = engine.input()
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {{
   establish   eventually[300ms, inf] true
   reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0)

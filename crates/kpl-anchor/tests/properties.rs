@@ -28,8 +28,8 @@ type RadarPercept  symbol rp { pos: vec2, vel: vec2, size: float }
 type WorldObject   symbol wo { pos: vec2, vel: vec2 }
 type OnRoadObject  : WorldObject symbol oo { road: int, lane_offset: float }
 
-source camera : list<VisionPercept> = sim.uav_tracker(scenario: "crossing")
-source radar  : list<RadarPercept>  = sim.uav_tracker(scenario: "crossing")
+source camera : list<VisionPercept> = engine.input()
+source radar  : list<RadarPercept>  = engine.input()
 
 link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
   establish   eventually[300ms, inf] true

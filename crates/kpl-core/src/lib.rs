@@ -11,10 +11,12 @@
 //! assert_eq!(v.as_vec2(), Some([3.0, 4.0]));
 //! ```
 
+pub mod suggest;
 mod time;
 mod value;
 
-pub use time::{Time, TimeUnit, format_micros};
+pub use suggest::{closest, did_you_mean};
+pub use time::{Time, TimeUnit, format_micros, parse_duration};
 pub use value::{
     BBox, FieldType, JsonError, OBJECT_STATUS, Record, RecordType, Value, ValueType, object_status_type,
 };

@@ -79,6 +79,19 @@ pub fn format_micros(us: Time) -> String {
     format!("{us}us")
 }
 
+/// A positive duration written as a number and a unit, as the command line takes it (`60s`,
+/// `1.5min`, `250ms`), in microseconds.
+pub fn parse_duration(text: &str) -> Result<Time, String> {
+    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
+    let (number, unit) = text.split_at(split);
+    let unit = TimeUnit::from_suffix(unit)
+        .ok_or_else(|| format!("`{text}`: write a number and a unit (us, ms, s, min, h), e.g. 60s"))?;
+    let value: f64 = number.parse().map_err(|_| format!("`{text}` is not a duration"))?;
+    unit.float_to_micros(value)
+        .filter(|us| *us > 0)
+        .ok_or_else(|| format!("`{text}` is not a positive duration"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

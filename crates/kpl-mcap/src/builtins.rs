@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use kpl_core::{Value, ValueType};
-use kpl_runtime::builtins::{ReplayTimes, StreamFilter};
+use kpl_runtime::builtins::{ReplaySetup, ReplayTimes, StreamFilter, replay_entry};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
@@ -99,29 +99,16 @@ impl Unit for Record {
 /// Registers `file.mcap` (source and sink).
 pub fn register(registry: &mut Registry) {
     registry.add_source(
-        Entry::new(
-            EntryKind::Source,
+        replay_entry(
             "file.mcap",
             "Replays samples from an MCAP file: a KPL recording, or JSON messages of another tool (docs/streams.md).",
-        )
-        .param(Param::required("path", ParamType::Str, "file to read, relative to the spec"))
-        .param(Param::optional(
-            "stream",
-            ParamType::Str,
-            Value::str(""),
             "only messages of the channel with this topic (empty: all)",
-        )),
+        ),
         |ctx| {
-            let path = ctx.input_path(ctx.param("path").and_then(Value::as_str).unwrap_or(""));
+            let ReplaySetup { path, filter, ty, clock } = ReplaySetup::from_context(ctx);
             let reader =
                 Reader::open(&path).map_err(|e| ctx.error(format!("cannot open {}: {e}", path.display())))?;
-            Ok(Box::new(Replay {
-                reader: Some(reader),
-                display: path.display().to_string(),
-                filter: StreamFilter::new(ctx.param("stream").and_then(Value::as_str).unwrap_or("")),
-                ty: ctx.process.output.clone().unwrap_or(ValueType::Any),
-                clock: ctx.clock,
-            }))
+            Ok(Box::new(Replay { reader: Some(reader), display: path.display().to_string(), filter, ty, clock }))
         },
     );
     registry.add_unit(

@@ -38,13 +38,13 @@ mod context;
 mod engine;
 mod error;
 mod formula;
+pub mod gate;
 mod group;
 mod lower;
 mod progress;
 mod residual;
 mod state;
 mod term;
-pub mod timescales;
 
 pub use context::Context;
 pub use engine::{EngineConfig, EngineStats};

@@ -111,6 +111,9 @@ pub struct Function {
     /// For the distance built-ins: computed by the evaluator on borrowed arguments, with the same
     /// result as `body` (which a host's function of the same name replaces, and this with it).
     pub(crate) native: Option<Native>,
+    /// For a predicate `f(a, b, d)` of two objects: true only when they are within `d + margin` of
+    /// each other in the plane, which gates pairs ([`crate::gate`]).
+    pub within_margin: Option<f64>,
 }
 
 /// Built-ins the evaluator computes itself, without copying arguments or calling `body`.
@@ -132,7 +135,13 @@ impl Function {
         arity: (usize, Option<usize>),
         body: impl Fn(&[Value]) -> Result<Value, String> + Send + Sync + 'static,
     ) -> Function {
-        Function { name: Arc::from(name), arity, body: Arc::new(body), native: None }
+        Function { name: Arc::from(name), arity, body: Arc::new(body), native: None, within_margin: None }
+    }
+
+    /// Declares `f(a, b, d)` true only when `a` and `b` are within `d + margin` of each other in
+    /// the plane, so pair monitors and link conditions using it are gated ([`crate::gate`]).
+    pub fn within(self, margin: f64) -> Function {
+        Function { within_margin: Some(margin), ..self }
     }
 
     fn native(self, native: Native) -> Function {

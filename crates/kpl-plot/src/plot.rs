@@ -193,12 +193,8 @@ impl Plot {
 fn named<'a>(recording: &'a Recording, name: &str) -> Result<&'a ObjectStream, PlotError> {
     recording.stream(name).ok_or_else(|| {
         let known: Vec<String> = recording.streams().map(|s| s.name.clone()).collect();
-        let suggestion = known
-            .iter()
-            .map(|k| (strsim::levenshtein(name, k), k))
-            .filter(|(d, _)| *d <= 3)
-            .min_by_key(|(d, _)| *d)
-            .map(|(_, k)| k.clone());
+        let names: Vec<&str> = known.iter().map(String::as_str).collect();
+        let suggestion = kpl_core::closest(name, &names).map(str::to_string);
         PlotError::UnknownStream { name: name.to_string(), suggestion, known }
     })
 }

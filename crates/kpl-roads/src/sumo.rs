@@ -214,6 +214,12 @@ struct Raw {
 }
 
 fn element_of(e: &BytesStart<'_>, line: usize) -> Result<Element, String> {
+    Ok(Element { line, attributes: attributes(e)? })
+}
+
+/// The attributes of a SUMO XML element, unescaped, by name: how every SUMO file KPL reads (the
+/// network, polygons, and `kpl-sim`'s trajectories and vehicle types) takes an element's values.
+pub fn attributes(e: &BytesStart<'_>) -> Result<HashMap<String, String>, String> {
     let mut attributes = HashMap::new();
     for attribute in e.attributes() {
         let attribute = attribute.map_err(|err| err.to_string())?;
@@ -221,7 +227,7 @@ fn element_of(e: &BytesStart<'_>, line: usize) -> Result<Element, String> {
         let value = attribute.unescape_value().map_err(|err| err.to_string())?.into_owned();
         attributes.insert(key, value);
     }
-    Ok(Element { line, attributes })
+    Ok(attributes)
 }
 
 fn xml_error(what: &'static str, lines: &Lines, position: u64, message: String) -> NetworkError {

@@ -25,11 +25,14 @@ pub struct Clock {
     origin: tokio::time::Instant,
     /// `now()` at `origin`.
     epoch: Time,
+    /// The wall clock when the run started, for the report's wall time (whatever the kind).
+    wall_origin: std::time::Instant,
 }
 
 impl Clock {
     /// Creates the clock. Must be called inside the run's tokio runtime (for `Sim`, one started
     /// with paused time).
+    #[allow(clippy::disallowed_methods)] // the one place that reads the system's clocks
     pub fn new(kind: ClockKind) -> Clock {
         let epoch = match kind {
             ClockKind::Sim => 0,
@@ -37,7 +40,13 @@ impl Clock {
                 .duration_since(UNIX_EPOCH)
                 .map_or(0, |d| i64::try_from(d.as_micros()).unwrap_or(i64::MAX)),
         };
-        Clock { kind, origin: tokio::time::Instant::now(), epoch }
+        Clock { kind, origin: tokio::time::Instant::now(), epoch, wall_origin: std::time::Instant::now() }
+    }
+
+    /// Wall-clock microseconds since the clock was made: how long a run took, whatever its kind
+    /// (the report's `wall_elapsed`; never a time stamp of a sample).
+    pub fn wall_elapsed(&self) -> Time {
+        i64::try_from(self.wall_origin.elapsed().as_micros()).unwrap_or(i64::MAX)
     }
 
     pub fn kind(&self) -> ClockKind {

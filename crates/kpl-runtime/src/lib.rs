@@ -8,7 +8,8 @@
 //! - [`sync`]: state synchronization for formulas and synchronized units.
 //! - [`instances`]: process instances created at run time (one per object).
 //! - [`registry`]: implementations by name, with their signatures.
-//! - [`run`]: building and running a checked spec; [`transport`]: streams between hosts.
+//! - [`plan`]: what one host runs of a checked spec (processes, edges, streams between hosts),
+//!   built without tokio; [`run`]: executing a plan; [`transport`]: streams between hosts.
 //!
 //! The runtime builds only from a checked spec (`kpl_semantic::hir::Spec`), never from text.
 
@@ -18,6 +19,7 @@ pub mod context;
 pub mod edge;
 pub mod instances;
 mod monitor;
+pub mod plan;
 pub mod policy;
 pub mod process;
 pub mod registry;

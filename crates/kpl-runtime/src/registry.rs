@@ -91,6 +91,9 @@ pub struct BuildContext<'a> {
     pub run_seed: u64,
     pub clock: ClockKind,
     pub shared: &'a mut Extensions,
+    /// The registry the process is built from: implementations that other processes run are kept
+    /// there ([`Registry::extension`]).
+    pub registry: &'a Registry,
     /// The process's counters (malformed input, errors, instances created at run time).
     pub stats: std::sync::Arc<crate::stats::ProcessStats>,
 }
@@ -151,6 +154,10 @@ pub type UnitFactory =
     Box<dyn Fn(&mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> + Send + Sync>;
 
 /// Everything a runtime can run, with the signatures `kpl check` checks specs against.
+///
+/// One assembly function fills it (`kpl_std::assemble`), for running or, in a registry made with
+/// [`Registry::signatures_only`], for checking: then the implementations are dropped as they are
+/// added, so a check builds nothing of the runtime.
 #[derive(Default)]
 pub struct Registry {
     signatures: kpl_semantic::registry::Registry,
@@ -158,6 +165,10 @@ pub struct Registry {
     units: BTreeMap<(EntryKind, String), UnitFactory>,
     links: Option<UnitFactory>,
     functions: Vec<kpl_mtl::Function>,
+    /// Implementations that live inside other processes, by type (the anchoring's link units and
+    /// prediction models, which its link processes run).
+    extensions: BTreeMap<TypeId, Box<dyn Any + Send + Sync>>,
+    signatures_only: bool,
 }
 
 impl std::fmt::Debug for Registry {
@@ -171,15 +182,48 @@ impl Registry {
     /// `kpl.merge`) and the signatures of the formula functions.
     pub fn with_builtins() -> Registry {
         let mut registry = Registry::default();
-        crate::builtins::register(&mut registry);
+        registry.add_builtins();
         registry
+    }
+
+    /// Adds the runtime's own sources, units, sinks and function signatures.
+    pub fn add_builtins(&mut self) {
+        crate::builtins::register(self);
+    }
+
+    /// An empty registry that keeps only the signatures of what is added to it: what `kpl check`
+    /// and `kpl list` need. Its processes cannot be built.
+    pub fn signatures_only() -> Registry {
+        Registry { signatures_only: true, ..Registry::default() }
+    }
+
+    /// Whether this registry keeps only signatures ([`Registry::signatures_only`]).
+    pub fn is_signatures_only(&self) -> bool {
+        self.signatures_only
+    }
+
+    /// The implementations of type `T` kept by a crate whose processes run them (for example the
+    /// link units and prediction models of the anchoring), made with `T::default()` on first use.
+    pub fn extension_mut<T: Any + Send + Sync + Default>(&mut self) -> &mut T {
+        let entry = self.extensions.entry(TypeId::of::<T>()).or_insert_with(|| Box::new(T::default()));
+        match entry.downcast_mut::<T>() {
+            Some(t) => t,
+            None => unreachable!("extensions are keyed by their own type"),
+        }
+    }
+
+    /// The implementations of type `T`, if a crate added them ([`Registry::extension_mut`]).
+    pub fn extension<T: Any + Send + Sync>(&self) -> Option<&T> {
+        self.extensions.get(&TypeId::of::<T>())?.downcast_ref()
     }
 
     pub fn add_source<F>(&mut self, entry: Entry, factory: F)
     where
         F: Fn(&mut BuildContext<'_>) -> Result<Box<dyn Source>, BuildError> + Send + Sync + 'static,
     {
-        self.sources.insert(entry.name.clone(), Box::new(factory));
+        if !self.signatures_only {
+            self.sources.insert(entry.name.clone(), Box::new(factory));
+        }
         self.signatures.add(entry);
     }
 
@@ -188,7 +232,9 @@ impl Registry {
     where
         F: Fn(&mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> + Send + Sync + 'static,
     {
-        self.units.insert((entry.kind, entry.name.clone()), Box::new(factory));
+        if !self.signatures_only {
+            self.units.insert((entry.kind, entry.name.clone()), Box::new(factory));
+        }
         self.signatures.add(entry);
     }
 
@@ -203,15 +249,19 @@ impl Registry {
     where
         F: Fn(&mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> + Send + Sync + 'static,
     {
-        self.links = Some(Box::new(factory));
+        if !self.signatures_only {
+            self.links = Some(Box::new(factory));
+        }
     }
 
     /// Adds a formula function: its signature (for checking) and its implementation (for
     /// monitors and link conditions).
     pub fn add_function(&mut self, signature: Function, implementation: kpl_mtl::Function) {
         self.signatures.add_function(signature);
-        self.functions.retain(|f| *f.name != *implementation.name);
-        self.functions.push(implementation);
+        if !self.signatures_only {
+            self.functions.retain(|f| *f.name != *implementation.name);
+            self.functions.push(implementation);
+        }
     }
 
     /// Adds a function signature whose implementation `kpl-mtl` already has built in.
@@ -221,6 +271,11 @@ impl Registry {
 
     pub fn signatures(&self) -> &kpl_semantic::registry::Registry {
         &self.signatures
+    }
+
+    /// The signatures, for a caller that needs nothing else.
+    pub fn into_signatures(self) -> kpl_semantic::registry::Registry {
+        self.signatures
     }
 
     /// Sets the link protocols of the transport between hosts (`kpl-zenoh` does), which the

@@ -12,23 +12,24 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::task::Poll;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use kpl_core::Time;
 use kpl_semantic::hir::{self, ProcessId};
 use kpl_semantic::registry::EntryKind;
-use kpl_syntax::ast::Overflow;
+use tokio::task::JoinSet;
 
 use crate::clock::{Clock, ClockKind};
 use crate::context::{Outputs, SourceContext, StopSignal};
 use crate::edge::{EdgeReceiver, EdgeSender, Received, edge};
+use crate::plan::{Origin, Plan, Role, Target};
 use crate::policy::PolicyFilter;
 use crate::process::{AsyncUnit, Emitter, Input, ProcessError, Source, SyncUnit, Trigger};
 use crate::registry::{BuildContext, BuildError, Extensions, Registry};
 use crate::sample::Sample;
 use crate::stats::{ProcessStats, RunStats, Summary};
 use crate::sync::{StateSync, SyncInput, SyncState};
-use crate::transport::{Remote, StreamKey, Transport, TransportError, TransportReport};
+use crate::transport::{Remote, Transport, TransportError, TransportReport};
 
 /// How to run a spec.
 #[derive(Debug, Clone)]
@@ -77,6 +78,15 @@ impl Default for RunConfig {
 pub const DEFAULT_DEPLOYMENT: &str = "default";
 
 impl RunConfig {
+    /// What this run executes of a spec ([`Plan::new`]): its host, deployment and spec name.
+    pub fn target(&self, spec: &hir::Spec) -> Target {
+        Target {
+            host: self.host.clone(),
+            deployment: self.deployment(spec),
+            spec_name: self.spec_name.clone(),
+        }
+    }
+
     /// The deployment's name: `--deployment`, else the spec's, else [`DEFAULT_DEPLOYMENT`].
     pub fn deployment(&self, spec: &hir::Spec) -> String {
         self.deployment
@@ -232,58 +242,159 @@ struct InputEdge {
 }
 
 /// Runs a spec on the current tokio runtime (which must match the clock: paused and
-/// single-threaded for `Sim`).
+/// single-threaded for `Sim`): plans the configured host ([`Plan::new`]) and executes the plan.
 pub async fn run_async(
     spec: &hir::Spec,
     registry: &Registry,
     config: &RunConfig,
     transport_factory: Option<&dyn TransportFactory>,
 ) -> Result<RunReport, RunError> {
-    let wall_start = Instant::now();
+    let plan = Plan::new(spec, &config.target(spec)).map_err(|e| RunError::Host(e.to_string()))?;
+    execute(spec, &plan, registry, config, transport_factory).await
+}
+
+/// Executes a plan: watches for signals and `--for`, opens the transport if the plan has streams
+/// between hosts, builds the processes, wires the edges, spawns one task per process and feed,
+/// waits for them and reports.
+pub async fn execute(
+    spec: &hir::Spec,
+    plan: &Plan,
+    registry: &Registry,
+    config: &RunConfig,
+    transport_factory: Option<&dyn TransportFactory>,
+) -> Result<RunReport, RunError> {
     let clock = Clock::new(config.clock);
     let stats = config.stats.clone().unwrap_or_default();
     stats.start.store(clock.start(), Ordering::Relaxed);
     stats.observe_time(clock.start());
     let stop = StopSignal::default();
     let end = config.duration.map(|d| clock.start().saturating_add(d));
+    // Ctrl-C and SIGTERM from the start: a host waiting for the others stops cleanly too; and
+    // --for from the start: waiting for other hosts counts in the run's time.
+    let signals = Signals::watch(&stop);
+    let watchers = watch_for_the_end(&clock, end, &stop);
+    let stop_watching = || {
+        signals.task.abort();
+        watchers.abort();
+    };
 
-    // Ctrl-C and SIGTERM, from the start: a host waiting for the others stops cleanly too.
-    let signal: Arc<std::sync::Mutex<Option<Signal>>> = Arc::default();
-    let signals = {
-        let stop = stop.clone();
-        let signal = signal.clone();
-        tokio::spawn(async move {
-            let received = Signal::next().await;
-            tracing::info!("{}: stopping the run", received.name());
-            if let Ok(mut slot) = signal.lock() {
-                *slot = Some(received);
+    let transport = match open_transport(spec, plan, config, transport_factory).await {
+        Ok(transport) => transport,
+        Err(e) => {
+            stop_watching();
+            return Err(e);
+        }
+    };
+    let mut tasks = match build_processes(spec, plan, registry, config, &stats, &stop) {
+        Ok(tasks) => tasks,
+        Err(errors) => {
+            stop_watching();
+            return Err(RunError::Build(errors));
+        }
+    };
+    let remote_feeds = wire_edges(plan, &mut tasks, &stats);
+    let mut join = JoinSet::new();
+    if let Some(transport) = &transport {
+        connect_remote(plan, transport, &mut tasks, remote_feeds, &stats, &stop, &mut join).await?;
+    }
+    stats.set_endless(
+        tasks
+            .values()
+            .filter(|t| matches!(&t.kind, TaskKind::Source(source) if !source.ends_by_itself()))
+            .map(|t| spec.processes[t.id].name.clone())
+            .collect(),
+    );
+    spawn_processes(spec, tasks, config, &clock, &stats, &stop, end, &mut join);
+    let (failures, strict_failure) = join_processes(&mut join, &stop).await;
+
+    let signal = signals.received();
+    let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))
+        && signal.is_none()
+        && !strict_failure;
+    stop_watching();
+    let transport_report = match transport {
+        Some(transport) => {
+            transport.clone().close().await;
+            Some(transport.report())
+        }
+        None => None,
+    };
+    let ending = if strict_failure {
+        Ending::Strict
+    } else if signal.is_some() {
+        Ending::Interrupted
+    } else if duration_reached {
+        Ending::DurationReached
+    } else {
+        Ending::SourcesEnded
+    };
+    Ok(RunReport {
+        ending,
+        signal,
+        clock_elapsed: clock.elapsed(),
+        wall_elapsed: clock.wall_elapsed(),
+        failures,
+        summary: stats.summary(),
+        transport: transport_report,
+    })
+}
+
+/// Ctrl-C and SIGTERM: the first one received stops the run and is remembered for its report.
+struct Signals {
+    task: tokio::task::JoinHandle<()>,
+    received: Arc<std::sync::Mutex<Option<Signal>>>,
+}
+
+impl Signals {
+    fn watch(stop: &StopSignal) -> Signals {
+        let received: Arc<std::sync::Mutex<Option<Signal>>> = Arc::default();
+        let (stop, slot) = (stop.clone(), received.clone());
+        let task = tokio::spawn(async move {
+            let signal = Signal::next().await;
+            tracing::info!("{}: stopping the run", signal.name());
+            if let Ok(mut slot) = slot.lock() {
+                *slot = Some(signal);
             }
             stop.interrupt();
-        })
-    };
-    let received_signal = move || signal.lock().ok().and_then(|s| *s);
+        });
+        Signals { task, received }
+    }
 
-    let local = local_processes(spec, config.host.as_deref())?;
+    fn received(&self) -> Option<Signal> {
+        self.received.lock().ok().and_then(|s| *s)
+    }
+}
 
-    // --for, from the start: waiting for other hosts counts in the run's time.
-    let watchers = watch_for_the_end(&clock, end, &stop);
-
-    let transport = match (&config.host, transport_factory) {
-        (Some(_), Some(factory)) if needs_transport(spec, &local) => Some(factory.open(spec, config).await?),
-        (Some(_), None) if needs_transport(spec, &local) => {
-            return Err(RunError::Host(
-                "this spec sends streams between hosts, but no transport is available".into(),
-            ));
+/// The transport for streams between hosts, when the plan has some and the run has a host.
+async fn open_transport(
+    spec: &hir::Spec,
+    plan: &Plan,
+    config: &RunConfig,
+    factory: Option<&dyn TransportFactory>,
+) -> Result<Option<Arc<dyn Transport>>, RunError> {
+    match (&config.host, factory) {
+        (Some(_), Some(factory)) if plan.needs_transport() => Ok(Some(factory.open(spec, config).await?)),
+        (Some(_), None) if plan.needs_transport() => {
+            Err(RunError::Host("this spec sends streams between hosts, but no transport is available".into()))
         }
-        _ => None,
-    };
+        _ => Ok(None),
+    }
+}
 
-    // Build every local process.
+/// Builds every planned process from the registry; every error, not only the first.
+fn build_processes(
+    spec: &hir::Spec,
+    plan: &Plan,
+    registry: &Registry,
+    config: &RunConfig,
+    stats: &Arc<RunStats>,
+    stop: &StopSignal,
+) -> Result<BTreeMap<ProcessId, ProcessTask>, Vec<BuildError>> {
     let mut shared = Extensions::default();
-    let mut tasks: BTreeMap<ProcessId, ProcessTask> = BTreeMap::new();
+    let mut tasks = BTreeMap::new();
     let mut errors = Vec::new();
-    for &id in &local {
-        let process = &spec.processes[id];
+    for planned in &plan.processes {
+        let process = &spec.processes[planned.id];
         let process_stats = stats.process(&process.name);
         let mut ctx = BuildContext {
             spec,
@@ -293,109 +404,116 @@ pub async fn run_async(
             run_seed: config.seed,
             clock: config.clock,
             shared: &mut shared,
+            registry,
             stats: process_stats.clone(),
         };
-        let built = match &process.kind {
-            hir::ProcessKind::Source(call) => {
-                registry.build_source(&mut ctx, &call.entry).map(TaskKind::Source)
+        let built = match (&planned.role, &process.kind) {
+            (Role::Source { entry }, _) => registry.build_source(&mut ctx, entry).map(TaskKind::Source),
+            (Role::Compute { entry }, _) => {
+                registry.build_unit(&mut ctx, EntryKind::Compute, entry).map(TaskKind::Unit)
             }
-            hir::ProcessKind::Compute(call) => {
-                registry.build_unit(&mut ctx, EntryKind::Compute, &call.entry).map(TaskKind::Unit)
+            (Role::Sink { entry }, _) => {
+                registry.build_unit(&mut ctx, EntryKind::Sink, entry).map(TaskKind::Unit)
             }
-            hir::ProcessKind::Sink(call) => {
-                registry.build_unit(&mut ctx, EntryKind::Sink, &call.entry).map(TaskKind::Unit)
-            }
-            hir::ProcessKind::Link(_) => registry.build_link(&mut ctx).map(TaskKind::Unit),
-            hir::ProcessKind::Monitor(monitor) => {
+            (Role::Link { .. }, _) => registry.build_link(&mut ctx).map(TaskKind::Unit),
+            (Role::Monitor, hir::ProcessKind::Monitor(monitor)) => {
                 crate::monitor::build(process, monitor, registry, process_stats)
                     .map(|m| TaskKind::Unit(Box::new(SyncUnit(m)) as Box<dyn AsyncUnit>))
             }
+            (Role::Monitor, _) => Err(ctx.error("planned as a monitor, but it is not one")),
         };
         match built {
             Ok(kind) => {
-                tasks.insert(
-                    id,
-                    ProcessTask {
-                        id,
-                        kind,
-                        outputs: Outputs::with_ports(1 + process.ports.len(), stop.clone()),
-                        inputs: Vec::new(),
-                    },
-                );
+                let outputs = Outputs::with_ports(planned.ports.len(), stop.clone());
+                tasks.insert(planned.id, ProcessTask { id: planned.id, kind, outputs, inputs: Vec::new() });
             }
             Err(e) => errors.push(e),
         }
     }
-    if !errors.is_empty() {
-        signals.abort();
-        watchers.abort();
-        return Err(RunError::Build(errors));
-    }
+    if errors.is_empty() { Ok(tasks) } else { Err(errors) }
+}
 
-    // Wire the edges: in-process queues between local processes, subscriptions from remote ones.
-    let mut remote_feeds: BTreeMap<(ProcessId, Option<String>), Vec<EdgeSender>> = BTreeMap::new();
-    for &consumer in &local {
-        let process = &spec.processes[consumer];
-        for input in &process.inputs {
-            let policy = &input.stream.policy;
-            let overflow = if policy.feedback { Overflow::DropOldest } else { policy.queue.overflow };
-            let capacity = usize::try_from(policy.queue.capacity).unwrap_or(usize::MAX);
-            let edge_stats = stats.edge(&input.stream.name, &process.name);
-            let (tx, rx) = edge(capacity, overflow, edge_stats.clone());
-            let producer = input.stream.producer;
-            let port = port_index(&spec.processes[producer], input.stream.port.as_deref());
-            match tasks.get_mut(&producer) {
-                Some(task) if local.contains(&producer) => task.outputs.ports[port].local.push(tx),
-                _ => remote_feeds.entry((producer, input.stream.port.clone())).or_default().push(tx),
+/// Makes the planned edges: a bounded queue per edge, its sender at the local producer's port or
+/// kept for the remote stream that feeds it (returned, by subscription), its receiver with the
+/// consumer's policy.
+fn wire_edges(
+    plan: &Plan,
+    tasks: &mut BTreeMap<ProcessId, ProcessTask>,
+    stats: &Arc<RunStats>,
+) -> Vec<Vec<EdgeSender>> {
+    let mut remote: BTreeMap<usize, EdgeSender> = BTreeMap::new();
+    for (index, planned) in plan.edges.iter().enumerate() {
+        let consumer_name = plan.processes.iter().find(|p| p.id == planned.consumer).map_or("", |p| &p.name);
+        let edge_stats = stats.edge(&planned.stream, consumer_name);
+        let (tx, rx) = edge(planned.capacity, planned.overflow, edge_stats.clone());
+        match &planned.origin {
+            Origin::Local { producer, port } => {
+                if let Some(task) = tasks.get_mut(producer) {
+                    task.outputs.ports[*port].local.push(tx);
+                }
             }
-            if let Some(task) = tasks.get_mut(&consumer) {
-                task.inputs.push(InputEdge {
-                    rx,
-                    filter: PolicyFilter::new(policy.clone(), edge_stats),
-                    feedback: policy.feedback,
-                    name: Arc::from(input.stream.name.as_str()),
-                });
+            Origin::Remote { .. } => {
+                remote.insert(index, tx);
             }
         }
-    }
-
-    // Streams to other hosts: one publisher per produced stream with remote consumers, one
-    // subscription per received stream; then the transport waits for the consuming hosts, all
-    // streams at once.
-    let mut join = tokio::task::JoinSet::new();
-    if let Some(transport) = &transport {
-        for (producer, port) in remote_streams(spec, &local) {
-            let key = stream_key(config, spec, producer, port.clone());
-            let publisher = transport.publisher(&key).await?;
-            if let Some(task) = tasks.get_mut(&producer) {
-                let index = port_index(&spec.processes[producer], port.as_deref());
-                task.outputs.ports[index].remote.push(publisher);
-            }
-        }
-        for ((producer, port), senders) in remote_feeds {
-            let key = stream_key(config, spec, producer, port);
-            let receiver = transport.subscriber(&key).await?;
-            let feed_stats = stats.process(&format!("{}@remote", key.producer));
-            let (stop, run_stats) = (stop.clone(), stats.clone());
-            join.spawn(async move {
-                feed_remote(receiver, senders, feed_stats, run_stats, stop).await;
-                Ok::<(), (String, ProcessError)>(())
+        if let Some(task) = tasks.get_mut(&planned.consumer) {
+            task.inputs.push(InputEdge {
+                rx,
+                filter: PolicyFilter::new(planned.policy.clone(), edge_stats),
+                feedback: planned.policy.feedback,
+                name: Arc::from(planned.stream.as_str()),
             });
         }
-        tokio::select! {
-            () = transport.start() => {}
-            () = stop.stopped() => {}
+    }
+    plan.subscriptions.iter().map(|s| s.edges.iter().filter_map(|i| remote.remove(i)).collect()).collect()
+}
+
+/// Streams to and from other hosts: one publisher per planned publication, one subscription per
+/// planned subscription feeding its edges; then the transport waits for the consuming hosts, all
+/// streams at once.
+async fn connect_remote(
+    plan: &Plan,
+    transport: &Arc<dyn Transport>,
+    tasks: &mut BTreeMap<ProcessId, ProcessTask>,
+    remote_feeds: Vec<Vec<EdgeSender>>,
+    stats: &Arc<RunStats>,
+    stop: &StopSignal,
+    join: &mut JoinSet<Result<(), (String, ProcessError)>>,
+) -> Result<(), RunError> {
+    for publication in &plan.publications {
+        let publisher = transport.publisher(&publication.key).await?;
+        if let Some(task) = tasks.get_mut(&publication.producer) {
+            task.outputs.ports[publication.port].remote.push(publisher);
         }
     }
+    for (subscription, senders) in plan.subscriptions.iter().zip(remote_feeds) {
+        let receiver = transport.subscriber(&subscription.key).await?;
+        let feed_stats = stats.process(&format!("{}@remote", subscription.key.producer));
+        let (stop, run_stats) = (stop.clone(), stats.clone());
+        join.spawn(async move {
+            feed_remote(receiver, senders, feed_stats, run_stats, stop).await;
+            Ok::<(), (String, ProcessError)>(())
+        });
+    }
+    tokio::select! {
+        () = transport.start() => {}
+        () = stop.stopped() => {}
+    }
+    Ok(())
+}
 
-    stats.set_endless(
-        tasks
-            .values()
-            .filter(|t| matches!(&t.kind, TaskKind::Source(source) if !source.ends_by_itself()))
-            .map(|t| spec.processes[t.id].name.clone())
-            .collect(),
-    );
-
+/// One task per process: a source runs until it ends, a unit until its inputs have ended.
+#[allow(clippy::too_many_arguments)] // what every task shares, passed once
+fn spawn_processes(
+    spec: &hir::Spec,
+    tasks: BTreeMap<ProcessId, ProcessTask>,
+    config: &RunConfig,
+    clock: &Clock,
+    stats: &Arc<RunStats>,
+    stop: &StopSignal,
+    end: Option<Time>,
+    join: &mut JoinSet<Result<(), (String, ProcessError)>>,
+) {
     for (id, task) in tasks {
         let name = spec.processes[id].name.clone();
         let process_stats = stats.process(&name);
@@ -439,7 +557,13 @@ pub async fn run_async(
             result.map_err(|e| (name, e))
         });
     }
+}
 
+/// Waits for every task; the failures, and whether a `--strict` run stopped at a malformed input.
+async fn join_processes(
+    join: &mut JoinSet<Result<(), (String, ProcessError)>>,
+    stop: &StopSignal,
+) -> (Vec<String>, bool) {
     let mut failures = Vec::new();
     let mut strict_failure = false;
     while let Some(joined) = join.join_next().await {
@@ -456,37 +580,7 @@ pub async fn run_async(
             Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
         }
     }
-    let signal = received_signal();
-    let duration_reached = (stop.is_stopped() || stats.reached_end.load(Ordering::Relaxed))
-        && signal.is_none()
-        && !strict_failure;
-    watchers.abort();
-    signals.abort();
-    let transport_report = match transport {
-        Some(transport) => {
-            transport.clone().close().await;
-            Some(transport.report())
-        }
-        None => None,
-    };
-    let ending = if strict_failure {
-        Ending::Strict
-    } else if signal.is_some() {
-        Ending::Interrupted
-    } else if duration_reached {
-        Ending::DurationReached
-    } else {
-        Ending::SourcesEnded
-    };
-    Ok(RunReport {
-        ending,
-        signal,
-        clock_elapsed: clock.elapsed(),
-        wall_elapsed: i64::try_from(wall_start.elapsed().as_micros()).unwrap_or(i64::MAX),
-        failures,
-        summary: stats.summary(),
-        transport: transport_report,
-    })
+    (failures, strict_failure)
 }
 
 /// Stops the run when the clock reaches `end` (`--for`); Ctrl-C and SIGTERM are watched by the
@@ -499,63 +593,6 @@ fn watch_for_the_end(clock: &Clock, end: Option<Time>, stop: &StopSignal) -> tok
             stop.stop();
         }
     })
-}
-
-/// The processes this run executes: all, or one host's.
-fn local_processes(spec: &hir::Spec, host: Option<&str>) -> Result<Vec<ProcessId>, RunError> {
-    let Some(host) = host else { return Ok((0..spec.processes.len()).collect()) };
-    let deploy = spec
-        .deploy
-        .as_ref()
-        .ok_or_else(|| RunError::Host(format!("--host {host}: the spec has no deploy section")))?;
-    match deploy.hosts.iter().find(|h| h.name == host) {
-        Some(h) => Ok(h.processes.clone()),
-        None => {
-            let names: Vec<&str> = deploy.hosts.iter().map(|h| h.name.as_str()).collect();
-            Err(RunError::Host(format!(
-                "--host {host}: the deploy section has the hosts {}",
-                names.join(", ")
-            )))
-        }
-    }
-}
-
-fn needs_transport(spec: &hir::Spec, local: &[ProcessId]) -> bool {
-    spec.processes
-        .iter()
-        .any(|p| p.inputs.iter().any(|i| local.contains(&p.id) != local.contains(&i.stream.producer)))
-}
-
-/// Streams produced here and consumed elsewhere: (producer, port).
-fn remote_streams(spec: &hir::Spec, local: &[ProcessId]) -> Vec<(ProcessId, Option<String>)> {
-    let mut streams = std::collections::BTreeSet::new();
-    for consumer in &spec.processes {
-        if local.contains(&consumer.id) {
-            continue;
-        }
-        for input in &consumer.inputs {
-            if local.contains(&input.stream.producer) {
-                streams.insert((input.stream.producer, input.stream.port.clone()));
-            }
-        }
-    }
-    streams.into_iter().collect()
-}
-
-fn stream_key(config: &RunConfig, spec: &hir::Spec, producer: ProcessId, port: Option<String>) -> StreamKey {
-    StreamKey {
-        deployment: config.deployment(spec),
-        spec: config.spec_name.clone(),
-        producer: spec.processes[producer].name.clone(),
-        port,
-    }
-}
-
-fn port_index(process: &hir::Process, port: Option<&str>) -> usize {
-    match port {
-        None => 0,
-        Some(name) => process.ports.iter().position(|(n, _)| n == name).map_or(0, |i| i + 1),
-    }
 }
 
 async fn feed_remote(

@@ -242,22 +242,10 @@ impl Recording {
         let known: Vec<&str> = self.streams.keys().chain(self.others.keys()).map(String::as_str).collect();
         Err(SelectError::UnknownStream {
             name: name.to_string(),
-            suggestion: closest(name, &known).map(str::to_string),
+            suggestion: kpl_core::closest(name, &known).map(str::to_string),
             known: self.streams.keys().cloned().collect(),
         })
     }
-}
-
-/// The closest name to `name`, if close enough to be a typo.
-fn closest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
-    let limit = (name.chars().count() / 3).max(1);
-    candidates
-        .iter()
-        .filter(|c| **c != name)
-        .map(|c| (strsim::damerau_levenshtein(&name.to_lowercase(), &c.to_lowercase()), *c))
-        .filter(|(distance, _)| *distance <= limit)
-        .min()
-        .map(|(_, c)| c)
 }
 
 /// A named pipe (`kpl score <(...)`): read like a file.

@@ -53,6 +53,43 @@ pub fn check_identification(
     diagnostics
 }
 
+/// A spec's errors as text, one per line (`line:column: code message`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SpecErrors(pub String);
+
+impl std::fmt::Display for SpecErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the spec has errors:\n{}", self.0)
+    }
+}
+
+impl std::error::Error for SpecErrors {}
+
+/// Parses and checks a spec's text against a registry: the checked spec, or its errors as text.
+/// For tests, benchmarks and programs that hold a spec in a string; `kpl check` renders
+/// diagnostics with their source instead.
+pub fn check_text(text: &str, registry: &Registry) -> Result<hir::Spec, SpecErrors> {
+    use std::fmt::Write as _;
+    let parse = kpl_syntax::parse(text);
+    let index = kpl_syntax::LineIndex::new(text);
+    let render = |diagnostics: &[Diagnostic]| {
+        let mut out = String::new();
+        for d in diagnostics.iter().filter(|d| d.is_error()) {
+            let (line, column) = index.line_col(text, d.span.start);
+            let _ = writeln!(out, "{line}:{column}: {} {}", d.code, d.message);
+        }
+        out
+    };
+    if parse.has_errors() {
+        return Err(SpecErrors(render(&parse.diagnostics)));
+    }
+    let checked = check(&parse.spec, registry);
+    match checked.spec {
+        Some(spec) if !checked.has_errors() => Ok(spec),
+        _ => Err(SpecErrors(render(&checked.diagnostics))),
+    }
+}
+
 /// Checks a parsed spec against a registry.
 pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
     let mut checker =
@@ -273,15 +310,7 @@ impl<'a> Checker<'a> {
                 });
                 if p.kind == ast::ProcessKind::Sink {
                     if let Some(output) = &p.output {
-                        self.diagnostics.push(
-                            Diagnostic::error(
-                                diag::TYPE_MISMATCH,
-                                output.span(),
-                                "a sink has no output type",
-                            )
-                            .with_label("remove this")
-                            .with_hint("sinks consume streams; write `sink NAME = entry(inputs...)`"),
-                        );
+                        self.diagnostics.push(diag::sink_with_output(output.span()));
                     }
                     return (None, ports);
                 }

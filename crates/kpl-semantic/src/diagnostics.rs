@@ -4,7 +4,7 @@
 use kpl_syntax::Diagnostic;
 use kpl_syntax::ast::Span;
 
-use crate::suggest::did_you_mean;
+use kpl_core::did_you_mean;
 
 pub const UNKNOWN_NAME: &str = "E0101";
 pub const DUPLICATE: &str = "E0102";
@@ -399,4 +399,18 @@ pub fn unset_attribute(
         .with_hint(format!(
             "`{unit}` sets {sets} of a `{ty}`; compute `{attribute}` in a link unit that sets it (see `kpl list`), or remove the attribute"
         ))
+}
+
+/// A subtype declares an attribute its parent already has.
+pub fn inherited_attribute(span: Span, name: &str) -> Diagnostic {
+    Diagnostic::error(DUPLICATE, span, format!("attribute `{name}` is already inherited"))
+        .with_label("inherited from a parent type")
+        .with_hint("a subtype adds attributes; it cannot redefine its parent's")
+}
+
+/// `sink NAME : TYPE = ...`: sinks produce nothing.
+pub fn sink_with_output(span: Span) -> Diagnostic {
+    Diagnostic::error(TYPE_MISMATCH, span, "a sink has no output type")
+        .with_label("remove this")
+        .with_hint("sinks consume streams; write `sink NAME = entry(inputs...)`")
 }

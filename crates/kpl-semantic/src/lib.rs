@@ -21,14 +21,14 @@ mod attributes;
 mod check;
 pub mod diagnostics;
 mod formula;
+pub mod functions;
 pub mod hir;
 pub mod registry;
 pub mod render;
-mod suggest;
 pub mod svg;
 mod types;
 
-pub use check::{Checked, check, check_identification};
+pub use check::{Checked, SpecErrors, check, check_identification, check_text};
 pub use formula::bound_micros;
-pub use suggest::{closest, did_you_mean};
+pub use kpl_core::{closest, did_you_mean};
 pub use types::{BUILTIN_TYPES, default_symbol};

@@ -135,15 +135,7 @@ fn build(
             continue;
         }
         if fields[..inherited].iter().any(|f| *f.name == field.name.name) {
-            diagnostics.push(
-                Diagnostic::error(
-                    diag::DUPLICATE,
-                    field.name.span,
-                    format!("attribute `{}` is already inherited", field.name.name),
-                )
-                .with_label("inherited from a parent type")
-                .with_hint("a subtype adds attributes; it cannot redefine its parent's"),
-            );
+            diagnostics.push(diag::inherited_attribute(field.name.span, &field.name.name));
             continue;
         }
         if let Some(meaning) = reserved_meaning(&field.name.name) {

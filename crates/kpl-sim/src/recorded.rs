@@ -122,7 +122,7 @@ impl VehicleTypes {
             let event = reader.read_event_into(&mut buf).map_err(|e| error(e.to_string()))?;
             match &event {
                 Event::Start(e) | Event::Empty(e) if e.name().as_ref() == b"vType" => {
-                    let attributes = attributes_of(e).map_err(error)?;
+                    let attributes = kpl_roads::sumo::attributes(e).map_err(error)?;
                     let Some(id) = attributes.get("id") else {
                         return Err(error("a vType has no id".to_string()));
                     };
@@ -158,17 +158,6 @@ impl VehicleTypes {
     pub fn size(&self, id: &str) -> Option<(f64, f64)> {
         self.sizes.get(id).copied()
     }
-}
-
-fn attributes_of(e: &BytesStart<'_>) -> Result<HashMap<String, String>, String> {
-    let mut attributes = HashMap::new();
-    for attribute in e.attributes() {
-        let attribute = attribute.map_err(|err| err.to_string())?;
-        let key = String::from_utf8_lossy(attribute.key.as_ref()).into_owned();
-        let value = attribute.unescape_value().map_err(|err| err.to_string())?.into_owned();
-        attributes.insert(key, value);
-    }
-    Ok(attributes)
 }
 
 /// A reader that fails when [`MAX_LINE_BYTES`] pass without a line break or an XML tag, so that
@@ -258,7 +247,7 @@ impl FcdReader {
         problems: &mut Vec<Problem>,
     ) -> Option<Observation> {
         let location = |id: &str| format!("timestep {time_s}, vehicle {id:?}");
-        let attributes = match attributes_of(e) {
+        let attributes = match kpl_roads::sumo::attributes(e) {
             Ok(a) => a,
             Err(error) => {
                 problems.push(Problem { location: location("?"), error });
@@ -345,7 +334,7 @@ impl StepReader for FcdReader {
             };
             match &event {
                 Event::Start(e) | Event::Empty(e) if e.name().as_ref() == b"timestep" => {
-                    let attributes = attributes_of(e).unwrap_or_default();
+                    let attributes = kpl_roads::sumo::attributes(e).unwrap_or_default();
                     let text = attributes.get("time").cloned().unwrap_or_default();
                     let time = text.trim().parse::<f64>().ok().and_then(time_us);
                     let Some(time) = time.filter(|t| self.last_time.is_none_or(|last| *t > last)) else {

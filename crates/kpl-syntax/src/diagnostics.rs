@@ -62,3 +62,14 @@ pub fn not_utf8(offset: usize) -> Diagnostic {
         .with_label("invalid byte sequence")
         .with_hint("save the spec as UTF-8 text")
 }
+
+/// A syntax error in the user's words (the parser words `message`, `label` and `hint` from what
+/// pest expected).
+pub fn syntax(span: Span, message: String, label: &str, hint: Option<String>) -> Diagnostic {
+    Diagnostic::error(SYNTAX, span, message).with_label(label).with_hint_opt(hint)
+}
+
+/// A formula given on its own (`kpl mtl eval`, an identification) is empty.
+pub fn expected_formula() -> Diagnostic {
+    Diagnostic::error(SYNTAX, Span::default(), "expected a formula")
+}

@@ -117,7 +117,7 @@ pub fn parse_formula(source: &str) -> Result<ast::Expr, Vec<Diagnostic>> {
     match expr {
         Some(expr) if diagnostics.is_empty() => Ok(expr),
         Some(_) => Err(diagnostics),
-        None => Err(vec![Diagnostic::error(diag::SYNTAX, Span::default(), "expected a formula")]),
+        None => Err(vec![diag::expected_formula()]),
     }
 }
 
@@ -183,7 +183,7 @@ fn syntax_error(source: &str, offset: usize, err: &pest::error::Error<Rule>) -> 
         (found_span(source, pos), "unexpected here")
     };
     let hint = hint_for(positives, &expected, source, pos);
-    Diagnostic::error(diag::SYNTAX, span, message).with_label(label).with_hint_opt(hint)
+    diag::syntax(span, message, label, hint)
 }
 
 /// The tokens pest expected, in the user's words: punctuation and words quoted, character

@@ -19,6 +19,11 @@
 //!
 //! zenoh needs a multi-threaded tokio runtime: `kpl run` uses one with `--clock wall`, which is
 //! what runs between hosts and with programs outside need.
+// The transport's liveliness, start-up waits and give-up times are real time whatever the run's
+// clock (zenoh runs on the wall clock), and `kpl bench zenoh` times work: this crate reads the
+// system's clocks (clippy.toml's `disallowed-methods` keeps the rest of the workspace on the
+// runtime's `Clock`).
+#![allow(clippy::disallowed_methods)]
 
 pub mod bench;
 pub mod codec;
@@ -38,7 +43,8 @@ pub use session::{HostSession, Sessions};
 pub use transport::{Plan, ZenohFactory, ZenohReceiver, ZenohSender, ZenohTransport};
 
 /// Adds `zenoh.subscribe` and `zenoh.publish` to a registry; they use this process's session
-/// ([`Sessions::process`]), the same one as [`factory`].
+/// ([`Sessions::process`]), the same one as [`factory`]. ROS 2's topics register themselves
+/// apart ([`ros2::register`]; `kpl_std::assemble` adds both).
 pub fn register(registry: &mut kpl_runtime::Registry) {
     register_with(registry, Sessions::process());
 }
@@ -47,7 +53,6 @@ pub fn register(registry: &mut kpl_runtime::Registry) {
 pub fn register_with(registry: &mut kpl_runtime::Registry, sessions: Arc<Sessions>) {
     registry.set_link_protocols(config::protocols());
     outside::register(registry, sessions);
-    ros2::register(registry);
 }
 
 /// The transport of `kpl run --host`, on this process's session ([`Sessions::process`]).

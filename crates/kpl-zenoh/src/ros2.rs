@@ -66,7 +66,9 @@ fn common_params(entry: Entry) -> Entry {
         .param(Param::optional("depth", ParamType::Int, Value::Int(10), "QoS history depth: messages kept while the run is busy (keep last)"))
 }
 
-pub(crate) fn register(registry: &mut Registry) {
+/// Adds `ros2.subscribe` and `ros2.publish` to a registry (`kpl_std::assemble` does). Their
+/// sessions are their own, one per router, apart from the session of the streams between hosts.
+pub fn register(registry: &mut Registry) {
     registry.add_source(
         common_params(Entry::new(
             EntryKind::Source,

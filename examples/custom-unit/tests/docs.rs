@@ -42,7 +42,7 @@ fn fresh(name: &str) -> PathBuf {
 fn the_page_shows_this_crates_files() {
     let files = documented_files();
     let paths: Vec<&str> = files.iter().map(|(p, _)| p.as_str()).collect();
-    assert_eq!(paths, ["Cargo.toml", "src/lib.rs", "src/main.rs", "accumulate.kpl"]);
+    assert_eq!(paths, ["Cargo.toml", "src/lib.rs", "src/main.rs", "accumulate.kpl", "braking.kpl"]);
     for (path, content) in &files[1..] {
         let actual = std::fs::read_to_string(here().join(path)).unwrap();
         assert_eq!(&actual, content, "docs/custom-units.md shows another {path} than examples/custom-unit");
@@ -83,7 +83,7 @@ fn the_pages_cargo_toml_resolves_outside_the_repository() {
     assert!(root.contains("my-units"), "{root}");
     let names: Vec<&str> =
         metadata["packages"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
-    for needed in ["kpl", "kpl-core", "kpl-runtime", "kpl-semantic"] {
+    for needed in ["kpl", "kpl-core", "kpl-runtime", "kpl-semantic", "kpl-anchor", "kpl-std"] {
         assert!(names.contains(&needed), "{needed} not resolved: {names:?}");
     }
     std::fs::remove_dir_all(&dir).ok();
@@ -110,5 +110,39 @@ fn the_pages_commands_run_as_written() {
     assert_eq!(sums.first(), Some(&0.0));
     assert_eq!(sums.last(), Some(&90.0), "0, 2, 6, 12, ..., 90 as the page says");
     assert!(Path::new(&dir.join("out/accumulate/summary.json")).exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_users_prediction_model_runs_in_kpl_run() {
+    // `braking.kpl`: a car seen at 10 m/s along x until x = 10 m at 1 s, then no more; its world
+    // object is predicted by `demo.braking(deceleration: 2.0)` and must stop 25 m further on
+    // (v² / 2a), slowing by 0.2 m/s every 100 ms on the way.
+    let dir = fresh("braking");
+    for file in ["braking.kpl", "braking.jsonl"] {
+        std::fs::copy(here().join(file), dir.join(file)).unwrap();
+    }
+    let kpl = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_custom-unit")).args(args).current_dir(&dir).output().unwrap()
+    };
+    assert!(String::from_utf8_lossy(&kpl(&["list"]).stdout).contains("demo.braking"));
+    let run = kpl(&["run", "braking.kpl"]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let states: Vec<(f64, f64, bool)> = std::fs::read_to_string(dir.join("out/braking/world.jsonl"))
+        .unwrap()
+        .lines()
+        .filter_map(|l| {
+            let line: serde_json::Value = serde_json::from_str(l).unwrap();
+            let object = line["value"].as_array()?.first()?.clone();
+            Some((object["pos"][0].as_f64()?, object["vel"][0].as_f64()?, object["measured"].as_bool()?))
+        })
+        .collect();
+    let predicted: Vec<&(f64, f64, bool)> = states.iter().filter(|s| !s.2).collect();
+    assert!(predicted.len() > 30, "{states:?}");
+    let (x, v, _) = predicted.last().unwrap();
+    assert!((x - 35.0).abs() < 0.6 && v.abs() < 1e-9, "stood at {x} with {v} m/s: {predicted:?}");
+    for pair in predicted.windows(2).filter(|w| w[0].1 > 0.2) {
+        assert!((pair[0].1 - pair[1].1 - 0.2).abs() < 1e-6, "{pair:?}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -183,6 +183,7 @@ fn threads(requested: Option<usize>) -> usize {
 }
 
 fn generate(args: GenerateArgs) -> Result<(), Failure> {
+    #[allow(clippy::disallowed_methods)] // how long the command took, reported beside its results
     let started = Instant::now();
     let config = GeneratorConfig {
         motion: match args.motion {
@@ -237,6 +238,7 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
         None => None,
         Some(path) => Some(layout::read_video_list(path)?),
     };
+    #[allow(clippy::disallowed_methods)] // how long the command took, reported beside its results
     let started = Instant::now();
     let report = eval::evaluate(&EvalOptions {
         data: args.data.clone(),

@@ -1,4 +1,5 @@
-//! `kpl check`: parse and check spec files against the runtime's registry.
+//! `kpl check`: parse and check spec files against the registry's signatures (nothing of the
+//! runtime is built).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -29,7 +30,7 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
     if parse.has_errors() {
         return (parse.diagnostics, None);
     }
-    let checked = kpl_semantic::check(&parse.spec, crate::registry::registry().signatures());
+    let checked = kpl_semantic::check(&parse.spec, &crate::registry::signatures());
     let mut diagnostics = parse.diagnostics;
     diagnostics.extend(checked.diagnostics);
     (diagnostics, checked.spec)

@@ -21,8 +21,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> ExitCode {
-    let runtime_registry = crate::registry::registry();
-    let registry = runtime_registry.signatures();
+    let signatures = crate::registry::signatures();
+    let registry = &signatures;
     let text = if args.json || args.format == OutputFormat::Json {
         let entries: Vec<_> = registry.entries().collect();
         let functions: Vec<_> = registry.functions().collect();

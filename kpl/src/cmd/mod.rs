@@ -2,9 +2,6 @@
 //! process exit code: 0 success, 1 the input has errors, 2 usage or I/O errors.
 
 pub mod bench;
-pub mod bench_anchor;
-pub mod bench_runtime;
-pub mod bench_situations;
 pub mod cater;
 pub mod check;
 pub mod convert;

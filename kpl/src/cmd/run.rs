@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
 use clap::Args as ClapArgs;
-use kpl_core::{Time, TimeUnit};
+use kpl_core::Time;
 use kpl_runtime::run::Signal;
 use kpl_runtime::stats::RunStats;
 use kpl_runtime::{ClockKind, Ending, RunConfig, RunReport};
@@ -82,16 +82,8 @@ fn uses_ros2(spec: &kpl_semantic::hir::Spec) -> bool {
     })
 }
 
-pub(crate) fn parse_duration(text: &str) -> Result<Time, String> {
-    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
-    let (number, unit) = text.split_at(split);
-    let unit = TimeUnit::from_suffix(unit)
-        .ok_or_else(|| format!("`{text}`: write a number and a unit (us, ms, s, min, h), e.g. 60s"))?;
-    let value: f64 = number.parse().map_err(|_| format!("`{text}` is not a duration"))?;
-    unit.float_to_micros(value)
-        .filter(|us| *us > 0)
-        .ok_or_else(|| format!("`{text}` is not a positive duration"))
-}
+/// A duration as `--for` takes it (`60s`, `1.5min`, `250ms`).
+pub(crate) use kpl_core::parse_duration;
 
 pub fn run(args: Args) -> ExitCode {
     let spec = match super::check::load_checked(&args.spec) {
@@ -147,6 +139,7 @@ pub fn run(args: Args) -> ExitCode {
     kpl_zenoh::ros2::set_router(args.ros2_router.clone());
     let registry = crate::registry::registry();
     let transport = crate::transport::factory(args.keys.as_deref());
+    #[allow(clippy::disallowed_methods)] // when the command started, for summary.json (not a sample's time)
     let started = SystemTime::now();
     let progress = (!args.quiet).then(|| {
         let stats = config.stats.clone().unwrap_or_default();
@@ -270,6 +263,7 @@ struct Progress {
 }
 
 impl Progress {
+    #[allow(clippy::disallowed_methods)] // the progress line shows the wall time the command has run
     fn start(stats: Arc<RunStats>, clock: ClockKind, bounded: bool) -> Progress {
         let done = Arc::new(AtomicBool::new(false));
         let flag = done.clone();

@@ -1,40 +1,12 @@
-//! Formula functions: the signatures of `kpl-mtl`'s built-ins (which implements them).
-
-use kpl_core::ValueType;
-use kpl_semantic::registry::Function;
+//! Formula functions: the signatures of `kpl-mtl`'s built-ins (`kpl_semantic::functions`), which
+//! `kpl-mtl` implements.
 
 use crate::registry::Registry;
 
 pub(super) fn register(registry: &mut Registry) {
-    use ValueType::{Any, Float, Vec2};
-    for (name, summary) in [
-        ("abs", "absolute value"),
-        ("sqrt", "square root (an error on negative numbers)"),
-        ("floor", "largest integer not above"),
-        ("ceil", "smallest integer not below"),
-    ] {
-        registry.add_builtin_function(Function::new(name, vec![Float], Float, summary));
+    for function in kpl_semantic::functions::builtin_functions() {
+        registry.add_builtin_function(function);
     }
-    registry.add_builtin_function(
-        Function::new("min", vec![Float], Float, "smallest of its arguments").variadic(),
-    );
-    registry.add_builtin_function(
-        Function::new("max", vec![Float], Float, "largest of its arguments").variadic(),
-    );
-    registry.add_builtin_function(Function::new("norm", vec![Vec2], Float, "length of a vector"));
-    registry.add_builtin_function(Function::new(
-        "xydist",
-        vec![Any, Any],
-        Float,
-        "distance in the x/y plane between two positions, or two objects' `pos`",
-    ));
-    registry.add_builtin_function(Function::new(
-        "dist",
-        vec![Any, Any],
-        Float,
-        "distance between two positions (or objects' `pos`), or |a - b| of two numbers",
-    ));
-    registry.add_builtin_function(Function::new("vec2", vec![Float, Float], Vec2, "the vector (x, y)"));
 }
 
 #[cfg(test)]

@@ -27,7 +27,7 @@ use kpl_core::{Time, Value, ValueType};
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 use serde::{Deserialize, Serialize};
 
-use super::replay::{ReplayTimes, StreamFilter};
+use super::replay::{ReplaySetup, ReplayTimes, StreamFilter, replay_entry};
 use crate::clock::ClockKind;
 use crate::context::SourceContext;
 use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
@@ -284,20 +284,13 @@ impl Drop for Record {
 
 pub(super) fn register(registry: &mut Registry) {
     registry.add_source(
-        Entry::new(
-            EntryKind::Source,
+        replay_entry(
             "file.jsonl",
             "Replays samples recorded as JSON lines (docs/streams.md).",
-        )
-        .param(Param::required("path", ParamType::Str, "file to read, relative to the spec"))
-        .param(Param::optional(
-            "stream",
-            ParamType::Str,
-            Value::str(""),
             "only lines whose `stream` is this (empty: all)",
-        )),
+        ),
         |ctx| {
-            let path = ctx.input_path(ctx.param("path").and_then(Value::as_str).unwrap_or(""));
+            let ReplaySetup { path, filter, ty, clock } = ReplaySetup::from_context(ctx);
             let file =
                 File::open(&path).map_err(|e| ctx.error(format!("cannot open {}: {e}", path.display())))?;
             // A directory opens on Unix, and then every read fails.
@@ -307,13 +300,7 @@ pub(super) fn register(registry: &mut Registry) {
                     path.display()
                 )));
             }
-            Ok(Box::new(Replay {
-                path,
-                reader: Some(BufReader::new(file)),
-                filter: StreamFilter::new(ctx.param("stream").and_then(Value::as_str).unwrap_or("")),
-                ty: ctx.process.output.clone().unwrap_or(ValueType::Any),
-                clock: ctx.clock,
-            }))
+            Ok(Box::new(Replay { path, reader: Some(BufReader::new(file)), filter, ty, clock }))
         },
     );
     registry.add_unit(

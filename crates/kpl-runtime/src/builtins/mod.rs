@@ -20,4 +20,4 @@ pub(crate) fn register(registry: &mut Registry) {
 }
 
 pub use jsonl::{SampleLine, decode_line, encode_line, read_line};
-pub use replay::{ReplayTimes, StreamFilter};
+pub use replay::{ReplaySetup, ReplayTimes, StreamFilter, replay_entry};

@@ -1,4 +1,7 @@
 //! What every replay source shares (`file.jsonl`, `file.mcap`):
+//! - [`replay_entry`] and [`ReplaySetup`]: the signature (a `path` relative to the spec and a
+//!   `stream` to keep) and what a source is built from (the file, its filter, the type to decode,
+//!   the clock), read off the build context the same way for every format.
 //! - [`StreamFilter`]: a recording holds several streams and a source replays one of them. The
 //!   filter is applied before a sample's value is decoded (the other streams' values need not fit
 //!   the source's type), and a filter that kept nothing says so, naming the streams it saw.
@@ -7,13 +10,46 @@
 //!   when the run starts (a time the shift would move past the range of i64 is malformed).
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 
-use kpl_core::Time;
+use kpl_core::{Time, Value, ValueType};
+use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType};
 
 use crate::clock::ClockKind;
 use crate::context::SourceContext;
 use crate::process::ProcessError;
+use crate::registry::BuildContext;
 use crate::sample::Sample;
+
+/// The signature of a replay source named `name`: a required `path` (relative to the spec) and
+/// an optional `stream` to keep (`stream_doc` says what names a stream in this format).
+pub fn replay_entry(name: &str, summary: &str, stream_doc: &str) -> Entry {
+    Entry::new(EntryKind::Source, name, summary)
+        .param(Param::required("path", ParamType::Str, "file to read, relative to the spec"))
+        .param(Param::optional("stream", ParamType::Str, Value::str(""), stream_doc))
+}
+
+/// What a replay source of [`replay_entry`]'s signature is built from.
+#[derive(Debug)]
+pub struct ReplaySetup {
+    /// The file, relative to the spec's directory.
+    pub path: PathBuf,
+    pub filter: StreamFilter,
+    /// The source's declared output type: what each value is decoded as.
+    pub ty: ValueType,
+    pub clock: ClockKind,
+}
+
+impl ReplaySetup {
+    pub fn from_context(ctx: &BuildContext<'_>) -> ReplaySetup {
+        ReplaySetup {
+            path: ctx.input_path(ctx.param("path").and_then(Value::as_str).unwrap_or("")),
+            filter: StreamFilter::new(ctx.param("stream").and_then(Value::as_str).unwrap_or("")),
+            ty: ctx.process.output.clone().unwrap_or(ValueType::Any),
+            clock: ctx.clock,
+        }
+    }
+}
 
 /// Which samples of a recording a replay keeps, and what it saw of the others (to say so when the
 /// filter kept nothing: a misspelt stream name must not silently give an empty source).

@@ -16,9 +16,9 @@ use std::sync::Arc;
 use kpl_core::{Record, Time, Value};
 use kpl_mtl::{DomainId, Formula, InstanceId, ProgressorGroup, SlotId, SlotState, State};
 
-use super::gate;
 use crate::process::Emitter;
 use crate::stats::ProcessStats;
+use kpl_mtl::gate::GateGrid;
 
 /// One variable of the bindings: its name (a field of each verdict), its slot in the state and
 /// the domain of its type.
@@ -237,7 +237,7 @@ impl State for BoundState<'_> {
 /// The bindings of `forall x: T . φ` or `forall a: T . forall b: U . φ`.
 pub(super) struct Bindings {
     vars: Vec<Var>,
-    /// Pairs farther apart than this are not progressed (see [`gate`]).
+    /// Pairs farther apart than this are not progressed (`kpl_mtl::gate`).
     gate: Option<f64>,
     group: ProgressorGroup,
     symbols: Vec<Symbols>,
@@ -318,18 +318,20 @@ impl Bindings {
                 let distinct = |i: usize, j: usize| a.domain != b.domain || i != j;
                 match self.gate {
                     Some(radius) => {
-                        let mut grid = gate::Grid::new(radius);
+                        // Objects without a (finite) position are never within a gate.
+                        let placed =
+                            |p: &Option<[f64; 2]>| p.filter(|p| p[0].is_finite() && p[1].is_finite());
+                        let mut grid = GateGrid::new(radius);
                         for (j, pos) in pb.pos.iter().enumerate() {
-                            if let Some(p) = pos {
-                                grid.insert(j, *p);
+                            if let Some(p) = placed(pos) {
+                                grid.insert(j, 0, p);
                             }
                         }
+                        grid.finish();
                         let mut near = Vec::new();
                         for (i, pos) in pa.pos.iter().enumerate() {
-                            let Some(p) = pos else { continue };
-                            near.clear();
-                            grid.near(*p, |j| pb.pos.get(j).copied().flatten(), &mut near);
-                            near.sort_unstable();
+                            let Some(p) = placed(pos) else { continue };
+                            grid.near(Some(p), &mut near);
                             for &j in near.iter().filter(|&&j| distinct(i, j)) {
                                 visit([i as u32, j as u32]);
                             }

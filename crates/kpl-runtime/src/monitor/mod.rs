@@ -19,17 +19,18 @@
 //! BOOL, start: µs, end: µs}`, with the valid time at which its first verdict was decided. A `true` episode of a situation
 //! formula is a recognised situation, from its first state to the state it was decided. With no
 //! object there is nothing to report (a plain progression would report the vacuous `true` at
-//! every state). A pair monitor whose body requires the pair to be close ([`gate`]) progresses
-//! only the pairs within that distance (and those whose progression is open), found with a grid.
+//! every state). A pair monitor whose body requires the pair to be close now (a top-level conjunct
+//! `close(a, b, d)` or `xydist(a, b) < d`: `kpl_mtl::gate`) progresses only the pairs within that
+//! distance (and those whose progression is open), found with its grid.
 
 use std::sync::Arc;
 
 use kpl_core::{Time, TimeUnit, Value};
-use kpl_mtl::{Context, Formula, Progressor, SlotState};
+use kpl_mtl::gate::{Horizon, PairGate};
+use kpl_mtl::{Context, Formula, Progressor, SlotId, SlotState};
 use kpl_semantic::hir;
 
 mod bindings;
-mod gate;
 
 use bindings::{Bindings, Var};
 
@@ -153,12 +154,16 @@ pub(crate) fn build(
                 Var { name: Arc::from(*var), slot: ctx.declare_value(var) as usize, domain }
             })
             .collect();
+        let mtl = kpl_mtl::lower(body, &mut ctx).map_err(|errors| {
+            let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
+            error(format!("formula: {}", messages.join("; ")))
+        })?;
         let gate = match vars.as_slice() {
-            [a, b] => gate::pair_gate(body, &a.name, &b.name),
+            [a, b] => PairGate::new(&ctx, a.slot as SlotId, b.slot as SlotId).distance(&mtl, Horizon::Now),
             _ => None,
         };
-        let body = compile(body, &mut ctx)?;
-        Mode::PerBinding(Bindings::new(body, vars, gate))
+        let body = Formula::new(&mtl, &ctx).map_err(|e| error(format!("formula: {e}")))?;
+        Mode::PerBinding(Bindings::new(Arc::new(body), vars, gate))
     } else {
         Mode::Whole(Open::new(&compile(&monitor.formula, &mut ctx)?))
     };
