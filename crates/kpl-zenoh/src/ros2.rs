@@ -27,7 +27,7 @@ use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source, Trigger};
 use kpl_runtime::registry::{BuildContext, BuildError, Registry};
-use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
+use kpl_semantic::registry::{CallTypes, Entry, EntryKind, Param, ParamProblem, ParamType, TypeReq};
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
@@ -78,7 +78,8 @@ pub fn register(registry: &mut Registry) {
         .param(Param::optional("identity", ParamType::Str, Value::str(""), "the field that identifies an object (a track id): the record's symbol is the type's prefix and its value"))
         .param(Param::optional("stamp", ParamType::Str, Value::str(""), "the valid time: a builtin_interfaces/Time field (default `header.stamp`, else the arrival time)"))
         .param(Param::optional("idle", ParamType::Duration, Value::Duration(3_000_000), "end after the topic's last publisher has been gone this long"))
-        .output(TypeReq::Any),
+        .output(TypeReq::Any)
+        .checked_by(check_subscribe),
         |ctx| {
             needs_wall_clock(ctx)?;
             let common = Common::new(ctx)?;
@@ -103,7 +104,8 @@ pub fn register(registry: &mut Registry) {
             "ros2.publish",
             "Publishes a stream as a ROS 2 topic over rmw_zenoh: values mapped into CDR messages (docs/ros2.md). Needs --clock wall.",
         ))
-        .input("in", TypeReq::Any, "the stream to publish"),
+        .input("in", TypeReq::Any, "the stream to publish")
+        .checked_by(check_publish),
         |ctx| {
             needs_wall_clock(ctx)?;
             let common = Common::new(ctx)?;
@@ -113,6 +115,84 @@ pub fn register(registry: &mut Registry) {
             Ok(Box::new(Publish { common, map, open: None, buffer: Vec::new(), published: 0, failures: 0 }))
         },
     );
+}
+
+/// The shipped message definitions, parsed once for `kpl check`.
+fn shipped() -> &'static Definitions {
+    static SHIPPED: OnceLock<Definitions> = OnceLock::new();
+    SHIPPED.get_or_init(Definitions::builtin)
+}
+
+/// The schema of a call's `type` for `kpl check`: a problem if it is not a shipped type and no
+/// `msgs` folder is named; `None` (checked when the run starts, where the folder is read) if it
+/// may be the user's.
+fn checked_schema(call: &CallTypes<'_>) -> Result<Option<Arc<Schema>>, ParamProblem> {
+    let text = |name: &str| call.params.get(name).and_then(Value::as_str).unwrap_or("");
+    match shipped().schema_of(text("type")) {
+        Ok(schema) => Ok(Some(schema)),
+        Err(_) if !text("msgs").is_empty() => Ok(None),
+        Err(e) => Err(ParamProblem {
+            param: "type".into(),
+            element: None,
+            range: (0, 0),
+            message: e.to_string(),
+            hint: e.hint().map(String::from).or_else(|| {
+                Some(
+                    "a shipped type (docs/ros2.md), or name a folder of your own `.msg` files in `msgs`"
+                        .into(),
+                )
+            }),
+        }),
+    }
+}
+
+fn text_param(call: &CallTypes<'_>, name: &str) -> Option<String> {
+    call.params.get(name).and_then(Value::as_str).filter(|s| !s.is_empty()).map(String::from)
+}
+
+fn list_of(call: &CallTypes<'_>, name: &str) -> Vec<String> {
+    match call.params.get(name) {
+        Some(Value::List(items)) => items.iter().filter_map(|v| v.as_str().map(String::from)).collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// A mapping error as `kpl check` reports it: in the entry of `map` (or the parameter) it names.
+fn problem(e: MapError) -> ParamProblem {
+    let (param, element) = match e.entry {
+        Some(i) => ("map".to_string(), Some(i)),
+        None => (e.param.to_string(), None),
+    };
+    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
+}
+
+/// `kpl check` of `ros2.subscribe`: its type, and its mapping against the type and the stream's.
+fn check_subscribe(call: &CallTypes<'_>) -> Vec<ParamProblem> {
+    let schema = match checked_schema(call) {
+        Ok(Some(schema)) => schema,
+        Ok(None) => return Vec::new(),
+        Err(p) => return vec![p],
+    };
+    let Some(output) = call.output else { return Vec::new() };
+    let spec = InSpec {
+        each: text_param(call, "each"),
+        identity: text_param(call, "identity"),
+        stamp: text_param(call, "stamp"),
+        entries: list_of(call, "map"),
+    };
+    InMap::compile(&schema, &spec, output).err().map(problem).into_iter().collect()
+}
+
+/// `kpl check` of `ros2.publish`: its type, and its mapping against the type and the input's.
+fn check_publish(call: &CallTypes<'_>) -> Vec<ParamProblem> {
+    let schema = match checked_schema(call) {
+        Ok(Some(schema)) => schema,
+        Ok(None) => return Vec::new(),
+        Err(p) => return vec![p],
+    };
+    let Some(input) = call.inputs.first() else { return Vec::new() };
+    let spec = OutSpec { each: text_param(call, "each"), entries: list_of(call, "map") };
+    OutMap::compile(schema, &spec, input).err().map(problem).into_iter().collect()
 }
 
 fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
