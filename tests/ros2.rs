@@ -157,3 +157,42 @@ fn markers_in_cars_out_with_a_ros2_node() {
         "kpl counts the message without attachment, the wrong hash and the cut CDR: {summary:#}"
     );
 }
+
+/// A rosbag2 recording that `rosbags` wrote (MCAP, CDR messages, `ros2msg` schemas: what
+/// `ros2 bag record` writes) is read by `kpl convert`: every message, in order, on its topic, at
+/// its time, with every field equal to what rosbags serialized (random PoseStamped and
+/// MarkerArray messages, every field of a marker filled).
+#[test]
+fn rosbag2_of_rosbags_converts_to_json_lines() {
+    let Some(python) = python("rosbags") else { return };
+    let dir = common::fresh_dir("ros2", "rosbag2");
+    let bag = dir.join("bag");
+    let expected = dir.join("expected.jsonl");
+    let script = root().join("tests/rosbag2_oracle.py");
+    let written = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("write")
+        .arg(&bag)
+        .arg(&expected)
+        .args(["--seed", "11", "--count", "60"])
+        .output()
+        .unwrap();
+    assert!(written.status.success(), "{}", String::from_utf8_lossy(&written.stderr));
+    let converted = dir.join("kpl.jsonl");
+    let out = common::kpl(&["convert", bag.join("bag.mcap").to_str().unwrap(), converted.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let checked = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("check")
+        .arg(&expected)
+        .arg(&converted)
+        .output()
+        .unwrap();
+    assert!(
+        checked.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&checked.stdout),
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert_eq!(lines(&converted).len(), 60);
+}

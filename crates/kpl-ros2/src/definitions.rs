@@ -110,6 +110,40 @@ impl Definitions {
         if errors.is_empty() { Ok(added) } else { Err(errors) }
     }
 
+    /// The schema of a recording's channel as rosbag2 and Foxglove write it (schema encoding
+    /// `ros2msg`): the `.msg` text of `name`, then for each type it uses a line of `=`, a line
+    /// `MSG: pkg/Name` (or `pkg/msg/Name`) and that type's text. The recording's definitions
+    /// take the place of shipped ones of the same name; a type it does not define must be
+    /// shipped.
+    pub fn schema_of_ros2msg(&self, name: &str, text: &str) -> Result<Arc<Schema>, String> {
+        let root = TypeName::parse(name).ok_or_else(|| format!("`{name}` is not a message type name"))?;
+        let mut defs = self.clone();
+        let mut current = root.clone();
+        let mut section = String::new();
+        let add = |defs: &mut Definitions, ty: &TypeName, text: &str| {
+            msg::parse(&ty.package, &ty.name, text)
+                .map(|def| defs.insert(def))
+                .map_err(|e| format!("the definition of `{ty}`, line {}: {}", e.line, e.message))
+        };
+        let mut lines = text.lines().peekable();
+        while let Some(line) = lines.next() {
+            let trimmed = line.trim();
+            if trimmed.len() >= 3 && trimmed.bytes().all(|b| b == b'=') {
+                add(&mut defs, &current, &section)?;
+                section.clear();
+                let header = lines.next().unwrap_or("").trim();
+                let named = header.strip_prefix("MSG:").map(str::trim).and_then(TypeName::parse);
+                current =
+                    named.ok_or_else(|| format!("after a line of `=`, `{header}` is not `MSG: pkg/Name`"))?;
+                continue;
+            }
+            section.push_str(line);
+            section.push('\n');
+        }
+        add(&mut defs, &current, &section)?;
+        defs.schema(&root).map_err(|e| e.to_string())
+    }
+
     pub fn get(&self, name: &TypeName) -> Option<&Arc<MessageDef>> {
         self.types.get(name)
     }
