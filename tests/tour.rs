@@ -7,7 +7,8 @@
 //!   what the help shows.
 //! - Benchmarks (`kpl bench ...`) run for minutes: each must start (load its inputs and begin)
 //!   and not fail while it is watched; then it is stopped.
-//! - The README's two-host pair is a separate block: `tests/zenoh.rs` runs it.
+//! - The README's two-host pair is a separate block: `tests/zenoh.rs` runs it; so is its ROS 2
+//!   command, which `tests/ros2.rs` runs against a ROS 2 node.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;

@@ -1,5 +1,5 @@
 //! The registry `kpl check`, `kpl list` and `kpl run` use: the standard one (`kpl_std::assemble`:
-//! the runtime's built-ins, the standard processes, anchoring, zenoh, MCAP) and whatever a user's
+//! the runtime's built-ins, the standard processes, anchoring, zenoh, ROS 2, MCAP) and whatever a user's
 //! crate adds (`kpl::main_with`). Checking and listing keep only signatures
 //! ([`signatures`]); only `kpl run` builds the registry of implementations ([`registry`]).
 

@@ -4,7 +4,10 @@
 //! carries sample envelopes `{"valid", "available", "value"}`; another channel with JSON messages
 //! (`message_encoding` `json`, written by any tool) carries values, whose valid time is the
 //! message's publish time and available time its log time (nanoseconds, truncated to
-//! microseconds). Messages are filtered by their channel's topic before they are decoded, then
+//! microseconds); a rosbag2 channel (`message_encoding` `cdr`, schema encoding `ros2msg`, as
+//! `ros2 bag record` and `rosbags` write them) carries CDR messages, decoded with the channel's
+//! message definition (kpl-ros2's codec) into JSON objects with the fields' names, with the same
+//! times. Messages are filtered by their channel's topic before they are decoded, then
 //! decoded with the replaying source's type as a JSON-lines replay decodes a line. A message that
 //! does not decode is malformed (counted, the replay goes on). A file cut short (a killed run) is
 //! read on with [`crate::recover::Walker`]: the messages of its whole chunks and what an
@@ -36,12 +39,16 @@ use crate::{SAMPLE_KEY, VIEW_KEY};
 pub const RECORD_LIMIT: usize = 256 << 20;
 
 /// What a channel's messages are.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 enum Encoding {
     /// KPL sample envelopes.
     Sample,
     /// JSON values of another writer.
     Json,
+    /// ROS 2 messages in CDR, with their definition (rosbag2).
+    Cdr(Arc<kpl_ros2::Schema>),
+    /// A channel whose schema this reader cannot use: why.
+    Unusable(String),
     /// An encoding this reader does not decode (`cdr`, `protobuf`, ...).
     Other(String),
     /// A channel KPL wrote for viewers, beside the stream's own: skipped.
@@ -89,6 +96,10 @@ pub struct Reader {
 struct Records {
     display: String,
     channels: HashMap<u16, Channel>,
+    /// The schemas seen so far: name, encoding and text.
+    schemas: HashMap<u16, (String, String, Vec<u8>)>,
+    /// The shipped ROS 2 message definitions, read at the first rosbag2 channel.
+    ros2: Option<kpl_ros2::Definitions>,
     /// Messages read so far (kept or not), for locations.
     messages: u64,
 }
@@ -123,7 +134,13 @@ impl Reader {
             salvage: None,
             file,
             reader: LinearReader::new_with_options(options),
-            records: Records { display: path.display().to_string(), channels: HashMap::new(), messages: 0 },
+            records: Records {
+                display: path.display().to_string(),
+                channels: HashMap::new(),
+                schemas: HashMap::new(),
+                ros2: None,
+                messages: 0,
+            },
             done: false,
         })
     }
@@ -253,6 +270,8 @@ impl Records {
                         Encoding::Sample
                     } else if channel.message_encoding == "json" {
                         Encoding::Json
+                    } else if channel.message_encoding == "cdr" {
+                        self.cdr_encoding(channel.schema_id)
                     } else {
                         Encoding::Other(channel.message_encoding.clone())
                     };
@@ -280,7 +299,7 @@ impl Records {
                     );
                     return Some(RawEvent::Malformed { location: self.location(), error });
                 };
-                if channel.encoding == Encoding::View || !filter.keep(&channel.topic) {
+                if matches!(channel.encoding, Encoding::View) || !filter.keep(&channel.topic) {
                     return None;
                 }
                 let stream = channel.topic.clone();
@@ -291,7 +310,34 @@ impl Records {
                     Err(error) => RawEvent::Malformed { location: self.location(), error },
                 })
             }
+            op::SCHEMA => {
+                if let Ok(Record::Schema { header, data }) = mcap::parse_record(op::SCHEMA, data) {
+                    self.schemas.insert(header.id, (header.name, header.encoding, data.into_owned()));
+                }
+                None
+            }
             _ => None,
+        }
+    }
+
+    /// How a `cdr` channel with schema `id` is read: its `ros2msg` definition, or why not.
+    fn cdr_encoding(&mut self, id: u16) -> Encoding {
+        if id == 0 {
+            return Encoding::Unusable("no schema (rosbag2 channels have a `ros2msg` one)".into());
+        }
+        let Some((name, encoding, data)) = self.schemas.get(&id) else {
+            return Encoding::Unusable(format!("its schema {id} is not in the file before it"));
+        };
+        if encoding != "ros2msg" {
+            return Encoding::Unusable(format!(
+                "its schema `{name}` has encoding `{encoding}`, not `ros2msg`"
+            ));
+        }
+        let text = String::from_utf8_lossy(data);
+        let defs = self.ros2.get_or_insert_with(kpl_ros2::Definitions::builtin);
+        match defs.schema_of_ros2msg(name, &text) {
+            Ok(schema) => Encoding::Cdr(schema),
+            Err(e) => Encoding::Unusable(format!("its schema `{name}` does not read: {e}")),
         }
     }
 }
@@ -315,8 +361,18 @@ fn decode(
             Ok((kpl_time(header.publish_time), kpl_time(header.log_time), json))
         }
         Encoding::View => Err(format!("channel `{topic}` is a view of another stream")),
+        Encoding::Cdr(schema) => {
+            let message = kpl_ros2::cdr::decode(schema, data)
+                .map_err(|e| format!("not a CDR `{}`: {e}", schema.name()))?;
+            Ok((
+                kpl_time(header.publish_time),
+                kpl_time(header.log_time),
+                kpl_ros2::json::to_json(schema, &message),
+            ))
+        }
+        Encoding::Unusable(why) => Err(format!("channel `{topic}` has message encoding `cdr`, but {why}")),
         Encoding::Other(name) => Err(format!(
-            "channel `{topic}` has message encoding `{name}`; file.mcap reads JSON messages (docs/streams.md)"
+            "channel `{topic}` has message encoding `{name}`; file.mcap reads JSON messages and rosbag2 CDR messages (docs/streams.md)"
         )),
     }
 }

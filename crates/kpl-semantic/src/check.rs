@@ -14,7 +14,9 @@ use kpl_syntax::ast::{self, Span};
 use crate::diagnostics as diag;
 use crate::formula::{Context, FormulaChecker, StreamScope, assignable};
 use crate::hir::{self, ProcessId, TypeTable};
-use crate::registry::{Entry, EntryKind, Function, Inputs, ParamType, Registry, TypeReq};
+use crate::registry::{
+    CallTypes, Entry, EntryKind, Function, Inputs, ParamProblem, ParamType, Registry, TypeReq,
+};
 use crate::types;
 
 /// The result of checking: the checked spec when there were no errors, and all diagnostics
@@ -870,8 +872,20 @@ impl Resolver<'_, '_, '_> {
                     let call = hir::Call { entry: p.call.callee.dotted(), params: BTreeMap::new() };
                     return (wrap(p.kind, call), Vec::new());
                 };
+                let before = self.checker.diagnostics.len();
                 let inputs = self.call_inputs(entry, &p.call);
                 let call = self.checker.params(entry, &p.call);
+                if let Some(check) = &entry.check
+                    && self.checker.diagnostics.len() == before
+                {
+                    let types: Vec<ValueType> = inputs.iter().map(|i| i.stream.ty.clone()).collect();
+                    let seen =
+                        CallTypes { params: &call.params, output: draft.output.as_ref(), inputs: &types };
+                    for problem in (check.0)(&seen) {
+                        let span = param_span(&p.call, &problem);
+                        self.checker.diagnostics.push(diag::param_problem(span, &entry.name, &problem));
+                    }
+                }
                 (wrap(p.kind, call), inputs)
             }
             Decl::Link(l) => self.link(l),
@@ -1299,6 +1313,30 @@ fn valid_endpoint(s: &str) -> bool {
             .rsplit_once(':')
             .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok());
     protocol_ok && !address.is_empty() && port_ok
+}
+
+/// Where a parameter check's problem is in the spec: the part of the string it names, when the
+/// string literal is written without escapes before it; else the literal (the element of a list,
+/// the parameter's value), or the call when the parameter was left to its default.
+fn param_span(call: &ast::Call, problem: &ParamProblem) -> Span {
+    let Some((_, literal)) = call.params().find(|(name, _)| name.name == problem.param) else {
+        return call.callee.span;
+    };
+    let literal = match (&literal.kind, problem.element) {
+        (ast::LitKind::List(items), Some(i)) => items.get(i).unwrap_or(literal),
+        _ => literal,
+    };
+    match &literal.kind {
+        ast::LitKind::Str(text)
+            if literal.span.end - literal.span.start == text.len() as u32 + 2
+                && problem.range.0 < problem.range.1
+                && problem.range.1 <= text.len() =>
+        {
+            let start = literal.span.start + 1;
+            Span::new(start + problem.range.0 as u32, start + problem.range.1 as u32)
+        }
+        _ => literal.span,
+    }
 }
 
 /// Converts a parameter literal to the value the parameter type asks for, or says what it found.

@@ -23,6 +23,7 @@ pub const INPUT_COUNT: &str = "E0114";
 pub const NOT_A_STREAM: &str = "E0115";
 pub const UNKNOWN_PORT: &str = "E0116";
 pub const BUILTIN_TYPE: &str = "E0117";
+pub const PARAM_PROBLEM: &str = "E0118";
 pub const POLICY_CONFLICT: &str = "E0120";
 pub const POLICY_DUPLICATE: &str = "E0121";
 pub const POLICY_VALUE: &str = "E0122";
@@ -170,6 +171,13 @@ pub fn param_type(span: Span, entry: &str, name: &str, expected: &str, found: &s
         format!("parameter `{name}` of `{entry}` must be {expected}, found {found}"),
     )
     .with_label(format!("expected {expected}"))
+}
+
+/// What an entry's own check of its parameters found (a ROS 2 mapping against its message).
+pub fn param_problem(span: Span, entry: &str, problem: &crate::registry::ParamProblem) -> Diagnostic {
+    Diagnostic::error(PARAM_PROBLEM, span, format!("`{entry}`: {}", problem.message))
+        .with_label(format!("in `{}`", problem.param))
+        .with_hint_opt(problem.hint.clone())
 }
 
 pub fn input_count(span: Span, entry: &str, expected: &str, given: usize) -> Diagnostic {

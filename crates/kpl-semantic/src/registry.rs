@@ -200,6 +200,47 @@ pub struct Entry {
     /// Which attributes of the objects it produces this entry sets (link units); the checker
     /// warns about an attribute that nothing sets (W0204).
     pub computes: Computes,
+    /// A check of the call's parameters against each other and the stream types, beyond each
+    /// parameter's own type (a message mapping against its message definition): what it finds
+    /// `kpl check` reports with the parameter's span (E0118).
+    #[serde(skip)]
+    pub check: Option<ParamCheck>,
+}
+
+/// What a parameter check sees of one call: its parameters (defaults filled in), the declared
+/// output type (sources, units) and the types of its input streams, in order.
+#[derive(Debug, Clone, Copy)]
+pub struct CallTypes<'a> {
+    pub params: &'a BTreeMap<String, Value>,
+    pub output: Option<&'a ValueType>,
+    pub inputs: &'a [ValueType],
+}
+
+/// What is wrong with a call's parameters: the parameter, the element of a list parameter, the
+/// byte range inside that string (empty: all of it), what is wrong and how to fix it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ParamProblem {
+    pub param: String,
+    pub element: Option<usize>,
+    pub range: (usize, usize),
+    pub message: String,
+    pub hint: Option<String>,
+}
+
+/// A check of an entry's parameters at `kpl check` time ([`Entry::checked_by`]).
+#[derive(Clone, Copy)]
+pub struct ParamCheck(pub fn(&CallTypes<'_>) -> Vec<ParamProblem>);
+
+impl fmt::Debug for ParamCheck {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("ParamCheck")
+    }
+}
+
+impl PartialEq for ParamCheck {
+    fn eq(&self, other: &ParamCheck) -> bool {
+        std::ptr::fn_addr_eq(self.0, other.0)
+    }
 }
 
 /// Which attributes of its objects a unit sets.
@@ -240,7 +281,15 @@ impl Entry {
             ports: Vec::new(),
             provides: Vec::new(),
             computes: Computes::Unknown,
+            check: None,
         }
+    }
+
+    /// Checks the call's parameters with `check` when a spec is checked (E0118), so that what
+    /// the implementation would refuse when the run starts is a diagnostic of `kpl check`.
+    pub fn checked_by(mut self, check: fn(&CallTypes<'_>) -> Vec<ParamProblem>) -> Entry {
+        self.check = Some(ParamCheck(check));
+        self
     }
 
     /// Declares the attributes this entry sets: `names`, and with `copies_shared` those the

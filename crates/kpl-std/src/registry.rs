@@ -1,11 +1,11 @@
 //! The one registry `kpl` runs with, assembled in one place: the runtime's built-ins, the
 //! standard processes of this crate (simulators, AAPA, CATER), anchoring (link processes, link
-//! units, prediction models, traffic relations), the zenoh sources and sinks, MCAP recordings and
-//! the live view (`view.live`). [`registry`] builds it for running; [`signatures`] keeps only the
-//! signatures, for `kpl check` and `kpl list`, without building anything of the runtime. A user's
-//! crate extends either with the same function (`kpl::main_with`): units with
-//! `Registry::add_unit`, link units and prediction models with [`crate::anchor::add_link_unit`]
-//! and [`crate::anchor::add_model`].
+//! units, prediction models, traffic relations), the zenoh sources and sinks, ROS 2 topics
+//! (`ros2.subscribe`, `ros2.publish`), MCAP recordings and the live view (`view.live`).
+//! [`registry`] builds it for running; [`signatures`] keeps only the signatures, for `kpl check`
+//! and `kpl list`, without building anything of the runtime. A user's crate extends either with
+//! the same function (`kpl::main_with`): units with `Registry::add_unit`, link units and
+//! prediction models with [`crate::anchor::add_link_unit`] and [`crate::anchor::add_model`].
 
 use kpl_runtime::Registry;
 use kpl_semantic::hir;
@@ -19,6 +19,7 @@ pub fn assemble(registry: &mut Registry) {
     crate::aapa::register(registry);
     crate::anchor::register(registry);
     kpl_zenoh::register(registry);
+    kpl_zenoh::ros2::register(registry);
     kpl_mcap::register(registry);
     kpl_view::register(registry);
 }

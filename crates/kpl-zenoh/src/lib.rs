@@ -14,6 +14,8 @@
 //! - [`Sessions`]: the one zenoh session of a host process;
 //! - [`ZenohFactory`] / [`ZenohTransport`]: what `kpl run --host` sends streams through;
 //! - `zenoh.subscribe` and `zenoh.publish` ([`register`]);
+//! - [`ros2`]: `ros2.subscribe` and `ros2.publish`, ROS 2 topics over rmw_zenoh (the wire is
+//!   `kpl-ros2`'s);
 //! - [`bench`]: `kpl bench zenoh`, against bare zenoh code.
 //!
 //! zenoh needs a multi-threaded tokio runtime: `kpl run` uses one with `--clock wall`, which is
@@ -32,6 +34,7 @@ pub mod envelope;
 pub mod flow;
 pub mod keys;
 mod outside;
+pub mod ros2;
 mod session;
 mod transport;
 
@@ -42,7 +45,8 @@ pub use session::{HostSession, Sessions};
 pub use transport::{Plan, ZenohFactory, ZenohReceiver, ZenohSender, ZenohTransport};
 
 /// Adds `zenoh.subscribe` and `zenoh.publish` to a registry; they use this process's session
-/// ([`Sessions::process`]), the same one as [`factory`].
+/// ([`Sessions::process`]), the same one as [`factory`]. ROS 2's topics register themselves
+/// apart ([`ros2::register`]; `kpl_std::assemble` adds both).
 pub fn register(registry: &mut kpl_runtime::Registry) {
     register_with(registry, Sessions::process());
 }

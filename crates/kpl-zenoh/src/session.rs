@@ -141,7 +141,7 @@ impl Sessions {
 /// take a connect retry, hundreds of milliseconds) is then taken by the inner `block_on` and lost:
 /// two hosts run by `run_async` in one task (`tokio::join!`) hung that way, one waiting forever
 /// for a timer that had fired. On a thread of the blocking pool nothing else waits on its parker.
-async fn open_off_thread(config: zenoh::Config) -> Result<zenoh::Session, String> {
+pub(crate) async fn open_off_thread(config: zenoh::Config) -> Result<zenoh::Session, String> {
     use zenoh::Wait;
     match tokio::task::spawn_blocking(move || zenoh::open(config).wait()).await {
         Ok(opened) => opened.map_err(|e| e.to_string()),

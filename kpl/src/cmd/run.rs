@@ -49,6 +49,11 @@ pub struct Args {
     /// authenticated.
     #[arg(long, requires = "host", conflicts_with = "keys")]
     pub insecure: bool,
+    /// The zenoh router (or peer) that the spec's ROS 2 topics (`ros2.subscribe`,
+    /// `ros2.publish`) go through, over the spec's `router` (default: rmw_zenoh's,
+    /// tcp/localhost:7447).
+    #[arg(long = "ros2-router", value_name = "ENDPOINT")]
+    pub ros2_router: Option<String>,
     /// Which clock drives the run.
     #[arg(long, value_enum, default_value = "sim")]
     pub clock: ClockArg,
@@ -83,6 +88,16 @@ pub struct Args {
     /// subscribe to every stream (so it misses nothing).
     #[arg(long, value_parser = parse_duration, requires = "foxglove")]
     pub foxglove_wait: Option<Time>,
+}
+
+/// Whether a process of the spec is a ROS 2 topic (so that `--ros2-router` does something).
+fn uses_ros2(spec: &kpl_semantic::hir::Spec) -> bool {
+    spec.processes.iter().any(|p| match &p.kind {
+        kpl_semantic::hir::ProcessKind::Source(call) | kpl_semantic::hir::ProcessKind::Sink(call) => {
+            call.entry.starts_with("ros2.")
+        }
+        _ => false,
+    })
 }
 
 /// A duration as `--for` takes it (`60s`, `1.5min`, `250ms`).
@@ -145,6 +160,12 @@ pub fn run(args: Args) -> ExitCode {
         );
         return ExitCode::from(2);
     }
+    if args.ros2_router.is_some() && !uses_ros2(&spec) {
+        eprintln!(
+            "warning: --ros2-router has no effect: the spec has no ROS 2 topic (ros2.subscribe, ros2.publish)"
+        );
+    }
+    kpl_zenoh::ros2::set_router(args.ros2_router.clone());
     let registry = crate::registry::registry();
     if args.insecure {
         eprintln!(

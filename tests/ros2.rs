@@ -1,0 +1,198 @@
+//! ROS 2 in and out, end to end, with the built `kpl` binary and a ROS 2 node that is not kpl:
+//! `tests/ros2_node.py` publishes, exactly as an rmw_zenoh node (zenoh-ros2-sdk's keys, tokens
+//! and attachment, rosidl's type hash, rclpy's CDR), the vehicles of a SUMO recording of
+//! specs/traffic/sumo/grid as a MarkerArray on /tracker/markers; `kpl run specs/ros2/markers.kpl
+//! --clock wall --ros2-router ENDPOINT --out DIR` (the shipped spec's contract) anchors them as
+//! cars, records them and publishes them back on /kpl/cars (MarkerArray) and /kpl/detections
+//! (vision_msgs); the node decodes them (rclpy, rosbags) and every car of kpl's own recording is
+//! among them, `ns` its symbol and `id` a number that stays with it. The node's three bad
+//! messages (no attachment, a wrong type hash, cut CDR) are counted, and kpl ends on its own
+//! once the publisher has gone. Skipped without `KPL_PYTHON` unless `KPL_REQUIRE_ORACLES=1`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Read;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{free_ports, lines, python, root};
+use serde_json::Value;
+
+const HANG: Duration = Duration::from_secs(180);
+
+fn wait(child: &mut Child, name: &str) -> (i32, String) {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                let _ = e.read_to_string(&mut err);
+            }
+            return (status.code().unwrap_or(-1), err);
+        }
+        if start.elapsed() > HANG {
+            child.kill().unwrap();
+            panic!("{name} did not finish within {HANG:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn markers_in_cars_out_with_a_ros2_node() {
+    let Some(python) = python("rclpy, rosbags, zenoh-ros2-sdk") else { return };
+    let dir = common::fresh_dir("ros2", "markers");
+    let port = free_ports(1);
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let result_path = dir.join("node.json");
+    let mut node = std::process::Command::new(&python)
+        .arg(root().join("tests/ros2_node.py"))
+        .args(["--listen", &endpoint, "--fcd"])
+        .arg(root().join("specs/traffic/sumo/grid/fcd.xml.gz"))
+        .args(["--start", "100", "--seconds", "15", "--out"])
+        .arg(&result_path)
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let out = dir.join("out");
+    let mut kpl = common::kpl_command(&[
+        "run",
+        "specs/ros2/markers.kpl",
+        "--clock",
+        "wall",
+        "--ros2-router",
+        &endpoint,
+        "--out",
+    ])
+    .arg(&out)
+    .args(["--for", "120s", "--quiet"])
+    .stdin(Stdio::null())
+    .stdout(Stdio::null())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    let (kpl_code, kpl_err) = wait(&mut kpl, "kpl run");
+    let (node_code, node_err) = wait(&mut node, "the ROS 2 node");
+    assert_eq!(node_code, 0, "the ROS 2 node failed:\n{node_err}");
+    assert_eq!(kpl_code, 0, "kpl run failed:\n{kpl_err}");
+
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(
+        summary["ending"], "sources_ended",
+        "kpl ends when the publisher has gone, not at --for: {summary:#}"
+    );
+    let result: Value = serde_json::from_slice(&std::fs::read(&result_path).unwrap()).unwrap();
+
+    // kpl's recording: every car symbol and the percepts it read.
+    let mut recorded_cars = BTreeSet::new();
+    let mut percepts = 0;
+    for line in lines(&out.join("tracks.jsonl")) {
+        let objects = line["value"].as_array().cloned().unwrap_or_default();
+        match line["stream"].as_str() {
+            Some("onroad_car") => {
+                recorded_cars.extend(objects.iter().map(|o| o["id"].as_str().unwrap().to_string()))
+            }
+            Some("markers") => percepts += objects.len(),
+            _ => {}
+        }
+    }
+    assert_eq!(
+        percepts as u64,
+        result["published_markers"].as_u64().unwrap(),
+        "every marker became a percept"
+    );
+    assert!(recorded_cars.len() >= 10, "only {} cars anchored", recorded_cars.len());
+
+    // What the node received: every recorded car, with a number that stays with its symbol.
+    let mut numbers: BTreeMap<String, BTreeSet<i64>> = BTreeMap::new();
+    for car in result["cars"].as_array().unwrap() {
+        numbers
+            .entry(car["ns"].as_str().unwrap().to_string())
+            .or_default()
+            .insert(car["id"].as_i64().unwrap());
+        assert_eq!(car["frame"], "map");
+        assert_eq!(car["length"], 5.0);
+    }
+    let received: BTreeSet<String> = numbers.keys().cloned().collect();
+    assert_eq!(received, recorded_cars, "the cars on /kpl/cars are those of kpl's recording");
+    for (symbol, ids) in &numbers {
+        assert_eq!(ids.len(), 1, "{symbol} changed its number: {ids:?}");
+    }
+    let detected: BTreeSet<String> = result["detections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(detected, recorded_cars, "the cars on /kpl/detections are those of kpl's recording");
+    assert_eq!(result["bad_attachments"], 0, "kpl's messages carry rmw_zenoh's 33-byte attachment");
+
+    // kpl is in the ROS 2 graph: its node, its subscription and its two publishers.
+    let graph: Vec<String> =
+        result["graph"].as_array().unwrap().iter().map(|g| g.as_str().unwrap().to_string()).collect();
+    for (kind, topic) in
+        [("NN", ""), ("MS", "%tracker%markers"), ("MP", "%kpl%cars"), ("MP", "%kpl%detections")]
+    {
+        assert!(
+            graph.iter().any(|g| g.contains(&format!("/{kind}/")) && g.contains("/kpl") && g.contains(topic)),
+            "no {kind} token for `{topic}` in {graph:#?}"
+        );
+    }
+
+    // The three bad messages: counted and reported, the run went on.
+    let malformed: u64 = summary["summary"]["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["process"] == "markers")
+        .map(|p| p["malformed"].as_u64().unwrap_or(0))
+        .sum();
+    assert_eq!(
+        malformed, 3,
+        "kpl counts the message without attachment, the wrong hash and the cut CDR: {summary:#}"
+    );
+}
+
+/// A rosbag2 recording that `rosbags` wrote (MCAP, CDR messages, `ros2msg` schemas: what
+/// `ros2 bag record` writes) is read by `kpl convert`: every message, in order, on its topic, at
+/// its time, with every field equal to what rosbags serialized (random PoseStamped and
+/// MarkerArray messages, every field of a marker filled).
+#[test]
+fn rosbag2_of_rosbags_converts_to_json_lines() {
+    let Some(python) = python("rosbags") else { return };
+    let dir = common::fresh_dir("ros2", "rosbag2");
+    let bag = dir.join("bag");
+    let expected = dir.join("expected.jsonl");
+    let script = root().join("tests/rosbag2_oracle.py");
+    let written = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("write")
+        .arg(&bag)
+        .arg(&expected)
+        .args(["--seed", "11", "--count", "60"])
+        .output()
+        .unwrap();
+    assert!(written.status.success(), "{}", String::from_utf8_lossy(&written.stderr));
+    let converted = dir.join("kpl.jsonl");
+    let out = common::kpl(&["convert", bag.join("bag.mcap").to_str().unwrap(), converted.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let checked = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("check")
+        .arg(&expected)
+        .arg(&converted)
+        .output()
+        .unwrap();
+    assert!(
+        checked.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&checked.stdout),
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert_eq!(lines(&converted).len(), 60);
+}
