@@ -303,13 +303,12 @@ pub async fn execute(
     };
     let remote_feeds = wire_edges(plan, &mut tasks, &stats);
     let mut join = JoinSet::new();
-    if let Some(transport) = &transport {
-        if let Err(e) =
+    if let Some(transport) = &transport
+        && let Err(e) =
             connect_remote(plan, transport, &mut tasks, remote_feeds, &stats, &stop, &mut join).await
-        {
-            stop_all();
-            return Err(e);
-        }
+    {
+        stop_all();
+        return Err(e);
     }
     stats.set_endless(
         tasks
