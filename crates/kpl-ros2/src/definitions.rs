@@ -91,10 +91,17 @@ impl Definitions {
                 });
                 continue;
             };
-            let text = match std::fs::read_to_string(&path) {
-                Ok(text) => text,
+            // A message definition is a few KiB; a file past 1 MiB (or `/dev/zero`) is refused.
+            let text = match kpl_core::read::read_file(&path, 1 << 20) {
+                Ok(bytes) => match String::from_utf8(bytes) {
+                    Ok(text) => text,
+                    Err(_) => {
+                        errors.push(DefError::Io { path, message: "not UTF-8 text".into() });
+                        continue;
+                    }
+                },
                 Err(e) => {
-                    errors.push(DefError::Io { path, message: e.to_string() });
+                    errors.push(DefError::Io { path, message: std::io::Error::from(e).to_string() });
                     continue;
                 }
             };
