@@ -8,7 +8,7 @@ use kpl_core::{Value, ValueType};
 use kpl_runtime::builtins::{ReplaySetup, ReplayTimes, StreamFilter, replay_entry};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
-use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
+use kpl_runtime::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Unit};
 use kpl_runtime::registry::Registry;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 
@@ -84,8 +84,7 @@ impl Record {
 
 impl Unit for Record {
     fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-        let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+        let Some((port, sample)) = input.trigger_sample() else { return Ok(()) };
         self.recorder()?;
         let Some((recorder, ids)) = self.recorder.as_mut() else { return Ok(()) };
         let Some(id) = ids.get(port) else { return Ok(()) };

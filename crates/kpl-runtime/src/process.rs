@@ -85,6 +85,15 @@ impl Input<'_> {
         }
     }
 
+    /// The sample that triggered this call and its port (`None` for a synchronized state, or
+    /// when the port holds no sample).
+    pub fn trigger_sample(&self) -> Option<(usize, &Sample)> {
+        match self.trigger {
+            Trigger::Sample(port) => self.values.get(port)?.as_ref().map(|s| (port, s)),
+            Trigger::State => None,
+        }
+    }
+
     /// The current value of input port `port`.
     pub fn value(&self, port: usize) -> Option<&Value> {
         self.values.get(port)?.as_ref().map(|s| &s.value)

@@ -43,11 +43,10 @@ use kpl_roads::geom::Point;
 use kpl_roads::{Occluders, RoadNetwork};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Geometric, Poisson, StandardNormal};
+use rand_distr::{Geometric, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::error::ParamsError;
-use crate::params::ParamInfo;
 use crate::tracker::{PerceptId, PerceptSource, Visibility};
 use crate::traffic::{CarId, CarState};
 
@@ -115,20 +114,6 @@ const FALSE_POSITIVE_TRIES: usize = 20;
 const VELOCITY_SMOOTHING: f64 = 0.5;
 
 impl CameraParams {
-    /// Name, type, default and description of every parameter, in declaration order.
-    pub fn describe() -> Vec<ParamInfo> {
-        let defaults = serde_json::to_value(CameraParams::default()).unwrap_or_default();
-        CAMERA_PARAM_TABLE
-            .iter()
-            .map(|&(name, ty, doc)| ParamInfo {
-                name,
-                ty,
-                default: defaults.get(name).map(ToString::to_string).unwrap_or_default(),
-                doc: doc.trim(),
-            })
-            .collect()
-    }
-
     /// Reads the parameters from a JSON object and checks them.
     pub fn from_json(json: serde_json::Value) -> Result<CameraParams, ParamsError> {
         let params: CameraParams = serde_json::from_value(json)?;
@@ -594,14 +579,7 @@ impl ImageTracker {
             fp.frames_left -= 1;
             fp.frames_left > 0
         });
-        let expected = self.shared.false_positive_rate * dt_s;
-        let n_new = match Poisson::new(expected) {
-            Ok(poisson) if expected > 0.0 => {
-                let n: f64 = self.rng.sample(poisson);
-                n as u64
-            }
-            _ => 0,
-        };
+        let n_new = crate::tracker::poisson_count(&mut self.rng, self.shared.false_positive_rate * dt_s);
         let mean_frames = (self.shared.false_positive_duration_s / dt_s).max(1.0);
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
         let (lo, hi) = network.bounds();

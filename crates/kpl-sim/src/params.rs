@@ -31,7 +31,7 @@ pub struct ParamInfo {
 }
 
 /// Declares a parameter struct whose missing fields take their defaults, with the table of its
-/// fields (name, KPL type, doc) that signatures and `kpl list` show.
+/// fields (name, KPL type, doc) and `describe()`, which signatures and `kpl list` show.
 macro_rules! declare_params {
     (
         $(#[doc = $struct_doc:literal])* struct $name_of_struct:ident, table $table:ident;
@@ -51,6 +51,22 @@ macro_rules! declare_params {
         }
 
         const $table: &[(&str, &str, &str)] = &[ $( (stringify!($name), $kpl_ty, $doc), )* ];
+
+        impl $name_of_struct {
+            /// Name, type, default and description of every parameter, in declaration order.
+            pub fn describe() -> Vec<$crate::params::ParamInfo> {
+                let defaults = serde_json::to_value($name_of_struct::default()).unwrap_or_default();
+                $table
+                    .iter()
+                    .map(|&(name, ty, doc)| $crate::params::ParamInfo {
+                        name,
+                        ty,
+                        default: defaults.get(name).map(ToString::to_string).unwrap_or_default(),
+                        doc: doc.trim(),
+                    })
+                    .collect()
+            }
+        }
     };
 }
 pub(crate) use declare_params;
@@ -113,20 +129,6 @@ declare_params! {
 }
 
 impl Params {
-    /// Name, type, default and description of every parameter, in declaration order.
-    pub fn describe() -> Vec<ParamInfo> {
-        let defaults = serde_json::to_value(Params::default()).unwrap_or_default();
-        PARAM_TABLE
-            .iter()
-            .map(|&(name, ty, doc)| ParamInfo {
-                name,
-                ty,
-                default: defaults.get(name).map(ToString::to_string).unwrap_or_default(),
-                doc: doc.trim(),
-            })
-            .collect()
-    }
-
     /// Reads parameters from a JSON object; unknown names are an error, missing ones default, and
     /// a parameter set (to other than its default) where it would have no effect is an error too.
     pub fn from_json(json: serde_json::Value) -> Result<Params, ParamsError> {

@@ -257,14 +257,7 @@ impl Tracker {
             fp.frames_left -= 1;
             fp.frames_left > 0
         });
-        let expected = self.config.false_positive_rate * dt_s;
-        let n_new = match Poisson::new(expected) {
-            Ok(poisson) if expected > 0.0 => {
-                let n: f64 = self.rng.sample(poisson);
-                n as u64
-            }
-            _ => 0,
-        };
+        let n_new = poisson_count(&mut self.rng, self.config.false_positive_rate * dt_s);
         let mean_frames = (self.config.false_positive_duration_s / dt_s).max(1.0);
         for _ in 0..n_new {
             let on_road = self.rng.random::<f64>() < self.config.false_positive_on_road;
@@ -320,5 +313,17 @@ impl Tracker {
     /// Percept ids handed out so far.
     pub fn n_percept_ids(&self) -> u64 {
         self.next_percept - 1
+    }
+}
+
+/// How many of something with Poisson mean `expected` happen (none when `expected` is not
+/// positive): new false positives per frame, in both tracker modes.
+pub(crate) fn poisson_count(rng: &mut ChaCha8Rng, expected: f64) -> u64 {
+    match Poisson::new(expected) {
+        Ok(poisson) if expected > 0.0 => {
+            let n: f64 = rng.sample(poisson);
+            n as u64
+        }
+        _ => 0,
     }
 }

@@ -10,7 +10,7 @@ use std::time::Duration;
 use kpl_core::Value;
 use kpl_mcap::foxglove::Role;
 use kpl_mcap::scene::Scene;
-use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Trigger, Unit};
+use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::Registry;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
 
@@ -32,8 +32,7 @@ struct Live {
 
 impl Unit for Live {
     fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-        let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+        let Some((port, sample)) = input.trigger_sample() else { return Ok(()) };
         while self.wait_tenths > 0 && self.subscribers.load(Ordering::Relaxed) < self.channels {
             std::thread::sleep(Duration::from_millis(100));
             self.wait_tenths -= 1;

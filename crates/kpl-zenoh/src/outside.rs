@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use kpl_core::{Time, Value, ValueType};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
-use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source, Trigger};
+use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source};
 use kpl_runtime::registry::{BuildContext, BuildError, Registry};
 use kpl_semantic::hir;
 use kpl_semantic::registry::{Entry, EntryKind, Param, ParamType, TypeReq};
@@ -252,8 +252,7 @@ impl AsyncUnit for Publish {
         _out: &'a mut Emitter,
     ) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
-            let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-            let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+            let Some((_, sample)) = input.trigger_sample() else { return Ok(()) };
             let mut bytes = Vec::new();
             codec::encode_sample(sample, &mut bytes).map_err(|e| ProcessError::failed(e.to_string()))?;
             self.put(bytes).await?;

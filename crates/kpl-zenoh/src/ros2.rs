@@ -25,7 +25,7 @@ use kpl_ros2::wire::{self, Attachment, EntityKind, Node, Qos};
 use kpl_ros2::{Definitions, Schema, cdr};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
-use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source, Trigger};
+use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source};
 use kpl_runtime::registry::{BuildContext, BuildError, Registry};
 use kpl_semantic::registry::{CallTypes, Entry, EntryKind, Param, ParamProblem, ParamType, TypeReq};
 use zenoh::liveliness::LivelinessToken;
@@ -604,8 +604,7 @@ impl AsyncUnit for Publish {
         _out: &'a mut Emitter,
     ) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
-            let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-            let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+            let Some((_, sample)) = input.trigger_sample() else { return Ok(()) };
             let msg = self
                 .map
                 .apply(sample.valid, &sample.value)

@@ -12,8 +12,7 @@ struct Console;
 
 impl Unit for Console {
     fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        let crate::process::Trigger::Sample(port) = input.trigger else { return Ok(()) };
-        let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+        let Some((port, sample)) = input.trigger_sample() else { return Ok(()) };
         let stream = input.names.get(port).map_or("", |n| n);
         let line = super::encode_line(stream, sample);
         let mut stdout = std::io::stdout().lock();

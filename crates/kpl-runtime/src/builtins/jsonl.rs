@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 use super::replay::{ReplaySetup, ReplayTimes, StreamFilter, replay_entry};
 use crate::clock::ClockKind;
 use crate::context::SourceContext;
-use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Trigger, Unit};
+use crate::process::{BoxFuture, Emitter, Input, ProcessError, Source, SyncUnit, Unit};
 use crate::registry::Registry;
 use crate::sample::Sample;
 
@@ -208,8 +208,7 @@ impl Record {
 
 impl Unit for Record {
     fn on_input(&mut self, input: &Input<'_>, _out: &mut Emitter) -> Result<(), ProcessError> {
-        let Trigger::Sample(port) = input.trigger else { return Ok(()) };
-        let Some(Some(sample)) = input.values.get(port) else { return Ok(()) };
+        let Some((port, sample)) = input.trigger_sample() else { return Ok(()) };
         let line = encode_line(input.names.get(port).map_or("", |n| n), sample);
         let path = self.path.display().to_string();
         writeln!(self.writer()?, "{line}")
