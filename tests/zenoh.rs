@@ -436,7 +436,11 @@ fn outside_peers_cannot_slip_samples_or_ends_into_a_deployment_with_keys() {
         .collect();
     assert!(reasons.iter().any(|r| r.contains("no KPL envelope")), "{reasons:?}");
     assert!(reasons.iter().any(|r| r.contains("no authentication tag")), "{reasons:?}");
-    assert_eq!(summary(&dir.join("relay"))["transport"]["inbound"][0]["refused"], 0);
+    // Whether the stranger's messages also reach the relay depends on zenoh's routing at that
+    // moment (seen under load on a fresh machine): if they do, the relay refuses all of them too,
+    // and it accepted nothing but the producer's (relayed.jsonl above).
+    let relay = &summary(&dir.join("relay"))["transport"]["inbound"][0];
+    assert!(relay["refused"] == 0 || relay["refused"] == 21, "{relay}");
 }
 
 #[test]
