@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
 use foxglove::{Context, PartialMetadata, WebSocketServer, WebSocketServerHandle};
@@ -47,6 +48,11 @@ pub struct FoxgloveServer {
 /// How many messages a client may lag behind before the oldest are dropped (per client).
 const BACKLOG: usize = 4096;
 
+/// How long a server that stops keeps serving its connected clients first: the SDK drops what
+/// is still queued for a client when it stops and says nothing of how much that is, so a client
+/// that keeps up gets the run's last messages only if the queue has this long to drain.
+const LINGER: Duration = Duration::from_secs(2);
+
 /// Serves the hub's streams (`streams`: name and role) to Foxglove at `addr` (`HOST:PORT`, port 0
 /// for any free one).
 /// `subscribers` counts the subscriptions to the streams' channels.
@@ -83,8 +89,15 @@ pub fn serve(
 }
 
 impl FoxgloveServer {
-    /// Stops serving (clients are disconnected).
+    /// Stops serving: connected clients are served for up to [`LINGER`] more (until they all
+    /// disconnect), then disconnected.
     pub fn stop(mut self) {
+        if let Some(handle) = &self.handle {
+            let started = Instant::now();
+            while handle.client_count() > 0 && started.elapsed() < LINGER {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
         self.shutdown();
     }
 
