@@ -94,8 +94,19 @@ pub fn check_text(text: &str, registry: &Registry) -> Result<hir::Spec, SpecErro
 
 /// Checks a parsed spec against a registry.
 pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
-    let mut checker =
-        Checker { registry, diagnostics: Vec::new(), types: TypeTable::default(), names: BTreeMap::new() };
+    check_in(spec, registry, None)
+}
+
+/// [`check`] for a spec read from a file in `dir`: parameter checks may look for the files a
+/// spec names relative to itself (a Python unit's module).
+pub fn check_in(spec: &ast::Spec, registry: &Registry, dir: Option<&std::path::Path>) -> Checked {
+    let mut checker = Checker {
+        registry,
+        diagnostics: Vec::new(),
+        types: TypeTable::default(),
+        names: BTreeMap::new(),
+        dir,
+    };
     // Hints look at a bounded number of names in all, so many unknown names stay linear.
     let result = kpl_core::suggest::with_budget(|| checker.run(spec));
     let mut diagnostics = checker.diagnostics;
@@ -123,6 +134,7 @@ struct Checker<'a> {
     diagnostics: Vec<Diagnostic>,
     types: TypeTable,
     names: BTreeMap<String, (Named, Span)>,
+    dir: Option<&'a std::path::Path>,
 }
 
 /// A process during checking: its declaration and what is known so far.
@@ -509,6 +521,21 @@ impl<'a> Checker<'a> {
             }
             seen.insert(&name.name, name.span);
             let Some(param) = entry.param_named(&name.name) else {
+                if entry.extra_params.is_some() {
+                    match literal_value(literal, &ParamType::Any) {
+                        Ok(value) => {
+                            params.insert(name.name.clone(), value);
+                        }
+                        Err(found) => self.diagnostics.push(diag::param_type(
+                            literal.span,
+                            &entry.name,
+                            &name.name,
+                            "any",
+                            &found,
+                        )),
+                    }
+                    continue;
+                }
                 let names: Vec<&str> = entry.params.iter().map(|p| p.name.as_str()).collect();
                 self.diagnostics.push(diag::unknown_param(name.span, &entry.name, &name.name, &names));
                 continue;
@@ -880,7 +907,12 @@ impl Resolver<'_, '_, '_> {
                 {
                     let types: Vec<ValueType> = inputs.iter().map(|i| i.stream.ty.clone()).collect();
                     let seen =
-                        CallTypes { params: &call.params, output: draft.output.as_ref(), inputs: &types };
+                        CallTypes {
+                        params: &call.params,
+                        output: draft.output.as_ref(),
+                        inputs: &types,
+                        dir: self.checker.dir,
+                    };
                     for problem in (check.0)(&seen) {
                         let span = param_span(&p.call, &problem);
                         self.checker.diagnostics.push(diag::param_problem(span, &entry.name, &problem));
@@ -1116,7 +1148,7 @@ impl Resolver<'_, '_, '_> {
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
         // Borrow the checker's parts separately: the formula checker reads the types and the
         // registry while the scope resolves stream names and marks streams used.
-        let Checker { registry, types, diagnostics, names } = &mut *self.checker;
+        let Checker { registry, types, diagnostics, names, dir: _ } = &mut *self.checker;
         let mut scope = MonitorScope {
             refs: BTreeMap::new(),
             names,

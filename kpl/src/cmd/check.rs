@@ -30,7 +30,8 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
     if parse.has_errors() {
         return (parse.diagnostics, None);
     }
-    let checked = kpl_semantic::check(&parse.spec, &crate::registry::signatures());
+    let dir = file.path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let checked = kpl_semantic::check_in(&parse.spec, &crate::registry::signatures(), Some(dir));
     let mut diagnostics = parse.diagnostics;
     diagnostics.extend(checked.diagnostics);
     (diagnostics, checked.spec)
