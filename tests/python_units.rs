@@ -165,7 +165,8 @@ fn the_shipped_spec_runs_on_the_wall_clock() {
 #[test]
 fn a_slow_worker_changes_nothing_in_simulated_time_and_its_latency_shows_on_the_wall_clock() {
     let Some(python) = common::python("the kpl package") else { return };
-    let fast = fixture("fast", &ticks_spec(10, "python.unit(ticks, module: \"units\", function: \"double\")"));
+    let fast =
+        fixture("fast", &ticks_spec(10, "python.unit(ticks, module: \"units\", function: \"double\")"));
     let slow = fixture(
         "slow",
         &ticks_spec(10, "python.unit(ticks, module: \"units\", function: \"double\", delay: 0.05)"),
@@ -192,7 +193,8 @@ fn a_slow_worker_changes_nothing_in_simulated_time_and_its_latency_shows_on_the_
 #[test]
 fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_goes_on() {
     let Some(python) = common::python("the kpl package") else { return };
-    let spec = fixture("raises", &ticks_spec(6, "python.unit(ticks, module: \"units\", function: \"raises_at\")"));
+    let spec =
+        fixture("raises", &ticks_spec(6, "python.unit(ticks, module: \"units\", function: \"raises_at\")"));
     let out = fresh_dir("pyunits", "raises-out");
     let output = run(&python, &spec, &out, &[]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
@@ -217,7 +219,10 @@ fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_go
     let summary = summary(&output);
     assert_eq!(summary["ending"], "UnitStopped", "{summary}");
     let failure = summary["failures"][0].as_str().unwrap();
-    assert!(failure.contains("ValueError: no good: 3") && failure.contains("policy stops the run"), "{failure}");
+    assert!(
+        failure.contains("ValueError: no good: 3") && failure.contains("policy stops the run"),
+        "{failure}"
+    );
     assert_eq!(values(&out.join("y.jsonl")), [0.0, 1.0, 2.0]);
 }
 
@@ -235,7 +240,10 @@ fn a_unit_that_hangs_is_stopped_by_the_specs_timeout_and_restarted() {
     assert!(started.elapsed().as_secs() < 300, "the hang was not bounded");
     let summary = summary(&output);
     let y = process(&summary, "y");
-    assert_eq!((result(y, "failed calls"), result(y, "worker restarts"), result(y, "inputs lost with a worker")), (1, 1, 1));
+    assert_eq!(
+        (result(y, "failed calls"), result(y, "worker restarts"), result(y, "inputs lost with a worker")),
+        (1, 1, 1)
+    );
     let example = y["error_examples"][0].as_str().unwrap();
     assert!(example.contains("did not answer within 500ms"), "{example}");
     assert_eq!(values(&out.join("y.jsonl")), [0.0, 1.0, 2.0, 4.0, 5.0]);
@@ -244,13 +252,17 @@ fn a_unit_that_hangs_is_stopped_by_the_specs_timeout_and_restarted() {
 #[test]
 fn a_killed_worker_is_restarted_and_the_input_it_had_is_counted_as_lost() {
     let Some(python) = common::python("the kpl package") else { return };
-    let spec = fixture("dies", &ticks_spec(6, "python.unit(ticks, module: \"units\", function: \"dies_at\")"));
+    let spec =
+        fixture("dies", &ticks_spec(6, "python.unit(ticks, module: \"units\", function: \"dies_at\")"));
     let out = fresh_dir("pyunits", "dies-out");
     let output = run(&python, &spec, &out, &[]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let summary = summary(&output);
     let y = process(&summary, "y");
-    assert_eq!((result(y, "failed calls"), result(y, "worker restarts"), result(y, "inputs lost with a worker")), (1, 1, 1));
+    assert_eq!(
+        (result(y, "failed calls"), result(y, "worker restarts"), result(y, "inputs lost with a worker")),
+        (1, 1, 1)
+    );
     let example = y["error_examples"][0].as_str().unwrap();
     assert!(example.contains("killed by signal 9") && example.contains("is lost"), "{example}");
     assert_eq!(values(&out.join("y.jsonl")), [0.0, 1.0, 2.0, 4.0, 5.0]);
@@ -298,7 +310,11 @@ fn float_lists_arrive_as_numpy_arrays_or_lists() {
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         let t = lines(&out.join("t.jsonl"));
         let total = &t[0]["value"];
-        assert_eq!((&total["sum"], &total["n"], &total["kind"]), (&serde_json::json!(249750.0), &serde_json::json!(1000), &serde_json::json!(kind)), "{t:?}");
+        assert_eq!(
+            (&total["sum"], &total["n"], &total["kind"]),
+            (&serde_json::json!(249750.0), &serde_json::json!(1000), &serde_json::json!(kind)),
+            "{t:?}"
+        );
     }
 }
 
@@ -317,9 +333,15 @@ fn kpl_check_finds_the_module_the_function_and_its_parameters_without_running_py
     let module = check("module", "python.unit(ticks, module: \"unit\", function: \"double\")");
     assert!(module.contains("E0118") && module.contains("no module `unit` beside the spec"), "{module}");
     let function = check("function", "python.unit(ticks, module: \"units\", function: \"doubel\")");
-    assert!(function.contains("has no function or class `doubel`") && function.contains("did you mean `double`"), "{function}");
+    assert!(
+        function.contains("has no function or class `doubel`") && function.contains("did you mean `double`"),
+        "{function}"
+    );
     let param = check("param", "python.unit(ticks, module: \"units\", function: \"double\", dealy: 0.5)");
-    assert!(param.contains("`double` has no parameter `dealy`") && param.contains("did you mean `delay`"), "{param}");
+    assert!(
+        param.contains("`double` has no parameter `dealy`") && param.contains("did you mean `delay`"),
+        "{param}"
+    );
     let inputs = check("inputs", "python.unit(ticks, ticks, module: \"units\", function: \"double\")");
     assert!(inputs.contains("`double` takes 1 input(s), but the spec gives it 2"), "{inputs}");
     let missing = check("missing", "python.unit(ticks, module: \"units\")");

@@ -79,7 +79,12 @@ fn registry(counted: Arc<AtomicU64>, python: Option<PathBuf>) -> Registry {
     registry.add_source(
         Entry::new(EntryKind::Source, "bench.values", "N floats, or lists of floats.")
             .param(Param::required("count", ParamType::Int, "how many"))
-            .param(Param::optional("length", ParamType::Int, Value::Int(0), "0: floats; else lists this long"))
+            .param(Param::optional(
+                "length",
+                ParamType::Int,
+                Value::Int(0),
+                "0: floats; else lists this long",
+            ))
             .output(TypeReq::Any),
         |ctx| {
             let count = ctx.param("count").and_then(Value::as_i64).unwrap_or(0).max(0) as u64;
@@ -100,7 +105,14 @@ fn registry(counted: Arc<AtomicU64>, python: Option<PathBuf>) -> Registry {
 }
 
 /// Seconds of one run of `unit` over `calls` values of `ty`.
-fn run_once(unit: &str, ty: &str, length: usize, calls: u64, dir: &std::path::Path, python: &Option<PathBuf>) -> Result<f64, String> {
+fn run_once(
+    unit: &str,
+    ty: &str,
+    length: usize,
+    calls: u64,
+    dir: &std::path::Path,
+    python: &Option<PathBuf>,
+) -> Result<f64, String> {
     let counted = Arc::new(AtomicU64::new(0));
     let registry = registry(counted.clone(), python.clone());
     let text = format!(
@@ -111,7 +123,12 @@ fn run_once(unit: &str, ty: &str, length: usize, calls: u64, dir: &std::path::Pa
     let parse = kpl_syntax::parse(&text);
     let checked = kpl_semantic::check(&parse.spec, registry.signatures());
     let spec = checked.spec.ok_or_else(|| format!("{:?}", checked.diagnostics))?;
-    let config = RunConfig { clock: ClockKind::Sim, spec_dir: dir.to_path_buf(), out_dir: dir.join("out"), ..RunConfig::default() };
+    let config = RunConfig {
+        clock: ClockKind::Sim,
+        spec_dir: dir.to_path_buf(),
+        out_dir: dir.join("out"),
+        ..RunConfig::default()
+    };
     let start = Instant::now();
     let report = kpl_runtime::run(&spec, &registry, &config, None).map_err(|e| e.to_string())?;
     let elapsed = start.elapsed().as_secs_f64();
@@ -128,20 +145,31 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
     let dir = std::env::temp_dir().join(format!("kpl-bench-python-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| BenchError::Failed(e.to_string()))?;
     std::fs::write(dir.join("kpl_bench_unit.py"), MODULE).map_err(|e| BenchError::Failed(e.to_string()))?;
-    let python_unit = "python.unit(src, module: \"kpl_bench_unit\", function: \"identity\", arrays: \"list\")";
-    let numpy_unit = "python.unit(src, module: \"kpl_bench_unit\", function: \"identity\", arrays: \"numpy\")";
+    let python_unit =
+        "python.unit(src, module: \"kpl_bench_unit\", function: \"identity\", arrays: \"list\")";
+    let numpy_unit =
+        "python.unit(src, module: \"kpl_bench_unit\", function: \"identity\", arrays: \"numpy\")";
     let best = |unit: &str, ty: &str, length: usize, calls: u64| -> Result<f64, BenchError> {
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
-            best = best.min(run_once(unit, ty, length, calls, &dir, &args.python).map_err(BenchError::Failed)?);
+            best =
+                best.min(run_once(unit, ty, length, calls, &dir, &args.python).map_err(BenchError::Failed)?);
         }
         Ok(best)
     };
     // The worker's start (interpreter, imports, handshake): a run of one call.
     let start = best(python_unit, "float", 0, 1)? - best("bench.identity(src)", "float", 0, 1)?;
-    writeln!(out, "Python units against a Rust unit, simulated time, {} calls, best of {}", args.calls, args.repeat)?;
+    writeln!(
+        out,
+        "Python units against a Rust unit, simulated time, {} calls, best of {}",
+        args.calls, args.repeat
+    )?;
     writeln!(out, "worker start (interpreter, imports, handshake): {:.0} ms", start * 1e3)?;
-    writeln!(out, "{:<26} {:>12} {:>12} {:>16} {:>14}", "value", "Rust us/call", "Python us/call", "overhead us/call", "Python calls/s")?;
+    writeln!(
+        out,
+        "{:<26} {:>12} {:>12} {:>16} {:>14}",
+        "value", "Rust us/call", "Python us/call", "overhead us/call", "Python calls/s"
+    )?;
     for (name, ty, length, unit) in [
         ("float", "float", 0, python_unit),
         ("list<float> x 1000 (list)", "list<float>", 1000, python_unit),

@@ -906,8 +906,7 @@ impl Resolver<'_, '_, '_> {
                     && self.checker.diagnostics.len() == before
                 {
                     let types: Vec<ValueType> = inputs.iter().map(|i| i.stream.ty.clone()).collect();
-                    let seen =
-                        CallTypes {
+                    let seen = CallTypes {
                         params: &call.params,
                         output: draft.output.as_ref(),
                         inputs: &types,

@@ -16,19 +16,34 @@ pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let (module, function) = (text("module"), text("function"));
     let mut problems = Vec::new();
     if !is_module_name(&module) {
-        problems.push(problem("module", format!("`{module}` is not a Python module name"), "dotted identifiers, such as `vehicle_kind` or `detectors.boxes`"));
+        problems.push(problem(
+            "module",
+            format!("`{module}` is not a Python module name"),
+            "dotted identifiers, such as `vehicle_kind` or `detectors.boxes`",
+        ));
         return problems;
     }
     if !is_identifier(&function) {
-        problems.push(problem("function", format!("`{function}` is not a Python name"), "the name of a function or class defined in the module"));
+        problems.push(problem(
+            "function",
+            format!("`{function}` is not a Python name"),
+            "the name of a function or class defined in the module",
+        ));
         return problems;
     }
     let Some(dir) = call.dir else { return problems };
     let Some(file) = find_module(dir, &module) else {
         problems.push(problem(
             "module",
-            format!("no module `{module}` beside the spec ({}) nor in the active virtual environment", dir.display()),
-            &format!("kpl looks for {}.py or {}/__init__.py beside the spec", module.replace('.', "/"), module.replace('.', "/")),
+            format!(
+                "no module `{module}` beside the spec ({}) nor in the active virtual environment",
+                dir.display()
+            ),
+            &format!(
+                "kpl looks for {}.py or {}/__init__.py beside the spec",
+                module.replace('.', "/"),
+                module.replace('.', "/")
+            ),
         ));
         return problems;
     };
@@ -46,7 +61,11 @@ pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
             None if names.is_empty() => "it defines no function or class at its top level".to_string(),
             None => format!("it defines: {}", names.join(", ")),
         };
-        problems.push(problem("function", format!("{} has no function or class `{function}`", file.display()), &hint));
+        problems.push(problem(
+            "function",
+            format!("{} has no function or class `{function}`", file.display()),
+            &hint,
+        ));
         return problems;
     };
     let Some(params) = &definition.params else { return problems };
@@ -56,7 +75,10 @@ pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
             let known: Vec<&str> = params.keywords.iter().map(String::as_str).collect();
             let hint = match kpl_core::closest(name, &known) {
                 Some(near) => format!("did you mean `{near}`?"),
-                None => format!("`{function}` takes the parameters: {}", if known.is_empty() { "none".to_string() } else { known.join(", ") }),
+                None => format!(
+                    "`{function}` takes the parameters: {}",
+                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                ),
             };
             problems.push(problem(name, format!("`{function}` has no parameter `{name}`"), &hint));
         }
@@ -84,7 +106,8 @@ fn problem(param: &str, message: String, hint: &str) -> ParamProblem {
 
 fn is_identifier(name: &str) -> bool {
     let mut chars = name.chars();
-    chars.next().is_some_and(|c| c.is_alphabetic() || c == '_') && chars.all(|c| c.is_alphanumeric() || c == '_')
+    chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')
+        && chars.all(|c| c.is_alphanumeric() || c == '_')
 }
 
 fn is_module_name(name: &str) -> bool {
@@ -94,7 +117,8 @@ fn is_module_name(name: &str) -> bool {
 /// The module's file beside the spec, else in `$VIRTUAL_ENV`'s site-packages.
 fn find_module(dir: &Path, module: &str) -> Option<PathBuf> {
     let relative = module.replace('.', "/");
-    let candidates = |root: &PathBuf| [root.join(format!("{relative}.py")), root.join(&relative).join("__init__.py")];
+    let candidates =
+        |root: &PathBuf| [root.join(format!("{relative}.py")), root.join(&relative).join("__init__.py")];
     let mut roots = vec![dir.to_path_buf()];
     if let Some(env) = std::env::var_os("VIRTUAL_ENV")
         && let Ok(entries) = std::fs::read_dir(Path::new(&env).join("lib"))
@@ -133,8 +157,16 @@ fn top_level_definitions(source: &str) -> Vec<Definition> {
         if let Some(rest) = rest.strip_prefix("def ") {
             let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
             let open = at + (line.len() - rest.len()) + name.len();
-            let params = source[open..].trim_start().strip_prefix('(').and_then(parameter_list).map(parse_params);
-            found.push(Definition { name, params: Some(params.unwrap_or(Params { any_positional: true, any_keyword: true, ..Params::default() })) });
+            let params =
+                source[open..].trim_start().strip_prefix('(').and_then(parameter_list).map(parse_params);
+            found.push(Definition {
+                name,
+                params: Some(params.unwrap_or(Params {
+                    any_positional: true,
+                    any_keyword: true,
+                    ..Params::default()
+                })),
+            });
         } else if let Some(rest) = line.strip_prefix("class ") {
             let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
             found.push(Definition { name, params: None });
@@ -236,7 +268,12 @@ fn mentions(source: &str, name: &str) -> bool {
         let before = source[..i].chars().next_back();
         let after = source[i + name.len()..].chars().next();
         let word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
-        !word(before) && !word(after) && source[..i].rsplit('\n').next().is_some_and(|l| l.starts_with("from ") || l.starts_with("import ") || !l.starts_with(' '))
+        !word(before)
+            && !word(after)
+            && source[..i]
+                .rsplit('\n')
+                .next()
+                .is_some_and(|l| l.starts_with("from ") || l.starts_with("import ") || !l.starts_with(' '))
     })
 }
 

@@ -34,8 +34,17 @@ use worker::{Answer, Launch, StartError, Worker};
 pub const ENTRY: &str = "python.unit";
 
 /// The parameters of `python.unit` itself; every other named parameter is the unit's own.
-pub const RESERVED: &[&str] =
-    &["module", "function", "python", "timeout", "start_timeout", "on_error", "restarts", "arrays", "synchronized"];
+pub const RESERVED: &[&str] = &[
+    "module",
+    "function",
+    "python",
+    "timeout",
+    "start_timeout",
+    "on_error",
+    "restarts",
+    "arrays",
+    "synchronized",
+];
 
 /// What `kpl run` knows that a spec does not: the interpreter named on its command line
 /// (`--python`) and the spec's file (for positions in errors). Kept in the registry
@@ -140,7 +149,8 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
         }
     }
     let output = ctx.process.output.clone().unwrap_or(ValueType::Any);
-    let position = options.spec_file.as_deref().and_then(|file| position(file, ctx.process.span.start as usize));
+    let position =
+        options.spec_file.as_deref().and_then(|file| position(file, ctx.process.span.start as usize));
     let name = match position {
         Some(at) => format!("`{}` ({module}.{function}, {at})", ctx.process.name),
         None => format!("`{}` ({module}.{function})", ctx.process.name),
@@ -183,7 +193,11 @@ fn interpreter(in_spec: &str, on_command_line: Option<&Path>, spec_dir: &Path) -
     }
     if !in_spec.is_empty() {
         let path = Path::new(in_spec);
-        return if path.components().count() > 1 && path.is_relative() { spec_dir.join(path) } else { path.into() };
+        return if path.components().count() > 1 && path.is_relative() {
+            spec_dir.join(path)
+        } else {
+            path.into()
+        };
     }
     if let Some(env) = std::env::var_os("VIRTUAL_ENV") {
         let python = Path::new(&env).join("bin").join("python");
@@ -227,7 +241,15 @@ struct PythonUnit {
 
 impl PythonUnit {
     fn new(config: Arc<Config>, stats: Arc<ProcessStats>) -> PythonUnit {
-        PythonUnit { config, worker: None, stats, counts: Counts::default(), started: 0, gave_up: None, call: Vec::new() }
+        PythonUnit {
+            config,
+            worker: None,
+            stats,
+            counts: Counts::default(),
+            started: 0,
+            gave_up: None,
+            call: Vec::new(),
+        }
     }
 
     fn report(&self) {
@@ -247,7 +269,13 @@ impl PythonUnit {
     }
 
     /// One call, on a blocking thread (the worker answers on a pipe); the worker comes back.
-    async fn call(&mut self, valid: Time, now: Time, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+    async fn call(
+        &mut self,
+        valid: Time,
+        now: Time,
+        input: &Input<'_>,
+        out: &mut Emitter,
+    ) -> Result<(), ProcessError> {
         self.counts.calls += 1;
         if let Some(why) = &self.gave_up {
             self.counts.lost += 1;
@@ -301,7 +329,10 @@ impl PythonUnit {
                         self.started, self.config.restarts
                     ));
                 }
-                let lost = format!("{trouble}; the input at valid time {} is lost and a new worker is started for the next", kpl_core::format_micros(valid));
+                let lost = format!(
+                    "{trouble}; the input at valid time {} is lost and a new worker is started for the next",
+                    kpl_core::format_micros(valid)
+                );
                 return Err(self.fail(lost));
             }
             Err(StartError::Spawn(e)) => {
@@ -309,7 +340,8 @@ impl PythonUnit {
                 return Err(self.fail(e));
             }
             Err(StartError::Refused(e)) => {
-                let message = format!("the worker could not load the unit: {}\n{}", e.error, e.traceback.trim_end());
+                let message =
+                    format!("the worker could not load the unit: {}\n{}", e.error, e.traceback.trim_end());
                 self.gave_up = Some(message.clone());
                 return Err(self.fail(message));
             }
@@ -321,11 +353,12 @@ impl PythonUnit {
                     out.emit(sample.value);
                     Ok(())
                 }
-                Ok(kpl_zenoh::codec::Message::End { .. }) => Err(self.fail("the worker sent an end, not an output".into())),
-                Err(e) => Err(self.fail(format!(
-                    "returned a value that is not a `{}`: {e}",
-                    self.config.output
-                ))),
+                Ok(kpl_zenoh::codec::Message::End { .. }) => {
+                    Err(self.fail("the worker sent an end, not an output".into()))
+                }
+                Err(e) => {
+                    Err(self.fail(format!("returned a value that is not a `{}`: {e}", self.config.output)))
+                }
             },
             Answer::Raised(e) => {
                 let message = if e.traceback.is_empty() {
@@ -344,7 +377,11 @@ impl AsyncUnit for PythonUnit {
         self.config.synchronized
     }
 
-    fn on_input<'a>(&'a mut self, input: &'a Input<'a>, out: &'a mut Emitter) -> BoxFuture<'a, Result<(), ProcessError>> {
+    fn on_input<'a>(
+        &'a mut self,
+        input: &'a Input<'a>,
+        out: &'a mut Emitter,
+    ) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move { self.call(input.valid, input.now, input, out).await })
     }
 

@@ -93,7 +93,12 @@ pub fn read_frame(input: &mut impl Read) -> std::io::Result<Option<Frame>> {
     while filled < head.len() {
         match input.read(&mut head[filled..])? {
             0 if filled == 0 => return Ok(None),
-            0 => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the worker's output ended inside a frame")),
+            0 => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::UnexpectedEof,
+                    "the worker's output ended inside a frame",
+                ));
+            }
             n => filled += n,
         }
     }
@@ -108,7 +113,12 @@ pub fn read_frame(input: &mut impl Read) -> std::io::Result<Option<Frame>> {
 
 /// The body of a call: the valid time, the time now, and each input's latest sample as a KPL
 /// wire message (or absent).
-pub fn encode_call(valid: Time, now: Time, inputs: &[Option<&Sample>], out: &mut Vec<u8>) -> Result<(), String> {
+pub fn encode_call(
+    valid: Time,
+    now: Time,
+    inputs: &[Option<&Sample>],
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
     out.clear();
     out.extend_from_slice(&valid.to_le_bytes());
     out.extend_from_slice(&now.to_le_bytes());

@@ -35,7 +35,11 @@ pub enum Trouble {
 impl std::fmt::Display for Trouble {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Trouble::Hung(t) => write!(f, "did not answer within {} (the unit's `timeout`)", kpl_core::format_micros(t.as_micros() as i64)),
+            Trouble::Hung(t) => write!(
+                f,
+                "did not answer within {} (the unit's `timeout`)",
+                kpl_core::format_micros(t.as_micros() as i64)
+            ),
             Trouble::Died(how) => write!(f, "its worker process {how}"),
             Trouble::Protocol(what) => write!(f, "its worker broke the protocol: {what}"),
         }
@@ -118,19 +122,22 @@ impl Worker {
         }
         match worker.receive(launch.start_timeout) {
             Ok(Frame { kind: protocol::READY, body }) => {
-                let ready: Ready = serde_json::from_slice(&body)
-                    .map_err(|e| StartError::Trouble(Trouble::Protocol(format!("a ready frame that is not JSON: {e}"))))?;
+                let ready: Ready = serde_json::from_slice(&body).map_err(|e| {
+                    StartError::Trouble(Trouble::Protocol(format!("a ready frame that is not JSON: {e}")))
+                })?;
                 if ready.protocol != protocol::PROTOCOL {
-                    let what = format!("it speaks protocol {}, kpl speaks {}", ready.protocol, protocol::PROTOCOL);
+                    let what =
+                        format!("it speaks protocol {}, kpl speaks {}", ready.protocol, protocol::PROTOCOL);
                     return Err(StartError::Trouble(Trouble::Protocol(what)));
                 }
                 worker.ready = ready;
                 Ok(worker)
             }
             Ok(Frame { kind: protocol::ERROR, body }) => Err(StartError::Refused(worker_error(&body))),
-            Ok(Frame { kind, .. }) => {
-                Err(StartError::Trouble(Trouble::Protocol(format!("expected ready, got a `{}` frame", kind as char))))
-            }
+            Ok(Frame { kind, .. }) => Err(StartError::Trouble(Trouble::Protocol(format!(
+                "expected ready, got a `{}` frame",
+                kind as char
+            )))),
             Err(trouble) => Err(StartError::Trouble(trouble)),
         }
     }
@@ -144,7 +151,9 @@ impl Worker {
             Frame { kind: protocol::OUTPUT, body } if body.is_empty() => Ok(Answer::Nothing),
             Frame { kind: protocol::OUTPUT, body } => Ok(Answer::Output(body)),
             Frame { kind: protocol::ERROR, body } => Ok(Answer::Raised(worker_error(&body))),
-            Frame { kind, .. } => Err(Trouble::Protocol(format!("expected an output, got a `{}` frame", kind as char))),
+            Frame { kind, .. } => {
+                Err(Trouble::Protocol(format!("expected an output, got a `{}` frame", kind as char)))
+            }
         }
     }
 
