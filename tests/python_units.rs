@@ -217,7 +217,7 @@ fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_go
     let output = run(&python, &spec, &out, &[]);
     assert_eq!(output.status.code(), Some(1));
     let summary = summary(&output);
-    assert_eq!(summary["ending"], "UnitStopped", "{summary}");
+    assert_eq!(summary["ending"], "unit_stopped", "{summary}");
     let failure = summary["failures"][0].as_str().unwrap();
     assert!(
         failure.contains("ValueError: no good: 3") && failure.contains("policy stops the run"),
