@@ -205,7 +205,7 @@ fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_go
     assert!(example.contains("ValueError: no good: 3"), "{example}");
     assert!(example.contains("Traceback (most recent call last)"), "{example}");
     assert!(example.contains("units.py\", line"), "{example}");
-    assert!(example.contains("raises.kpl:2:1"), "the spec's position of the unit: {example}");
+    assert!(example.contains("raises.kpl:2:"), "the spec's position of the unit: {example}");
     assert_eq!(values(&out.join("y.jsonl")), [0.0, 1.0, 2.0, 4.0, 5.0]);
 
     // `on_error: "stop"` stops the run there, and says so.
