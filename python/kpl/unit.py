@@ -115,7 +115,8 @@ def _plain(value: Any) -> Any:
     if numpy is not None:
         if isinstance(value, numpy.ndarray):
             if value.dtype == numpy.float64 and value.ndim == 1:
-                return numpy.ascontiguousarray(value, dtype="<f8")
+                # Native byte order: its buffer's format is `d`, which the wire packs in one copy.
+                return numpy.ascontiguousarray(value, dtype=numpy.float64)
             return _plain(value.tolist())
         if isinstance(value, numpy.generic):
             return value.item()
@@ -183,7 +184,7 @@ class Unit:
             return b"O", b""
         try:
             return b"O", wire.encode_sample(valid, now, _plain(result))
-        except (wire.WireError, TypeError, ValueError, OverflowError) as e:
+        except Exception as e:  # a value the wire format has no encoding for: the unit's failure, not the worker's
             return b"E", _error(f"the unit returned a value KPL cannot take: {e}")
 
 

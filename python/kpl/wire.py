@@ -206,9 +206,17 @@ def _double_buffer(v: Any) -> "memoryview | None":
 
 
 def _encode_floats(values: Any, out: bytearray) -> None:
-    numbers = array.array("d", values)
-    for x in numbers:
-        _float(x, "a list of floats")
+    view = _double_buffer(values)
+    if view is not None:
+        # A buffer of doubles (NumPy's float64 arrays: format `<d` or `=d`, which array.array does
+        # not take): its bytes in one copy.
+        numbers = array.array("d")
+        numbers.frombytes(view.tobytes())
+    else:
+        numbers = array.array("d", values)
+    if not all(map(math.isfinite, numbers)):
+        for x in numbers:
+            _float(x, "a list of floats")
     if not _LITTLE:
         numbers.byteswap()
     out += b"F" + _U32.pack(len(numbers))
