@@ -94,8 +94,19 @@ pub fn check_text(text: &str, registry: &Registry) -> Result<hir::Spec, SpecErro
 
 /// Checks a parsed spec against a registry.
 pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
-    let mut checker =
-        Checker { registry, diagnostics: Vec::new(), types: TypeTable::default(), names: BTreeMap::new() };
+    check_in(spec, registry, None)
+}
+
+/// Checks a parsed spec against a registry, as a spec of the folder `dir`: the checks of calls
+/// whose parameters name files (a ROS 2 topic's `msgs`) read them from there.
+pub fn check_in(spec: &ast::Spec, registry: &Registry, dir: Option<&std::path::Path>) -> Checked {
+    let mut checker = Checker {
+        registry,
+        diagnostics: Vec::new(),
+        types: TypeTable::default(),
+        names: BTreeMap::new(),
+        dir,
+    };
     // Hints look at a bounded number of names in all, so many unknown names stay linear.
     let result = kpl_core::suggest::with_budget(|| checker.run(spec));
     let mut diagnostics = checker.diagnostics;
@@ -123,6 +134,8 @@ struct Checker<'a> {
     diagnostics: Vec<Diagnostic>,
     types: TypeTable,
     names: BTreeMap<String, (Named, Span)>,
+    /// The spec's folder, for the checks of calls that read files.
+    dir: Option<&'a std::path::Path>,
 }
 
 /// A process during checking: its declaration and what is known so far.
@@ -879,8 +892,12 @@ impl Resolver<'_, '_, '_> {
                     && self.checker.diagnostics.len() == before
                 {
                     let types: Vec<ValueType> = inputs.iter().map(|i| i.stream.ty.clone()).collect();
-                    let seen =
-                        CallTypes { params: &call.params, output: draft.output.as_ref(), inputs: &types };
+                    let seen = CallTypes {
+                        params: &call.params,
+                        output: draft.output.as_ref(),
+                        inputs: &types,
+                        dir: self.checker.dir,
+                    };
                     for problem in (check.0)(&seen) {
                         let span = param_span(&p.call, &problem);
                         self.checker.diagnostics.push(diag::param_problem(span, &entry.name, &problem));
@@ -1116,7 +1133,7 @@ impl Resolver<'_, '_, '_> {
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
         // Borrow the checker's parts separately: the formula checker reads the types and the
         // registry while the scope resolves stream names and marks streams used.
-        let Checker { registry, types, diagnostics, names } = &mut *self.checker;
+        let Checker { registry, types, diagnostics, names, .. } = &mut *self.checker;
         let mut scope = MonitorScope {
             refs: BTreeMap::new(),
             names,

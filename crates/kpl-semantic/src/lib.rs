@@ -28,7 +28,7 @@ pub mod render;
 pub mod svg;
 mod types;
 
-pub use check::{Checked, SpecErrors, check, check_identification, check_text};
+pub use check::{Checked, SpecErrors, check, check_identification, check_in, check_text};
 pub use formula::bound_micros;
 pub use kpl_core::{closest, did_you_mean};
 pub use types::{BUILTIN_TYPES, default_symbol};
