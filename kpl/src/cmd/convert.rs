@@ -3,7 +3,9 @@
 //! `available` and `value` are the message, copied as JSON; order is kept. Going to MCAP, the
 //! streams are also written in Foxglove's schemas for its 3D panel (`kpl_mcap::foxglove`; the
 //! roads, occluders and camera of `--spec`), unless `--no-foxglove`. Going from MCAP, a file cut
-//! short by a killed run gives what its chunks hold (`kpl_mcap::recover`).
+//! short by a killed run gives what its chunks hold (`kpl_mcap::recover`). To a rosbag2 bag (an
+//! output without extension), the samples of the streams the spec's `ros2.publish` sinks publish
+//! become CDR messages of their topics, mapped as a run publishes them (`kpl_mcap::rosbag2`).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -23,12 +25,14 @@ use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n  kpl convert out/markers/tracks.jsonl out/markers/bag --spec specs/ros2/markers.kpl\n\nThe direction follows the extensions (.jsonl, .mcap; none: a rosbag2 bag, written through the\nros2.publish sinks of --spec, each sample of the stream a sink publishes a message of its topic). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
 )]
 pub struct Args {
     /// The recording to read (.jsonl or .mcap).
     pub input: PathBuf,
-    /// The file to write (.mcap or .jsonl).
+    /// The file to write (.mcap or .jsonl), or a rosbag2 bag: a folder (no extension) with
+    /// `metadata.yaml` and the bag's MCAP file, of the topics the --spec's ros2.publish sinks
+    /// publish.
     pub output: PathBuf,
     /// The spec that made the recording: gives each stream's type for the MCAP schemas (without
     /// it, a stream's schema accepts any value).
@@ -67,9 +71,25 @@ pub fn run(args: Args) -> ExitCode {
             to_mcap(&args.input, &args.output, &types, compression, views)
         }
         ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
+        ("jsonl", "") => {
+            let Some(path) = &args.spec else {
+                eprintln!(
+                    "error: a rosbag2 bag is written through the ros2.publish sinks of the spec that made the recording: name it with --spec"
+                );
+                return ExitCode::from(2);
+            };
+            let spec = match super::check::load_checked(path) {
+                Ok(spec) => spec,
+                Err(code) => return code,
+            };
+            if args.no_foxglove || args.compression != "zstd" {
+                eprintln!("warning: --no-foxglove and --compression apply to MCAP recordings, not to a rosbag2 bag");
+            }
+            to_rosbag2(&args.input, &args.output, &spec, path.parent().unwrap_or(Path::new("")))
+        }
         (from, to) => {
             eprintln!(
-                "error: kpl convert goes from .jsonl to .mcap or from .mcap to .jsonl, not from `.{from}` to `.{to}`"
+                "error: kpl convert goes from .jsonl to .mcap, from .mcap to .jsonl, or from .jsonl to a rosbag2 bag (a folder: no extension), not from `.{from}` to `.{to}`"
             );
             return ExitCode::from(2);
         }
@@ -187,6 +207,91 @@ fn to_mcap(
         converted.samples += 1;
     }
     recorder.finish().map_err(|e| e.to_string())?;
+    Ok(converted)
+}
+
+/// A recording into a rosbag2 bag (the folder `output`): each sample of a stream that a
+/// `ros2.publish` sink of the spec publishes becomes a message of that sink's topic, mapped as the
+/// run publishes it. Samples of other streams are counted and said, not written.
+fn to_rosbag2(input: &Path, output: &Path, spec: &kpl_semantic::hir::Spec, dir: &Path) -> Result<Converted, String> {
+    use kpl_mcap::rosbag2::{BagWriter, publications};
+    let mut publications = publications(spec, dir)?;
+    if publications.is_empty() {
+        return Err("the spec has no ros2.publish sink: a bag holds the ROS 2 topics a spec publishes".into());
+    }
+    let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+    let mut bag = BagWriter::create(output).map_err(|e| e.to_string())?;
+    let mut topics = Vec::new();
+    for p in &publications {
+        topics.push(bag.add_topic(&p.topic, &p.schema, p.qos).map_err(|e| e.to_string())?);
+    }
+    let mut converted = Converted { samples: 0, skipped: 0 };
+    let mut unpublished: BTreeMap<String, u64> = BTreeMap::new();
+    let mut lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
+    let mut number = 0u64;
+    loop {
+        number += 1;
+        let location = format!("{}:{number}", input.display());
+        let line = match lines.next_line() {
+            Ok(Some(line)) => line,
+            Ok(None) => break,
+            Err(error) => {
+                bag.finish().map_err(|e| e.to_string())?;
+                return Err(format!(
+                    "cannot read {}: {error}; the {} sample(s) before it are in {}",
+                    input.display(),
+                    converted.samples,
+                    output.display()
+                ));
+            }
+        };
+        let Ok(line) = std::str::from_utf8(line) else {
+            skip(&location, "the line is not UTF-8 text");
+            converted.skipped += 1;
+            continue;
+        };
+        if line.trim().is_empty() {
+            continue;
+        }
+        let line = match read_line(line) {
+            Ok(line) => line,
+            Err(error) => {
+                skip(&location, &error);
+                converted.skipped += 1;
+                continue;
+            }
+        };
+        let mut published = false;
+        for (p, topic) in publications.iter_mut().zip(&topics) {
+            if p.stream != line.stream {
+                continue;
+            }
+            published = true;
+            let message = Value::from_json(&line.value, &p.stream_type)
+                .map_err(|e| e.to_string())
+                .and_then(|value| p.encode(line.valid, &value).map(<[u8]>::to_vec));
+            match message {
+                Ok(message) => {
+                    bag.write(*topic, line.available, &message).map_err(|e| e.to_string())?;
+                    converted.samples += 1;
+                }
+                Err(error) => {
+                    skip(&location, &format!("`{}` on {}: {error}", line.stream, p.topic));
+                    converted.skipped += 1;
+                }
+            }
+        }
+        if !published {
+            *unpublished.entry(line.stream).or_default() += 1;
+        }
+    }
+    let written = bag.finish().map_err(|e| e.to_string())?;
+    for topic in &written.topics {
+        eprintln!("{}: {} message(s) of {}", topic.name, topic.message_count, topic.type_name);
+    }
+    for (stream, count) in unpublished {
+        eprintln!("note: {count} sample(s) of `{stream}` are not in the bag: no ros2.publish of the spec publishes it");
+    }
     Ok(converted)
 }
 
