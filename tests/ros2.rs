@@ -156,7 +156,6 @@ fn markers_in_cars_out_with_a_ros2_node() {
         malformed, 3,
         "kpl counts the message without attachment, the wrong hash and the cut CDR: {summary:#}"
     );
-
 }
 
 /// A rosbag2 recording that `rosbags` wrote (MCAP, CDR messages, `ros2msg` schemas: what
@@ -263,7 +262,13 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     assert!(converted.status.success(), "{said}");
     assert!(said.contains("sample(s) of `markers` are not in the bag"), "{said}");
     assert!(bag.join("metadata.yaml").is_file() && bag.join("cars_0.mcap").is_file());
-    let read = std::process::Command::new(&python).arg(&script).arg("read").arg(&bag).arg(out.join("tracks.jsonl")).output().unwrap();
+    let read = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("read")
+        .arg(&bag)
+        .arg(out.join("tracks.jsonl"))
+        .output()
+        .unwrap();
     assert!(
         read.status.success(),
         "{}{}",

@@ -76,7 +76,8 @@ impl Source for Replay {
                             continue;
                         }
                     };
-                    let Some(sample) = times.admit(ctx, &location, Sample::new(valid, available, value))? else {
+                    let Some(sample) = times.admit(ctx, &location, Sample::new(valid, available, value))?
+                    else {
                         continue;
                     };
                     if !ctx.wait_until(sample.available).await {

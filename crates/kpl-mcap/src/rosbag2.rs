@@ -69,8 +69,9 @@ impl BagWriter {
             .compression(None)
             .compression_threads(0)
             .disable_seeking(true);
-        let writer =
-            options.create(BufWriter::new(out)).map_err(|error| WriteError::Mcap { path: display(), error })?;
+        let writer = options
+            .create(BufWriter::new(out))
+            .map_err(|error| WriteError::Mcap { path: display(), error })?;
         Ok(BagWriter { dir: dir.to_path_buf(), file, writer, topics: Vec::new(), start: None, end: 0 })
     }
 
@@ -104,7 +105,8 @@ impl BagWriter {
         t.sequence = t.sequence.wrapping_add(1);
         t.info.message_count += 1;
         let ns = mcap_time(time);
-        let header = MessageHeader { channel_id: t.channel, sequence: t.sequence, log_time: ns, publish_time: ns };
+        let header =
+            MessageHeader { channel_id: t.channel, sequence: t.sequence, log_time: ns, publish_time: ns };
         self.start = Some(self.start.map_or(ns, |s| s.min(ns)));
         self.end = self.end.max(ns);
         self.writer.write_to_known_channel(&header, cdr).map_err(|e| self.mcap_error(e))
@@ -176,7 +178,9 @@ pub fn publications(spec: &hir::Spec, dir: &Path) -> Result<Vec<Publication>, St
         }
         let Some(input) = process.inputs.first() else { continue };
         let params = &call.params;
-        let err = |e: kpl_ros2::mapping::MapError| format!("sink `{}`: {}", process.name, topic::describe(params, &e));
+        let err = |e: kpl_ros2::mapping::MapError| {
+            format!("sink `{}`: {}", process.name, topic::describe(params, &e))
+        };
         let schema = topic::schema_in(params, dir).map_err(err)?;
         let map = OutMap::compile(schema.clone(), &topic::out_spec(params), &input.stream.ty).map_err(err)?;
         let namespace = topic::text(params, "namespace");

@@ -397,7 +397,13 @@ mod tests {
         let order: Vec<&str> = text.lines().filter_map(|l| l.strip_prefix("MSG: ")).collect();
         assert_eq!(
             order,
-            ["std_msgs/Header", "builtin_interfaces/Time", "geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"]
+            [
+                "std_msgs/Header",
+                "builtin_interfaces/Time",
+                "geometry_msgs/Pose",
+                "geometry_msgs/Point",
+                "geometry_msgs/Quaternion"
+            ]
         );
     }
 

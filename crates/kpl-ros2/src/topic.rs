@@ -99,7 +99,11 @@ pub fn schema_in(params: &BTreeMap<String, Value>, dir: &Path) -> Result<Arc<Sch
 
 /// Checks a mapping into KPL (a subscription, a replay) against the message type and the
 /// stream's type `output`.
-pub fn check_in(params: &BTreeMap<String, Value>, output: &ValueType, dir: Option<&Path>) -> Result<(), MapError> {
+pub fn check_in(
+    params: &BTreeMap<String, Value>,
+    output: &ValueType,
+    dir: Option<&Path>,
+) -> Result<(), MapError> {
     match schema(params, dir)? {
         Some(schema) => InMap::compile(&schema, &in_spec(params), output).map(|_| ()),
         None => Ok(()),
@@ -107,7 +111,11 @@ pub fn check_in(params: &BTreeMap<String, Value>, output: &ValueType, dir: Optio
 }
 
 /// Checks a mapping out of KPL (a publication) against the message type and the input's type.
-pub fn check_out(params: &BTreeMap<String, Value>, input: &ValueType, dir: Option<&Path>) -> Result<(), MapError> {
+pub fn check_out(
+    params: &BTreeMap<String, Value>,
+    input: &ValueType,
+    dir: Option<&Path>,
+) -> Result<(), MapError> {
     match schema(params, dir)? {
         Some(schema) => OutMap::compile(schema, &out_spec(params), input).map(|_| ()),
         None => Ok(()),

@@ -83,7 +83,9 @@ pub fn run(args: Args) -> ExitCode {
                 Err(code) => return code,
             };
             if args.no_foxglove || args.compression != "zstd" {
-                eprintln!("warning: --no-foxglove and --compression apply to MCAP recordings, not to a rosbag2 bag");
+                eprintln!(
+                    "warning: --no-foxglove and --compression apply to MCAP recordings, not to a rosbag2 bag"
+                );
             }
             to_rosbag2(&args.input, &args.output, &spec, path.parent().unwrap_or(Path::new("")))
         }
@@ -213,7 +215,12 @@ fn to_mcap(
 /// A recording into a rosbag2 bag (the folder `output`): each sample of a stream that a
 /// `ros2.publish` sink of the spec publishes becomes a message of that sink's topic, mapped as the
 /// run publishes it. Samples of other streams are counted and said, not written.
-fn to_rosbag2(input: &Path, output: &Path, spec: &kpl_semantic::hir::Spec, dir: &Path) -> Result<Converted, String> {
+fn to_rosbag2(
+    input: &Path,
+    output: &Path,
+    spec: &kpl_semantic::hir::Spec,
+    dir: &Path,
+) -> Result<Converted, String> {
     use kpl_mcap::rosbag2::{BagWriter, publications};
     let mut publications = publications(spec, dir)?;
     if publications.is_empty() {
@@ -290,7 +297,9 @@ fn to_rosbag2(input: &Path, output: &Path, spec: &kpl_semantic::hir::Spec, dir: 
         eprintln!("{}: {} message(s) of {}", topic.name, topic.message_count, topic.type_name);
     }
     for (stream, count) in unpublished {
-        eprintln!("note: {count} sample(s) of `{stream}` are not in the bag: no ros2.publish of the spec publishes it");
+        eprintln!(
+            "note: {count} sample(s) of `{stream}` are not in the bag: no ros2.publish of the spec publishes it"
+        );
     }
     Ok(converted)
 }
