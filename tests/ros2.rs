@@ -7,7 +7,10 @@
 //! (vision_msgs); the node decodes them (rclpy, rosbags) and every car of kpl's own recording is
 //! among them, `ns` its symbol and `id` a number that stays with it. The node's three bad
 //! messages (no attachment, a wrong type hash, cut CDR) are counted, and kpl ends on its own
-//! once the publisher has gone. Skipped without `KPL_PYTHON` unless `KPL_REQUIRE_ORACLES=1`.
+//! once the publisher has gone. Recordings: a rosbag2 bag of `rosbags` converts to JSON lines
+//! field for field, and replays through markers.kpl's mapping (specs/ros2/replay.kpl) into cars,
+//! whose bag kpl writes and `rosbags` and `mcap-ros2-support` read. Skipped without `KPL_PYTHON`
+//! unless `KPL_REQUIRE_ORACLES=1`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;
