@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
 use foxglove::{Context, PartialMetadata, WebSocketServer, WebSocketServerHandle};
@@ -93,9 +93,11 @@ impl FoxgloveServer {
     /// disconnect), then disconnected.
     pub fn stop(mut self) {
         if let Some(handle) = &self.handle {
-            let started = Instant::now();
-            while handle.client_count() > 0 && started.elapsed() < LINGER {
-                std::thread::sleep(Duration::from_millis(50));
+            let step = Duration::from_millis(50);
+            let mut left = LINGER.as_millis() / step.as_millis();
+            while handle.client_count() > 0 && left > 0 {
+                std::thread::sleep(step);
+                left -= 1;
             }
         }
         self.shutdown();
