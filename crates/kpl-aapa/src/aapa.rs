@@ -1141,8 +1141,8 @@ fn fit_move(track: &[[f64; 5]], since: Time, until: Time, tolerance: [f64; 2]) -
 }
 
 /// Extension `merge_duplicates`: two anchors of one type on the same spot (boxes overlapping at an
-/// IoU of [`DUPLICATE_IOU`] or more, of similar size), neither moving nor attached to the other,
-/// are one object anchored twice (a detector that reported it twice, or under another class for a
+/// IoU of [`DUPLICATE_IOU`] or more, of similar size), neither moving nor inside the other (directly
+/// or through a chain of attachments), are one object anchored twice (a detector that reported it twice, or under another class for a
 /// while): the younger is merged into the older, which keeps the newer sighting, the attachment
 /// (if only the younger had one) and the children.
 fn merge_duplicates(work: &mut [Work], bindings: &mut [Binding], notes: &mut Vec<String>) {
@@ -1158,11 +1158,16 @@ fn merge_duplicates(work: &mut [Work], bindings: &mut [Binding], notes: &mut Vec
                 && !a.moving
                 && !b.moving
                 && !(a.attachment.is_some() && b.attachment.is_some())
-                && a.attachment.as_ref().is_none_or(|t| t.parent != b.symbol)
-                && b.attachment.as_ref().is_none_or(|t| t.parent != a.symbol)
                 && similar_size(&a.bbox, &b.bbox)
                 && iou(&a.bbox, &b.bbox) >= DUPLICATE_IOU;
             if !same {
+                continue;
+            }
+            // One inside the other, directly or through a chain (a cone put over what holds its
+            // twin's contents stands where its twin is): two objects, not one. Merging them would
+            // attach the survivor to itself.
+            let index = symbol_index(work);
+            if is_ancestor(i, j, work, &index) || is_ancestor(j, i, work, &index) {
                 continue;
             }
             let younger = work[j].anchor.clone();
