@@ -83,9 +83,21 @@ fn check(previous: &WorldState, world: &WorldState, actions: &[Action], params: 
     // or its parents this cycle: one given now, or an earlier one on one of several identical
     // objects whose binding is decided now (its started effects, a pick-up that leaves the
     // contents behind for example, are applied when its motion tells which object it moves).
+    // An anchor merged into another (`merge_duplicates`: one object anchored twice) is not removed
+    // when the survivor holds its place in the hierarchy.
     let bindings_open = previous.bindings.iter().any(|b| b.bound.is_none());
+    let merged_keeping_parent = |a: &kpl_aapa::Anchor| {
+        let parent = a.attachment.as_ref().map(|t| &t.parent);
+        world.notes.iter().filter_map(|n| n.strip_prefix(&format!("`{}` merged into `", a.symbol))).any(
+            |rest| {
+                let survivor = rest.split('`').next().unwrap_or("");
+                world.anchor(survivor).and_then(|s| s.attachment.as_ref()).map(|t| &t.parent) == parent
+            },
+        )
+    };
     for a in &previous.anchors {
         if world.anchor(&a.symbol).is_none()
+            && !merged_keeping_parent(a)
             && ancestors_anchored(previous, &a.symbol, params.theta_anch)
             && actions.is_empty()
             && !bindings_open
