@@ -2,7 +2,8 @@
 //! rules (`Params::cater()`): moves with other speed profiles than Blender's easing, an object
 //! turning where it stands, a false detection of the contained object's class, nested cones moved
 //! as one, a contain onto a stack that is moving, simultaneous actions on identical objects, and
-//! occlusion by several objects together. Each failed before the rule it tests was added.
+//! occlusion by several objects together. Each failed before the rule it tests was added; the
+//! three decided by `identity_by_place` are also run with it off, as the published algorithm.
 #![allow(clippy::unwrap_used, reason = "tests")]
 
 use kpl_aapa::{Aapa, Action, AnchorStatus, Params, Percept, WorldState};
@@ -47,9 +48,15 @@ fn run(
     out
 }
 
+/// CATER's setting, as `kpl cater eval` and `specs/cater/snitch.kpl` use it.
 fn cater() -> Aapa {
+    Aapa::new(Params::cater()).unwrap()
+}
+
+/// CATER's setting without `identity_by_place`: which of identical objects an action means is then
+/// decided by the order of motion and by confidence alone, as in the published algorithm.
+fn cater_without_identity_by_place() -> Aapa {
     let mut p = Params::cater();
-    p.extensions.merge_duplicates = false;
     p.extensions.identity_by_place = false;
     Aapa::new(p).unwrap()
 }
@@ -182,8 +189,9 @@ fn ends(f: usize, at: usize, name: &str, args: &[&str]) -> Option<Action> {
     (f == at).then(|| completed(name, args))
 }
 
-#[test]
-fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen() {
+/// The scene of [`nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen`]; its
+/// last world.
+fn nested_cones(aapa: &Aapa) -> WorldState {
     // Cone A (type `cone_m`) comes over the snitch (10..30), the large cone B over A (40..60): the
     // snitch is two levels down. A's identical twin A2 stands at x = 60; while A is contained, a
     // perception like OPNet's leaves out every object of A's class, A2 included. A2 is picked up
@@ -193,7 +201,7 @@ fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen()
     let a_on = at(160.0, 152.0, 36.0, 44.0);
     let b_on = at(160.0, 154.0, 52.0, 64.0);
     let b_end = at(260.0, 154.0, 52.0, 64.0);
-    let worlds = run(&cater(), 140, |f| {
+    let worlds = run(aapa, 140, |f| {
         let mut percepts = vec![];
         if f < 60 {
             percepts.push(p("a", "cone_m", lerp(at(100.0, 152.0, 36.0, 44.0), a_on, 10, 30, f)));
@@ -224,7 +232,12 @@ fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen()
         ];
         (percepts, actions.into_iter().flatten().collect())
     });
-    let last = worlds.last().unwrap();
+    worlds.last().unwrap().clone()
+}
+
+#[test]
+fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen() {
+    let last = &nested_cones(&cater());
     assert!(
         last.has_relation("contained", "s", "a") && last.has_relation("contained", "a", "b"),
         "{:?}",
@@ -234,13 +247,13 @@ fn nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen()
     assert!((x - 260.0).abs() < 3.0, "the snitch is at {x:.1}, carried two levels down to 260");
 }
 
-#[test]
-fn a_contain_is_decided_by_the_cone_over_the_object_even_one_not_established_when_it_started() {
+/// The scene of [`a_contain_is_decided_by_the_cone_over_the_object_even_one_not_established_when_it_started`].
+fn late_cone(aapa: &Aapa) -> WorldState {
     // Two identical cones: `x` at x = 60 from the start; `y` first seen at frame 8 (it was behind
     // something), so when the contain starts at frame 10 only `x` is established. `y` comes over
     // the snitch (10..30) and slides with it to x = 250 (40..60): the snitch is in `y`.
     let snitch = at(150.0, 150.0, 14.0, 14.0);
-    let worlds = run(&cater(), 70, |f| {
+    let worlds = run(aapa, 70, |f| {
         let mut percepts = vec![p("x", "cone", at(60.0, 152.0, 34.0, 42.0))];
         if f >= 8 {
             let y = if f <= 30 {
@@ -263,7 +276,12 @@ fn a_contain_is_decided_by_the_cone_over_the_object_even_one_not_established_whe
         ];
         (percepts, actions.into_iter().flatten().collect())
     });
-    let last = worlds.last().unwrap();
+    worlds.last().unwrap().clone()
+}
+
+#[test]
+fn a_contain_is_decided_by_the_cone_over_the_object_even_one_not_established_when_it_started() {
+    let last = &late_cone(&cater());
     assert!(last.has_relation("contained", "s", "y"), "{:?}", last.relations);
     assert!((centre_of(last, "snitch")[0] - 250.0).abs() < 3.0);
 }
@@ -470,13 +488,13 @@ fn a_noisy_detectors_outlier_neither_moves_a_still_object_nor_its_contents() {
     }
 }
 
-#[test]
-fn a_container_no_one_saw_is_inferred_over_what_it_covers() {
+/// The scene of [`a_container_no_one_saw_is_inferred_over_what_it_covers`].
+fn unseen_container(aapa: &Aapa) -> Vec<WorldState> {
     // The only cone of its type is inside a large cone when a `_contain(cone_m, snitch)` comes
     // over the snitch (the cone that does it was never perceived): a contained cone comes over
     // nothing, so the container is inferred over the snitch, and the snitch stays where it is.
     let snitch = at(60.0, 150.0, 14.0, 14.0);
-    let worlds = run(&cater(), 80, |f| {
+    let worlds = run(aapa, 80, |f| {
         let mut percepts = vec![p(
             "b",
             "cone_l",
@@ -496,6 +514,12 @@ fn a_container_no_one_saw_is_inferred_over_what_it_covers() {
         ];
         (percepts, actions.into_iter().flatten().collect())
     });
+    worlds
+}
+
+#[test]
+fn a_container_no_one_saw_is_inferred_over_what_it_covers() {
+    let worlds = unseen_container(&cater());
     let last = worlds.last().unwrap();
     assert!(last.has_relation("contained", "a", "b"), "{:?}", last.relations);
     assert!(!last.has_relation("contained", "s", "a"), "{:?}", last.relations);
@@ -503,4 +527,23 @@ fn a_container_no_one_saw_is_inferred_over_what_it_covers() {
     assert!(worlds[60].notes.iter().any(|n| n.contains("inferred over `s`")), "{:?}", worlds[60].notes);
     let container = last.anchors.iter().find(|a| &*a.object_type == "cone_m" && &*a.symbol != "a").unwrap();
     assert!(last.has_relation("contained", "s", &container.symbol), "{:?}", last.relations);
+}
+
+#[test]
+fn identity_by_place_is_what_decides_the_cases_of_identical_cones() {
+    // The three scenes above with `identity_by_place` off: the published algorithm has no rule for
+    // which of identical objects an action names, so the order of motion and confidence decide, and
+    // each goes wrong the way the extension exists to prevent.
+    let aapa = cater_without_identity_by_place();
+    // The contained cone `a` is taken for the one picked up: the snitch is released from it.
+    let last = nested_cones(&aapa);
+    assert!(!last.has_relation("contained", "s", "a"), "{:?}", last.relations);
+    // Only the cone established when the contain started is a candidate: the snitch goes into `x`,
+    // which never moved.
+    let last = late_cone(&aapa);
+    assert!(last.has_relation("contained", "s", "x"), "{:?}", last.relations);
+    // The only `cone_m` is inside `b`; the snitch is put into it, nothing is inferred.
+    let worlds = unseen_container(&aapa);
+    assert!(worlds.last().unwrap().has_relation("contained", "s", "a"));
+    assert!(!worlds[60].notes.iter().any(|n| n.contains("inferred over")), "{:?}", worlds[60].notes);
 }
