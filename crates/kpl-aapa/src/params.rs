@@ -101,9 +101,9 @@ pub struct Extensions {
     /// default: it needs every move to be an action (CATER's scenes, not a hand moving freely).
     pub still_stays: bool,
     /// Two anchors of one type on the same spot (boxes overlapping at an IoU of 0.7 or more, of
-    /// similar size), neither moving nor one attached to the other, are one object anchored twice (a
-    /// detector that reported it twice, or under another class for a few frames): the younger is
-    /// merged into the older. Off by default: objects of one type can share a place (a casing top
+    /// similar size), neither moving nor one inside the other (however deep), are one object
+    /// anchored twice (a detector that reported it twice, or under another class for a few
+    /// frames): the younger is merged into the older. Off by default: objects of one type can share a place (a casing top
     /// mounted on a casing base); in CATER they cannot.
     pub merge_duplicates: bool,
     /// Which of several anchors of a type an action names is decided by where things are: an

@@ -60,25 +60,24 @@ pub const MAX_LIST_BYTES: u64 = 64 << 20;
 /// The most bytes a perception pickle may have (OPNet's are about 100 KiB).
 pub const MAX_PICKLE_BYTES: u64 = 16 << 20;
 
-/// Reads a whole file, refusing one larger than `cap` bytes (a data error naming the file) without
-/// reading more than `cap + 1` bytes of it, so that a device or a runaway file cannot exhaust the
-/// memory.
+/// Reads a whole file through `kpl_core::read` (the workspace's one capped reader), refusing one
+/// larger than `cap` bytes (a data error naming the file): a regular file that large is refused
+/// before it is read, a device or pipe is read to one byte past the cap and no further, so neither
+/// can exhaust the memory. A directory is refused too.
 pub fn read_capped(path: &Path, cap: u64) -> Result<Vec<u8>, CaterError> {
-    use std::io::Read;
-    let io = |source| CaterError::Io { path: path.to_owned(), source };
-    let file = std::fs::File::open(path).map_err(io)?;
-    let mut bytes = Vec::new();
-    file.take(cap.saturating_add(1)).read_to_end(&mut bytes).map_err(io)?;
-    if bytes.len() as u64 > cap {
-        return Err(CaterError::invalid(
-            path,
+    use kpl_core::read::{ReadError, read_file};
+    let limit = usize::try_from(cap).unwrap_or(usize::MAX);
+    read_file(path, limit).map_err(|e| match e {
+        ReadError::Io { path, source } => CaterError::Io { path, source },
+        ReadError::TooLarge { path, limit } => CaterError::invalid(
+            &path,
             format!(
-                "larger than {} MiB, the most this kind of file may have (is it the right file, not a device?)",
-                cap >> 20
+                "larger than {}, the most this kind of file may have (is it the right file, not a device?)",
+                kpl_core::read::size_in_words(limit)
             ),
-        ));
-    }
-    Ok(bytes)
+        ),
+        ReadError::Directory { path } => CaterError::invalid(&path, "a directory, not a file"),
+    })
 }
 
 /// [`read_capped`] as UTF-8 text.
