@@ -289,10 +289,16 @@ impl Report {
                 ("restore_partial_boxes", e.restore_partial_boxes),
                 ("established_first", e.established_first),
                 ("infer_hidden", e.infer_hidden),
+                ("still_stays", e.still_stays),
+                ("merge_duplicates", e.merge_duplicates),
+                ("identity_by_place", e.identity_by_place),
             ] {
                 if flag {
-                    names.push(name);
+                    names.push(name.to_owned());
                 }
+            }
+            if e.keep_lost > 0.0 {
+                names.push(format!("keep_lost {} s", e.keep_lost));
             }
             if names.is_empty() { "none (as published)".to_owned() } else { names.join(", ") }
         };
