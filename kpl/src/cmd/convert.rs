@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
-use kpl_core::read::{LineReader, MAX_RECORDING_LINE};
+use kpl_core::read::{LineError, LineReader, MAX_RECORDING_LINE};
 use kpl_core::{Value, ValueType};
 use kpl_mcap::foxglove::{Role, ViewChannels, ViewId, Views};
 use kpl_mcap::read::{RawEvent, Reader};
@@ -126,6 +126,15 @@ fn stream_types(spec: &kpl_semantic::hir::Spec) -> BTreeMap<String, (ValueType, 
     types
 }
 
+/// A read error that ended a conversion, with what was written before it.
+fn read_error(input: &Path, error: &LineError, samples: u64, output: &Path) -> String {
+    format!(
+        "cannot read {}: {error}; the {samples} sample(s) before it are in {}",
+        input.display(),
+        output.display()
+    )
+}
+
 struct Converted {
     samples: u64,
     skipped: u64,
@@ -135,6 +144,47 @@ fn skip(location: &str, error: &str) {
     eprintln!("skipped {location}: {error}");
 }
 
+/// The samples of a JSON-lines recording, in order. A line that is not a sample is said (`skip`)
+/// and counted in `skipped`; a line too long (`/dev/zero` has no line break) ends the reading
+/// with an error: the file is not a recording.
+struct RecordingSamples {
+    lines: LineReader<BufReader<File>>,
+    number: u64,
+    input: PathBuf,
+}
+
+impl RecordingSamples {
+    fn open(input: &Path) -> Result<RecordingSamples, String> {
+        let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+        let lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
+        Ok(RecordingSamples { lines, number: 0, input: input.to_path_buf() })
+    }
+
+    /// The next sample and where it is (`FILE:LINE`), `None` at the end, or the read error.
+    fn next(&mut self, skipped: &mut u64) -> Result<Option<(String, SampleLine)>, LineError> {
+        loop {
+            self.number += 1;
+            let location = format!("{}:{}", self.input.display(), self.number);
+            let Some(line) = self.lines.next_line()? else { return Ok(None) };
+            let Ok(line) = std::str::from_utf8(line) else {
+                skip(&location, "the line is not UTF-8 text");
+                *skipped += 1;
+                continue;
+            };
+            if line.trim().is_empty() {
+                continue;
+            }
+            match read_line(line) {
+                Ok(line) => return Ok(Some((location, line))),
+                Err(error) => {
+                    skip(&location, &error);
+                    *skipped += 1;
+                }
+            }
+        }
+    }
+}
+
 fn to_mcap(
     input: &Path,
     output: &Path,
@@ -142,46 +192,20 @@ fn to_mcap(
     compression: Compression,
     mut views: Option<Views>,
 ) -> Result<Converted, String> {
-    let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+    let mut samples = RecordingSamples::open(input)?;
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
     let mut streams: BTreeMap<String, (StreamId, Option<ViewId>)> = BTreeMap::new();
     let mut channels = ViewChannels::default();
     let mut messages = Vec::new();
     let mut converted = Converted { samples: 0, skipped: 0 };
-    let mut lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
-    let mut number = 0u64;
     loop {
-        number += 1;
-        let location = format!("{}:{number}", input.display());
-        // A line too long (`/dev/zero` has no line break) ends the conversion: the file is not a
-        // recording. What was converted before it is kept in the MCAP file.
-        let line = match lines.next_line() {
-            Ok(Some(line)) => line,
+        // What was converted before a read error is kept in the MCAP file.
+        let line = match samples.next(&mut converted.skipped) {
+            Ok(Some((_, line))) => line,
             Ok(None) => break,
             Err(error) => {
                 recorder.finish().map_err(|e| e.to_string())?;
-                return Err(format!(
-                    "cannot read {}: {error}; the {} sample(s) before it are in {}",
-                    input.display(),
-                    converted.samples,
-                    output.display()
-                ));
-            }
-        };
-        let Ok(line) = std::str::from_utf8(line) else {
-            skip(&location, "the line is not UTF-8 text");
-            converted.skipped += 1;
-            continue;
-        };
-        if line.trim().is_empty() {
-            continue;
-        }
-        let line = match read_line(line) {
-            Ok(line) => line,
-            Err(error) => {
-                skip(&location, &error);
-                converted.skipped += 1;
-                continue;
+                return Err(read_error(input, &error, converted.samples, output));
             }
         };
         let (id, view) = match streams.get(&line.stream) {
@@ -226,7 +250,7 @@ fn to_rosbag2(
     if publications.is_empty() {
         return Err("the spec has no ros2.publish sink: a bag holds the ROS 2 topics a spec publishes".into());
     }
-    let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+    let mut samples = RecordingSamples::open(input)?;
     let mut bag = BagWriter::create(output).map_err(|e| e.to_string())?;
     let mut topics = Vec::new();
     for p in &publications {
@@ -234,38 +258,13 @@ fn to_rosbag2(
     }
     let mut converted = Converted { samples: 0, skipped: 0 };
     let mut unpublished: BTreeMap<String, u64> = BTreeMap::new();
-    let mut lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
-    let mut number = 0u64;
     loop {
-        number += 1;
-        let location = format!("{}:{number}", input.display());
-        let line = match lines.next_line() {
-            Ok(Some(line)) => line,
+        let (location, line) = match samples.next(&mut converted.skipped) {
+            Ok(Some(sample)) => sample,
             Ok(None) => break,
             Err(error) => {
                 bag.finish().map_err(|e| e.to_string())?;
-                return Err(format!(
-                    "cannot read {}: {error}; the {} sample(s) before it are in {}",
-                    input.display(),
-                    converted.samples,
-                    output.display()
-                ));
-            }
-        };
-        let Ok(line) = std::str::from_utf8(line) else {
-            skip(&location, "the line is not UTF-8 text");
-            converted.skipped += 1;
-            continue;
-        };
-        if line.trim().is_empty() {
-            continue;
-        }
-        let line = match read_line(line) {
-            Ok(line) => line,
-            Err(error) => {
-                skip(&location, &error);
-                converted.skipped += 1;
-                continue;
+                return Err(read_error(input, &error, converted.samples, output));
             }
         };
         let mut published = false;
