@@ -494,7 +494,7 @@ fn unseen_container(aapa: &Aapa) -> Vec<WorldState> {
     // over the snitch (the cone that does it was never perceived): a contained cone comes over
     // nothing, so the container is inferred over the snitch, and the snitch stays where it is.
     let snitch = at(60.0, 150.0, 14.0, 14.0);
-    let worlds = run(aapa, 80, |f| {
+    run(aapa, 80, |f| {
         let mut percepts = vec![p(
             "b",
             "cone_l",
@@ -513,8 +513,7 @@ fn unseen_container(aapa: &Aapa) -> Vec<WorldState> {
             ends(f, 60, "_contain", &["cone_m", "snitch"]),
         ];
         (percepts, actions.into_iter().flatten().collect())
-    });
-    worlds
+    })
 }
 
 #[test]
