@@ -240,23 +240,6 @@ fn numeric_options_out_of_range_are_usage_errors() {
 const OWN_READERS: &[(&str, &str)] = &[
     ("crates/kpl-core/src/read.rs", "the capped readers themselves"),
     ("crates/kpl-mcap/src/read.rs", "MCAP records, each capped by kpl_mcap::read::RECORD_LIMIT"),
-    (
-        "crates/kpl-cater/src/formats/annotations_file.rs",
-        "LA-CATER's files: NOT capped yet (the caps wait on the aapa branch; issue 21)",
-    ),
-    (
-        "crates/kpl-cater/src/formats/mod.rs",
-        "LA-CATER's files: NOT capped yet (the caps wait on the aapa branch; issue 21)",
-    ),
-    (
-        "crates/kpl-cater/src/formats/pickle.rs",
-        "OPNet's pickles: NOT capped yet (the caps wait on the aapa branch; issue 21)",
-    ),
-    (
-        "crates/kpl-cater/src/layout.rs",
-        "LA-CATER's lists: NOT capped yet (the caps wait on the aapa branch; issue 21)",
-    ),
-    ("kpl/src/cmd/cater.rs", "LA-CATER's files: NOT capped yet (the caps wait on the aapa branch; issue 21)"),
     ("crates/kpl-zenoh/src/credentials.rs", "a deployment's keys, as `kpl keys` writes them"),
     ("crates/kpl-zenoh/src/bench.rs", "the output of its own child process"),
     ("kpl/src/cmd/mtl.rs", "formula and trace files, capped at 64 MiB by its own reader"),

@@ -7,7 +7,10 @@
 //! (vision_msgs); the node decodes them (rclpy, rosbags) and every car of kpl's own recording is
 //! among them, `ns` its symbol and `id` a number that stays with it. The node's three bad
 //! messages (no attachment, a wrong type hash, cut CDR) are counted, and kpl ends on its own
-//! once the publisher has gone. Skipped without `KPL_PYTHON` unless `KPL_REQUIRE_ORACLES=1`.
+//! once the publisher has gone. Recordings: a rosbag2 bag of `rosbags` converts to JSON lines
+//! field for field, and replays through markers.kpl's mapping (specs/ros2/replay.kpl) into cars,
+//! whose bag kpl writes and `rosbags` and `mcap-ros2-support` read. Skipped without `KPL_PYTHON`
+//! unless `KPL_REQUIRE_ORACLES=1`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr, clippy::disallowed_methods)] // tests; waits are bounded by the wall clock
 
 mod common;
@@ -195,4 +198,84 @@ fn rosbag2_of_rosbags_converts_to_json_lines() {
         String::from_utf8_lossy(&checked.stderr)
     );
     assert_eq!(lines(&converted).len(), 60);
+}
+
+/// A rosbag2 bag that `rosbags` wrote (specs/ros2/tracker/: a MarkerArray of the vehicles of the
+/// SUMO scenario per time step, made again here and equal byte for byte) replayed through the
+/// mapping of specs/ros2/markers.kpl in simulated time (specs/ros2/replay.kpl): every marker is a
+/// percept at its `header.stamp`, and the cars come out. The run's recording then goes into a
+/// rosbag2 bag through markers.kpl's ros2.publish sinks (`kpl convert`), which rosbags and
+/// mcap-ros2-support read: a MarkerArray and a Detection3DArray per sample of the cars, equal to
+/// them.
+#[test]
+fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
+    let Some(python) = python("rosbags, mcap-ros2-support") else { return };
+    let dir = common::fresh_dir("ros2", "replay");
+    let script = root().join("tests/rosbag2_oracle.py");
+    let made = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("markers")
+        .arg(dir.join("tracker"))
+        .arg("--fcd")
+        .arg(root().join("specs/traffic/sumo/grid/fcd.xml.gz"))
+        .args(["--start", "100", "--seconds", "30"])
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let made: Value = serde_json::from_slice(&made.stdout).unwrap();
+    for file in ["metadata.yaml", "tracker.mcap"] {
+        assert!(
+            std::fs::read(dir.join("tracker").join(file)).unwrap()
+                == std::fs::read(root().join("specs/ros2/tracker").join(file)).unwrap(),
+            "specs/ros2/tracker/{file} is not what rosbags writes: make it again with tests/rosbag2_oracle.py markers"
+        );
+    }
+
+    let out = dir.join("out");
+    let run = common::kpl(&["run", "specs/ros2/replay.kpl", "--quiet", "--out", out.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["ending"], "sources_ended", "{summary:#}");
+    let tracks = lines(&out.join("tracks.jsonl"));
+    let frames: Vec<&Value> = tracks.iter().filter(|l| l["stream"] == "markers").collect();
+    assert_eq!(frames.len() as u64, made["messages"].as_u64().unwrap(), "a sample per message");
+    let percepts: usize = frames.iter().map(|l| l["value"].as_array().unwrap().len()).sum();
+    assert_eq!(percepts as u64, made["markers"].as_u64().unwrap(), "a percept per marker");
+    for (i, frame) in frames.iter().enumerate() {
+        // The bag's time steps are 0.5 s apart from 2023-11-14T22:13:20Z; the stamp is the valid time.
+        let stamp = 1_700_000_000_000_000 + 500_000 * i as i64;
+        assert_eq!((frame["valid"].as_i64(), frame["available"].as_i64()), (Some(stamp), Some(stamp)));
+    }
+    let cars: BTreeSet<String> = tracks
+        .iter()
+        .filter(|l| l["stream"] == "onroad_car")
+        .flat_map(|l| l["value"].as_array().unwrap().iter().map(|c| c["id"].as_str().unwrap().to_string()))
+        .collect();
+    assert!(cars.len() >= 20, "only {} of the bag's {} vehicles became cars", cars.len(), made["vehicles"]);
+
+    let bag = dir.join("cars");
+    let converted = common::kpl(&[
+        "convert",
+        out.join("tracks.jsonl").to_str().unwrap(),
+        bag.to_str().unwrap(),
+        "--spec",
+        "specs/ros2/markers.kpl",
+    ]);
+    let said = String::from_utf8_lossy(&converted.stderr);
+    assert!(converted.status.success(), "{said}");
+    assert!(said.contains("sample(s) of `markers` are not in the bag"), "{said}");
+    assert!(bag.join("metadata.yaml").is_file() && bag.join("cars_0.mcap").is_file());
+    let read = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("read")
+        .arg(&bag)
+        .arg(out.join("tracks.jsonl"))
+        .output()
+        .unwrap();
+    assert!(
+        read.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&read.stdout),
+        String::from_utf8_lossy(&read.stderr)
+    );
 }

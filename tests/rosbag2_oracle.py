@@ -2,6 +2,8 @@
 
     python tests/rosbag2_oracle.py write BAG_DIR EXPECTED.jsonl --seed 7 --count 40
     python tests/rosbag2_oracle.py check EXPECTED.jsonl KPL.jsonl
+    python tests/rosbag2_oracle.py read KPL_BAG_DIR TRACKS.jsonl
+    python tests/rosbag2_oracle.py markers BAG_DIR --fcd FCD --start 100 --seconds 30
 
 `write` records a rosbag2 bag in MCAP (rosbags' writer: CDR messages, `ros2msg` schemas,
 metadata.yaml) with random geometry_msgs/msg/PoseStamped messages on /robot/pose and random
@@ -11,6 +13,17 @@ dataclass as a JSON object, fixed arrays and byte sequences as lists) with its t
 `check` compares kpl's JSON lines (`kpl convert BAG.mcap KPL.jsonl`) with them, in order: the
 stream is the topic, `valid` and `available` the message's time in microseconds, and every
 field equal (float32 fields to float32 precision). It exits 1 and says where on a difference.
+`read` opens a bag that kpl wrote (`kpl convert TRACKS.jsonl BAG --spec specs/ros2/markers.kpl`)
+with rosbags (AnyReader: metadata.yaml, the MCAP file, every message deserialized with its
+type) and with mcap-ros2-support (its own reading of the `ros2msg` schemas and its CDR decoder),
+and checks both against kpl's recording: one /kpl/cars MarkerArray and one /kpl/detections
+Detection3DArray per sample of `onroad_car`, at its available time, `header.stamp` its valid
+time, a marker per car (`ns` its symbol, `pose.position` its position, `scale.x` its size).
+`markers` records, with rosbags' writer, what a ROS 2 tracker publishes on /tracker/markers (the
+contract of specs/ros2/markers.kpl) for the vehicles of a SUMO recording (FCD): a MarkerArray per
+time step, a marker per vehicle (`id` its track id, `pose.position` x and y, `scale.x` 5 m,
+`header.stamp` the step's time from 2023-11-14T22:13:20Z), chunks compressed with zstd. It is
+how specs/ros2/tracker/ was made; it prints the number of messages and markers as JSON.
 """
 
 import json
@@ -140,8 +153,136 @@ def check(expected, got):
     print(f'{len(want)} messages equal')
 
 
+def default_msg(name):
+    """A message of `name` with every field zero, empty or default."""
+    _, fields = TS.fielddefs[name]
+
+    def value(desc):
+        kind, detail = desc
+        if kind == 1:
+            t = detail[0]
+            return '' if t == 'string' else False if t == 'bool' else 0.0 if t.startswith('float') else 0
+        if kind == 2:
+            return default_msg(detail)
+        inner, size = detail
+        items = [value(inner) for _ in range(size if kind == 3 else 0)]
+        if inner[0] == 1 and inner[1][0] in NP:
+            return np.array(items, dtype=NP[inner[1][0]])
+        return items
+
+    return TS.types[name](**{f: value(d) for f, d in fields})
+
+
+def fcd_frames(fcd, start, seconds):
+    """(time, [(vehicle, x, y)]) of a SUMO FCD recording from `start` for `seconds`."""
+    import gzip
+    import xml.etree.ElementTree as ET
+    frame, t = [], None
+    with gzip.open(fcd) as f:
+        for event, el in ET.iterparse(f, events=('start', 'end')):
+            if event == 'start' and el.tag == 'timestep':
+                t = float(el.get('time'))
+            elif event == 'end' and el.tag == 'vehicle' and t is not None and t >= start:
+                frame.append((el.get('id'), float(el.get('x')), float(el.get('y'))))
+            elif event == 'end' and el.tag == 'timestep':
+                if t is not None and t >= start:
+                    yield t, frame
+                frame = []
+                el.clear()
+                if t is not None and t >= start + seconds:
+                    return
+
+
+def markers(bag, fcd, start, seconds):
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode
+    epoch = 1_700_000_000_000_000_000
+    ty = 'visualization_msgs/msg/MarkerArray'
+    ids, count, total = {}, 0, 0
+    writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with writer:
+        conn = writer.add_connection('/tracker/markers', ty, typestore=TS)
+        for t, vehicles in fcd_frames(fcd, start, seconds):
+            ns = epoch + round((t - start) * 1e9)
+            msg = default_msg(ty)
+            for vehicle, x, y in vehicles:
+                m = default_msg('visualization_msgs/msg/Marker')
+                m.header.stamp.sec, m.header.stamp.nanosec = ns // 10**9, ns % 10**9
+                m.header.frame_id = 'map'
+                m.ns = 'tracker'
+                m.id = ids.setdefault(vehicle, len(ids) + 1)
+                m.type = 1
+                m.pose.position.x, m.pose.position.y = x, y
+                m.pose.orientation.w = 1.0
+                m.scale.x, m.scale.y, m.scale.z = 5.0, 1.8, 1.5
+                msg.markers.append(m)
+            writer.write(conn, ns, TS.serialize_cdr(msg, ty))
+            count += 1
+            total += len(vehicles)
+    print(json.dumps({'messages': count, 'markers': total, 'vehicles': len(ids)}))
+
+
+def stamp_us(stamp):
+    return stamp.sec * 1_000_000 + stamp.nanosec // 1000
+
+
+def read(bag, tracks):
+    from mcap_ros2.reader import read_ros2_messages
+    from rosbags.highlevel import AnyReader
+
+    samples = [json.loads(l) for l in Path(tracks).read_text().splitlines() if l]
+    samples = [s for s in samples if s['stream'] == 'onroad_car']
+    if not samples:
+        sys.exit('no onroad_car samples in the recording')
+    by_rosbags = {'/kpl/cars': [], '/kpl/detections': []}
+    with AnyReader([Path(bag)]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        want = {'/kpl/cars': 'visualization_msgs/msg/MarkerArray',
+                '/kpl/detections': 'vision_msgs/msg/Detection3DArray'}
+        if types != want:
+            sys.exit(f'topics {types}, expected {want}')
+        if reader.message_count != 2 * len(samples):
+            sys.exit(f'metadata: {reader.message_count} messages, expected {2 * len(samples)}')
+        for conn, t, raw in reader.messages():
+            by_rosbags[conn.topic].append((t, reader.deserialize(raw, conn.msgtype)))
+    by_mcap = {'/kpl/cars': [], '/kpl/detections': []}
+    for m in read_ros2_messages(str(next(Path(bag).glob('*.mcap')))):
+        by_mcap[m.channel.topic].append((m.log_time_ns, m.ros_msg))
+    for name, got in (('rosbags', by_rosbags), ('mcap-ros2-support', by_mcap)):
+        for topic, messages in got.items():
+            if len(messages) != len(samples):
+                sys.exit(f'{name}: {len(messages)} messages on {topic}, {len(samples)} samples')
+        for i, sample in enumerate(samples):
+            cars = sample['value']
+            (t, markers), (t2, detections) = got['/kpl/cars'][i], got['/kpl/detections'][i]
+            where = f'{name}, sample {i + 1} at {sample["valid"]}'
+            if t != sample['available'] * 1000 or t2 != t:
+                sys.exit(f'{where}: log time {t}/{t2}, available {sample["available"]}')
+            if len(markers.markers) != len(cars) or len(detections.detections) != len(cars):
+                sys.exit(f'{where}: {len(markers.markers)} markers, {len(cars)} cars')
+            for car, marker, det in zip(cars, markers.markers, detections.detections):
+                checks = [
+                    (marker.ns, car['id']), (det.id, car['id']),
+                    (marker.header.frame_id, 'map'), (stamp_us(marker.header.stamp), sample['valid']),
+                    (stamp_us(detections.header.stamp), sample['valid']),
+                    (marker.pose.position.x, car['pos'][0]), (marker.pose.position.y, car['pos'][1]),
+                    (marker.scale.x, car['size']), (marker.id, int(''.join(c for c in car['id'] if c.isdigit()))),
+                    (det.bbox.center.position.x, car['pos'][0]), (det.bbox.size.x, car['size']),
+                ]
+                for have, expect in checks:
+                    if have != expect:
+                        sys.exit(f'{where}, {car["id"]}: {have!r} != {expect!r}')
+    print(f'{len(samples)} samples, {2 * len(samples)} messages equal in rosbags and mcap-ros2-support')
+
+
 if __name__ == '__main__':
-    if sys.argv[1] == 'write':
+    if sys.argv[1] == 'read':
+        read(sys.argv[2], sys.argv[3])
+    elif sys.argv[1] == 'markers':
+        args = sys.argv[3:]
+        markers(Path(sys.argv[2]), args[args.index('--fcd') + 1], float(args[args.index('--start') + 1]),
+                float(args[args.index('--seconds') + 1]))
+    elif sys.argv[1] == 'write':
         args = sys.argv[2:]
         seed = int(args[args.index('--seed') + 1]) if '--seed' in args else 7
         count = int(args[args.index('--count') + 1]) if '--count' in args else 40

@@ -37,6 +37,8 @@ fn eval_json(data: &Path, model: &str, perception: &str, out: &Path) -> serde_js
         table.contains("Mean IoU ±SEM") && table.contains("Mean L2 ±SEM") && table.contains(model),
         "{table}"
     );
+    // Which perception and which options were used.
+    assert!(table.contains("perception: ") && table.contains("options: "), "{table}");
     serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap()
 }
 
@@ -152,5 +154,122 @@ fn bad_videos_are_skipped_and_reported_strict_exits_1_missing_data_exits_2() {
     assert_eq!(kpl(&["cater", "eval", "--model", "nope"]).status.code(), Some(2));
     let help = kpl(&["cater", "eval", "--help"]);
     assert!(String::from_utf8_lossy(&help.stdout).contains("kpl cater eval --data"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A pickle of `n` nested lists as Python's pickle writes it with protocol 2 (`]` n times, `a`
+/// n - 1 times): 4 KB for 2,000 levels.
+fn nested_lists_pickle(n: usize) -> Vec<u8> {
+    let mut p = vec![0x80, 2];
+    p.extend(std::iter::repeat_n(b']', n));
+    p.extend(std::iter::repeat_n(b'a', n - 1));
+    p.push(b'.');
+    p
+}
+
+#[test]
+fn hostile_files_get_a_clear_error_or_a_skip_never_an_abort() {
+    let dir = scratch("hostile");
+    let data = dir.join("data");
+    let output = kpl(&[
+        "cater",
+        "generate",
+        "--videos",
+        "3",
+        "--seed",
+        "4",
+        "--layout",
+        "la-cater",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    // 2,000 nested lists in place of one video's perfect perception: that video is skipped with the
+    // reason, the others are scored.
+    let pickle = data.join("perfect_perception").join("CATER_new_000001.pkl");
+    std::fs::write(&pickle, nested_lists_pickle(2000)).unwrap();
+    let run = |extra: &[&str]| {
+        let mut a = vec!["cater", "eval", "--data", data.to_str().unwrap(), "--model", "aapa"];
+        a.extend_from_slice(extra);
+        kpl(&a)
+    };
+    let output = run(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("skipped CATER_new_000001:") && stderr.contains("nested"), "{stderr}");
+    assert!(stderr.contains("evaluated 2 videos (1 skipped)"), "{stderr}");
+    // Files that never end: a size cap, exit 1 (bad data), within a few hundred megabytes read.
+    if Path::new("/dev/zero").exists() {
+        for option in ["--videos", "--params"] {
+            let output = run(&[option, "/dev/zero"]);
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert_eq!(output.status.code(), Some(1), "{option}: {stderr}");
+            assert!(stderr.contains("/dev/zero") && stderr.contains("larger than"), "{option}: {stderr}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn la_caters_perfect_perception_pickles_are_found_and_never_averaged() {
+    // LA-CATER's layout as it comes: `--data` alone finds perfect_perception/, and its exact
+    // boxes are scored exactly on the visible frames (no averaging of boxes that are exact).
+    let dir = scratch("la-cater");
+    let data = dir.join("data");
+    let output = kpl(&[
+        "cater",
+        "generate",
+        "--videos",
+        "4",
+        "--seed",
+        "6",
+        "--layout",
+        "la-cater",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let json = dir.join("perfect.json");
+    let output = kpl(&[
+        "cater",
+        "eval",
+        "--data",
+        data.to_str().unwrap(),
+        "--model",
+        "aapa",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let table = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        table.contains("perfect_perception")
+            && table.contains("average_still off for exact boxes (4 videos)"),
+        "{table}"
+    );
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["iou"]["visible"]["mean"], 100.0, "{}", report["iou"]);
+    assert_eq!(report["noisy_videos"], 0);
+    // Given as --pickles without --perception, the boxes are measured: exact, so not averaged;
+    // the detector's pickles are not exact, so averaged.
+    for (sub, noisy) in [("perfect_perception", 0), ("od_perception", 4)] {
+        let pickles = data.join(sub);
+        let output = kpl(&[
+            "cater",
+            "eval",
+            "--data",
+            data.to_str().unwrap(),
+            "--model",
+            "aapa",
+            "--pickles",
+            pickles.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        assert_eq!(report["noisy_videos"], noisy, "{sub}");
+        assert!(report["perception_source"].as_str().unwrap().contains("measured"), "{sub}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

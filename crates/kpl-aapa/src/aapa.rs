@@ -150,16 +150,20 @@ impl Aapa {
 
         // 1b. Consecutive frame alignment.
         let cols = work.len();
+        let still = still_anchors(&work, &bindings, p.extensions.still_stays);
         let mut cost = Vec::with_capacity(percepts.len() * cols);
         for percept in percepts {
-            for w in &work {
+            for (w, &still) in work.iter().zip(&still) {
                 if w.anchor.attachment.as_ref().is_some_and(|a| a.hidden) {
                     // Contained: it cannot be what was perceived.
                     cost.push(f64::INFINITY);
                     continue;
                 }
                 let same_type = percept.object_type == w.anchor.object_type;
-                let c = alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch);
+                let mut c = alignment_cost(&percept.bbox, &w.anchor.bbox, same_type, p.type_mismatch);
+                if still && moved_away(&percept.bbox, &w.anchor.bbox) {
+                    c *= STILL_MOVED_FACTOR;
+                }
                 let tentative = p.extensions.established_first && w.anchor.confidence < ESTABLISHED;
                 cost.push(if tentative { 2.0 * c } else { c });
             }
@@ -190,6 +194,9 @@ impl Aapa {
                 }
                 _ => [0.0, 0.0],
             };
+            if w.anchor.moving && w.anchor.moving_since.is_some() {
+                record_track(&mut w.anchor, time, &observed);
+            }
             w.anchor.bbox =
                 if p.extensions.average_still { average_still(&mut w.anchor, observed) } else { observed };
             vote_type(&mut w.anchor, &percept.object_type);
@@ -240,10 +247,19 @@ impl Aapa {
         // Effects of actions: attachments (III-B.2b) and motion. Actions moving one of several
         // identical objects wait for its motion to tell which (bindings).
         self.decide_bindings(&mut bindings, time, &mut work, &mut notes);
+        // What the actions starting this cycle move (a stack that slides: its contents move too).
+        let starting: HashSet<Symbol> = actions
+            .iter()
+            .filter(|a| a.phase == ActionPhase::Started)
+            .filter_map(|a| a.args.first().cloned())
+            .collect();
         for action in actions {
-            self.apply_action(action, time, &mut work, &mut bindings, &mut notes);
+            self.apply_action(action, &starting, time, &mut work, &mut bindings, &mut notes);
         }
         forget_stale_bindings(&mut bindings, time, &mut notes);
+        if p.extensions.merge_duplicates {
+            merge_duplicates(&mut work, &mut bindings, &mut notes);
+        }
 
         // 2. Hypothesis reasoning and confidence for anchors not aligned this cycle.
         let index = symbol_index(&work);
@@ -261,7 +277,11 @@ impl Aapa {
             } else if anchored && p.image.is_some_and(|img| !inside(&w.anchor.bbox, img.width, img.height)) {
                 AnchorStatus::OutOfView
             } else {
-                w.anchor.confidence -= p.conf_minus;
+                let kept = w.anchor.confidence >= ESTABLISHED
+                    && ((time - w.anchor.last_seen) as f64) <= p.extensions.keep_lost * 1e6;
+                if !kept {
+                    w.anchor.confidence -= p.conf_minus;
+                }
                 AnchorStatus::Lost
             };
             if w.anchor.confidence < 0.0 {
@@ -282,7 +302,7 @@ impl Aapa {
         }
 
         // Children follow their parents, parents first.
-        self.follow_parents(&mut work);
+        self.follow_parents(&mut work, time);
 
         // 3. The world state: relations and what is passed on for inference.
         let mut relations = Vec::new();
@@ -317,6 +337,7 @@ impl Aapa {
     fn apply_action(
         &self,
         action: &Action,
+        starting: &HashSet<Symbol>,
         time: Time,
         work: &mut Vec<Work>,
         bindings: &mut Vec<Binding>,
@@ -326,19 +347,60 @@ impl Aapa {
         if self.rules_for(action).next().is_none() {
             return;
         }
-        let ambiguous = action.args.first().is_some_and(|arg| {
-            !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) && candidates(arg, work).len() > 1
-        });
-        if !ambiguous {
-            for rule in self.rules_for(action) {
-                apply_rule(rule, action, time, work, &self.params, notes);
+        // An action that puts its moving object over another, single object (`_contain(cone,
+        // snitch)`) is decided, when it completes, by where that object is: the anchor of the type
+        // nearest it, among all of the type that are not themselves inside something, whatever the
+        // order of motion suggested (identical objects swap places in the image while they move).
+        // If every one of the type is inside something (or there is none), the container is
+        // inferred over the object (extension `infer_hidden`).
+        if self.params.extensions.identity_by_place
+            && action.phase == ActionPhase::Completed
+            && self.attaches_to_mover(action)
+            && names_single_other(action, work)
+        {
+            let open = open_binding(action, time, bindings);
+            let by_type = action
+                .args
+                .first()
+                .is_some_and(|m| !work.iter().any(|w| !w.removed && w.anchor.symbol == *m));
+            let nearest = nearest_to_other(action, work, theta_anch).or_else(|| {
+                let infer = by_type && self.params.extensions.infer_hidden && self.hides_in_mover(action);
+                infer.then(|| infer_container(action, time, work, theta_anch, notes)).flatten()
+            });
+            if let Some(nearest) = nearest {
+                self.bind_nearest(open, &nearest, action, time, work, bindings, notes);
+                self.apply_bound(action, &nearest, time, work, notes);
+                return;
+            }
+        }
+        let by_type = action
+            .args
+            .first()
+            .is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
+        let movers = match (by_type, self.params.extensions.identity_by_place) {
+            (false, _) => Vec::new(),
+            (true, true) => self.movers(action, starting, work),
+            (true, false) => action.args.first().map_or_else(Vec::new, |arg| candidates(arg, work)),
+        };
+        if movers.len() <= 1 {
+            match movers.first() {
+                // The one object of the type the action can be moving.
+                Some(&i) => {
+                    let symbol = work[i].anchor.symbol.clone();
+                    self.apply_bound(action, &symbol, time, work, notes);
+                }
+                None => {
+                    for rule in self.rules_for(action) {
+                        apply_rule(rule, action, time, work, &self.params, notes);
+                    }
+                }
             }
             return;
         }
         match action.phase {
             ActionPhase::Started => {
                 let taken = bound_symbols(bindings);
-                let candidates = candidates(&action.args[0], work)
+                let candidates = movers
                     .into_iter()
                     .filter(|&i| !taken.contains(&work[i].anchor.symbol))
                     .map(|i| Candidate {
@@ -356,14 +418,7 @@ impl Aapa {
                 });
             }
             ActionPhase::Completed => {
-                let open = bindings
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, b)| {
-                        !b.completed && b.action.name == action.name && b.action.args == action.args
-                    })
-                    .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
-                    .map(|(i, _)| i);
+                let open = open_binding(action, time, bindings);
                 let actor = match open {
                     Some(i) => {
                         let symbol = match bindings[i].bound.clone() {
@@ -414,6 +469,132 @@ impl Aapa {
         for rule in self.rules_for(&bound) {
             apply_rule(rule, &bound, time, work, &self.params, notes);
         }
+    }
+
+    /// The anchors an action naming its moving object by type can be moving: those of the type
+    /// (the established ones, if any) that are not inside another, since a contained object moves
+    /// only with its container; if all are inside another, those, unless the action puts its mover
+    /// over something or takes it off what it holds (a contained cone is picked up by no one).
+    fn movers(&self, action: &Action, starting: &HashSet<Symbol>, work: &[Work]) -> Vec<usize> {
+        let Some(arg) = action.args.first() else { return Vec::new() };
+        let acts_on_others = self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| {
+                matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0)
+                    || matches!(e, Effect::DetachChildren { parent: 0 })
+            })
+        });
+        let hidden = |i: usize| work[i].anchor.attachment.as_ref().is_some_and(|a| a.hidden);
+        let of_type: Vec<usize> =
+            (0..work.len()).filter(|&i| !work[i].removed && work[i].anchor.object_type == *arg).collect();
+        // An object inside another moves only with it: those whose outermost container is moving or
+        // starting to (a stack that slides), else the free ones of the type.
+        let index = symbol_index(work);
+        let carried: Vec<usize> = of_type
+            .iter()
+            .copied()
+            .filter(|&i| hidden(i))
+            .filter(|&i| {
+                let root = &work[root_of(i, work, &index)].anchor;
+                root.moving || starting.contains(&root.symbol) || starting.contains(&root.object_type)
+            })
+            .collect();
+        let free: Vec<usize> = of_type.iter().copied().filter(|&i| !hidden(i)).collect();
+        let all = if !carried.is_empty() && !acts_on_others {
+            carried
+        } else if free.is_empty() && !acts_on_others {
+            of_type
+        } else {
+            free
+        };
+        let established: Vec<usize> =
+            all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+        if established.is_empty() { all } else { established }
+    }
+
+    /// Whether an action's rules attach something to its moving object (argument 0 is a parent).
+    fn attaches_to_mover(&self, action: &Action) -> bool {
+        self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, child, .. } if *child != 0))
+        })
+    }
+
+    /// The box a parent's children follow: its own, or for a noisy detector's (`average_still`) seen
+    /// carrier in a move that follows one profile, the fitted box (the detector's noise smoothed
+    /// over the move).
+    fn carrier_box(&self, parent: &Work, time: Time) -> BBox {
+        let a = &parent.anchor;
+        if !(self.params.extensions.average_still && a.moving && parent.aligned) {
+            return a.bbox;
+        }
+        match (a.moving_since, a.moving_until) {
+            (Some(since), Some(until)) if until > since => {
+                fit_move(&a.move_track, since, until, SMOOTH_TOLERANCE).map_or(a.bbox, |path| path.bbox(time))
+            }
+            _ => a.bbox,
+        }
+    }
+
+    /// Whether an action's rules hide something inside its moving object (`_contain`).
+    fn hides_in_mover(&self, action: &Action) -> bool {
+        self.rules_for(action).any(|r| {
+            r.effects.iter().any(|e| matches!(e, Effect::Attach { parent: 0, hides_child: true, .. }))
+        })
+    }
+
+    /// The completing action of binding `open` (if it has one) is decided for `nearest`: its started
+    /// effects go to `nearest` (undone on the anchor they went to, if another); an open action on the
+    /// type that had been given `nearest` by the order of motion gets another candidate.
+    #[allow(clippy::too_many_arguments, reason = "one step of apply_action, on its state")]
+    fn bind_nearest(
+        &self,
+        open: Option<usize>,
+        nearest: &Symbol,
+        action: &Action,
+        time: Time,
+        work: &mut Vec<Work>,
+        bindings: &mut [Binding],
+        notes: &mut Vec<String>,
+    ) {
+        let Some(i) = open else { return };
+        if let Some(j) = bindings.iter().position(|b| b.bound.as_ref() == Some(nearest))
+            && j != i
+            && !(bindings[j].completed && names_single_other(&bindings[j].action, work))
+        {
+            let taken = bound_symbols(bindings);
+            let other = bindings[j]
+                .candidates
+                .iter()
+                .chain(&bindings[i].candidates)
+                .map(|c| c.symbol.clone())
+                .find(|s| s != nearest && !taken.contains(s));
+            notes.push(format!(
+                "action `{}` rebound from `{nearest}` to `{}`: `{nearest}` is nearest `{}`",
+                bindings[j].action.name,
+                other.as_deref().unwrap_or("nothing"),
+                action.args.get(1).map_or("", |a| a.as_ref())
+            ));
+            if !bindings[j].completed {
+                if let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == *nearest) {
+                    stop_moving(&mut w.anchor);
+                }
+                if let Some(other) = &other {
+                    let started = bindings[j].action.clone();
+                    self.apply_bound(&started, other, time, work, notes);
+                }
+            }
+            bindings[j].bound = other;
+        }
+        if bindings[i].bound.as_ref() != Some(nearest) {
+            if let Some(previous) = bindings[i].bound.clone()
+                && let Some(w) = work.iter_mut().find(|w| w.anchor.symbol == previous)
+            {
+                stop_moving(&mut w.anchor);
+            }
+            let started = bindings[i].action.clone();
+            self.apply_bound(&started, nearest, time, work, notes);
+        }
+        bindings[i].bound = Some(nearest.clone());
+        bindings[i].completed = true;
     }
 
     /// An action that names another, single object (`_contain(cone, snitch)`) is decided by where
@@ -620,6 +801,12 @@ impl Aapa {
                         && old.anchor.first_seen < new.anchor.first_seen
                         && similar_size(&old.anchor.bbox, &new.anchor.bbox)
                         && !has_anchored_ancestor(m, work, &index, p.theta_anch)
+                        // H1 (`still_stays`): an object no action has moved since it was last
+                        // seen is where it was; a detection elsewhere is another (a false one).
+                        && (!p.extensions.still_stays
+                            || old.anchor.moving
+                            || old.anchor.last_moved.is_some_and(|t| t >= old.anchor.last_seen)
+                            || !moved_away(&new.anchor.bbox, &old.anchor.bbox))
                 })
                 .min_by(|&a, &b| {
                     let cost =
@@ -651,7 +838,7 @@ impl Aapa {
 
     /// Places every child that is not seen but maintained by its attachment relative to its
     /// parent; refreshes the geometry of children that are seen.
-    fn follow_parents(&self, work: &mut [Work]) {
+    fn follow_parents(&self, work: &mut [Work], time: Time) {
         let index = symbol_index(work);
         let depth = |mut i: usize| {
             let mut d = 0;
@@ -673,7 +860,7 @@ impl Aapa {
         for i in order {
             let Some(att) = work[i].anchor.attachment.clone() else { continue };
             let Some(&parent) = index.get(&att.parent) else { continue };
-            let parent_box = work[parent].anchor.bbox;
+            let parent_box = self.carrier_box(&work[parent], time);
             let parent_moving = work[parent].anchor.moving;
             let parent_seen_still = work[parent].aligned && !parent_moving;
             let w = &mut work[i];
@@ -688,6 +875,20 @@ impl Aapa {
                 }
                 if parent_moving && let Some(a) = &mut w.anchor.attachment {
                     a.provisional = false;
+                }
+            }
+            if att.settling && !w.aligned {
+                if !parent_moving {
+                    // A noisy detector's parent standing still: the child inside has not moved;
+                    // the geometry is measured again against the parent's averaged box.
+                    let mut geometry = geometry_of(&w.anchor.bbox, att.parent, &parent_box, att.relation);
+                    geometry.hidden = att.hidden;
+                    geometry.settling = true;
+                    w.anchor.attachment = Some(geometry);
+                    continue;
+                }
+                if let Some(a) = &mut w.anchor.attachment {
+                    a.settling = false;
                 }
             }
             if w.aligned {
@@ -710,7 +911,12 @@ impl Aapa {
                 };
                 let base = bottom_centre(&parent_box);
                 let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
-                w.anchor.bbox = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                let followed = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                if followed != w.anchor.bbox {
+                    // Carried: the boxes seen of it before are not where it is now.
+                    w.anchor.still = None;
+                }
+                w.anchor.bbox = followed;
             }
         }
     }
@@ -735,6 +941,9 @@ fn validate(p: &Params) -> Result<(), AapaError> {
     }
     if !(p.conf_minus > 0.0 && p.conf_minus <= 1.0) {
         return bad("conf_minus", "must be in (0, 1]");
+    }
+    if !(p.extensions.keep_lost.is_finite() && p.extensions.keep_lost >= 0.0) {
+        return bad("keep_lost", "must be a number of seconds, 0 or more");
     }
     let [w, c] = p.extensions.infer_hidden_box;
     if !(w.is_finite() && w > 0.0 && c.is_finite()) {
@@ -762,7 +971,8 @@ fn inside(b: &BBox, width: f64, height: f64) -> bool {
 /// known start and end, the velocity last measured (at time fraction `u0`) fixes the displacement of
 /// the whole move, `D = v T / s'(u0)`, and the anchor advances by `D (s(u) - s(u_prev))`; near
 /// either end of the move (`s'(u0)` small) that estimate is unstable and the constant velocity
-/// model is used instead.
+/// model is used instead. With the fitted profile, the positions seen during the move choose the
+/// profile and the displacement ([`fit_move`]), and the anchor is placed on that path.
 fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: MotionProfile) {
     let ease = |u: f64| {
         let u = u.clamp(0.0, 1.0);
@@ -772,9 +982,28 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
         let end = w.anchor.moving_until.map_or(time, |until| until.min(time));
         let dt = (end - previous_time).max(0) as f64 / 1e6;
         let v = w.anchor.velocity;
-        if !w.aligned && v != [0.0, 0.0] && dt > 0.0 {
+        // A move fitted from where it was seen, once it is out of sight (a one-step prediction for
+        // an object seen last cycle is the measured velocity's, below).
+        let fitted = match (profile, w.anchor.moving_since, w.anchor.moving_until) {
+            (MotionProfile::Fitted, Some(since), Some(until))
+                if !w.aligned && w.previous_centre.is_none() && until > since =>
+            {
+                fit_move(&w.anchor.move_track, since, until, FIT_TOLERANCE)
+            }
+            _ => None,
+        };
+        if let Some(path) = fitted {
+            let target = path.at(end);
+            let now = centre(&w.anchor.bbox);
+            w.anchor.bbox = translate(&w.anchor.bbox, [target[0] - now[0], target[1] - now[1]]);
+        } else if !w.aligned
+            && v != [0.0, 0.0]
+            && dt > 0.0
+            && w.anchor.moving_since.is_none_or(|since| w.anchor.last_seen >= since)
+        {
+            // (Only a velocity measured during this move: one from before it says nothing of it.)
             let mut shift = [v[0] * dt, v[1] * dt];
-            if let (MotionProfile::EaseInOut, Some(since), Some(until)) =
+            if let (MotionProfile::EaseInOut | MotionProfile::Fitted, Some(since), Some(until)) =
                 (profile, w.anchor.moving_since, w.anchor.moving_until)
                 && until > since
             {
@@ -796,22 +1025,220 @@ fn predict_motion(work: &mut [Work], previous_time: Time, time: Time, profile: M
     }
 }
 
+/// Positions seen during a move kept at most (a move of CATER's lasts at most 45 frames).
+const MOVE_TRACK_MAX: usize = 120;
+
+/// Notes where a moving object's box centre is seen.
+fn record_track(anchor: &mut Anchor, time: Time, b: &BBox) {
+    if anchor.move_track.len() >= MOVE_TRACK_MAX {
+        // Keep the start, where the path begins.
+        anchor.move_track.remove(1);
+    }
+    let [x, y] = centre(b);
+    anchor.move_track.push([time as f64, x, y, b.width(), b.height()]);
+}
+
+/// The path of a move fitted to how it was seen: the box's centre and size along one profile.
+#[derive(Debug, Clone, Copy)]
+struct MovePath {
+    /// Centre x, y, width, height at the start and their change over the whole move.
+    from: [f64; 4],
+    change: [f64; 4],
+    profile: fn(f64) -> f64,
+    since: Time,
+    until: Time,
+}
+
+impl MovePath {
+    fn state(&self, t: Time) -> [f64; 4] {
+        let u = ((t - self.since) as f64 / (self.until - self.since) as f64).clamp(0.0, 1.0);
+        let s = (self.profile)(u);
+        std::array::from_fn(|k| self.from[k] + self.change[k] * s)
+    }
+
+    fn at(&self, t: Time) -> [f64; 2] {
+        let [x, y, ..] = self.state(t);
+        [x, y]
+    }
+
+    /// The box at time `t`.
+    fn bbox(&self, t: Time) -> BBox {
+        let [x, y, w, h] = self.state(t);
+        BBox::new(x - w / 2.0, y - h / 2.0, x + w / 2.0, y + h / 2.0)
+    }
+}
+
+/// The profiles a move is fitted with; smooth first, which wins unless another fits clearly
+/// better (residual below [`CLEARLY_BETTER`] of smooth's).
+const PROFILES: [fn(f64) -> f64; 4] =
+    [|u| u * u * (3.0 - 2.0 * u), |u| u, |u| u * u, |u| 1.0 - (1.0 - u) * (1.0 - u)];
+const CLEARLY_BETTER: f64 = 0.5;
+/// How far (root mean square, pixels plus a share of the move's length) the positions seen may lie
+/// from the best fit for it to be used to continue a move unseen, and to smooth a detector's boxes
+/// of a carrier that is seen.
+const FIT_TOLERANCE: [f64; 2] = [1.0, 0.03];
+const SMOOTH_TOLERANCE: [f64; 2] = [3.0, 0.06];
+
+/// Fits the positions seen since a move started (`track[0]` is where it started) with each of
+/// [`PROFILES`]: for profile `s`, the displacement `D` minimising `Σ |from + D s(u_i) - x_i|²`; the
+/// sizes along the best one likewise. The fit needs a position seen at least a tenth into the move
+/// that has moved a pixel or more, and positions within `tolerance` (`[px, share of the move]`, root
+/// mean square) of the fit.
+fn fit_move(track: &[[f64; 5]], since: Time, until: Time, tolerance: [f64; 2]) -> Option<MovePath> {
+    let (first, seen) = track.split_first()?;
+    let [_, fx, fy, fw, fh] = *first;
+    let duration = (until - since) as f64;
+    let u = |t: f64| ((t - since as f64) / duration).clamp(0.0, 1.0);
+    let last = seen.last()?;
+    let moved = ((last[1] - fx).powi(2) + (last[2] - fy).powi(2)).sqrt();
+    if u(last[0]) < 0.1 || moved < 1.0 {
+        return None;
+    }
+    // Least squares of `value - start = D s(u)` for one dimension of the track.
+    let slope = |profile: fn(f64) -> f64, k: usize, start: f64| -> Option<f64> {
+        let (mut ss, mut sv) = (0.0, 0.0);
+        for p in seen {
+            let s = profile(u(p[0]));
+            ss += s * s;
+            sv += s * (p[k] - start);
+        }
+        (ss > 1e-9).then(|| sv / ss)
+    };
+    let mut best: Option<(f64, usize, [f64; 2])> = None;
+    let mut smooth_residual = f64::INFINITY;
+    for (k, profile) in PROFILES.iter().enumerate() {
+        let (Some(dx), Some(dy)) = (slope(*profile, 1, fx), slope(*profile, 2, fy)) else { continue };
+        let residual: f64 = seen
+            .iter()
+            .map(|p| {
+                let s = profile(u(p[0]));
+                (fx + dx * s - p[1]).powi(2) + (fy + dy * s - p[2]).powi(2)
+            })
+            .sum();
+        if k == 0 {
+            smooth_residual = residual;
+        }
+        let better = match best {
+            None => true,
+            Some((r, _, _)) => residual < r && residual < CLEARLY_BETTER * smooth_residual,
+        };
+        if better {
+            best = Some((residual, k, [dx, dy]));
+        }
+    }
+    let (residual, k, [dx, dy]) = best?;
+    // A path that no single profile follows (a lift, a move across and a descent) is not
+    // extrapolated by one.
+    let rms = (residual / seen.len() as f64).sqrt();
+    let length = (dx * dx + dy * dy).sqrt();
+    if rms > tolerance[0] + tolerance[1] * length {
+        return None;
+    }
+    let profile = PROFILES[k];
+    let dw = slope(profile, 3, fw).unwrap_or(0.0);
+    let dh = slope(profile, 4, fh).unwrap_or(0.0);
+    Some(MovePath { from: [fx, fy, fw, fh], change: [dx, dy, dw, dh], profile, since, until })
+}
+
+/// Extension `merge_duplicates`: two anchors of one type on the same spot (boxes overlapping at an
+/// IoU of [`DUPLICATE_IOU`] or more, of similar size), neither moving nor inside the other (directly
+/// or through a chain of attachments), are one object anchored twice (a detector that reported it twice, or under another class for a
+/// while): the younger is merged into the older, which keeps the newer sighting, the attachment
+/// (if only the younger had one) and the children.
+fn merge_duplicates(work: &mut [Work], bindings: &mut [Binding], notes: &mut Vec<String>) {
+    for i in 0..work.len() {
+        for j in 0..work.len() {
+            if i == j || work[i].removed || work[j].removed {
+                continue;
+            }
+            let (a, b) = (&work[i].anchor, &work[j].anchor);
+            // `i` the older, `j` the younger.
+            let same = a.object_type == b.object_type
+                && (a.first_seen, &a.symbol) < (b.first_seen, &b.symbol)
+                && !a.moving
+                && !b.moving
+                && !(a.attachment.is_some() && b.attachment.is_some())
+                && similar_size(&a.bbox, &b.bbox)
+                && iou(&a.bbox, &b.bbox) >= DUPLICATE_IOU;
+            if !same {
+                continue;
+            }
+            // One inside the other, directly or through a chain (a cone put over what holds its
+            // twin's contents stands where its twin is): two objects, not one. Merging them would
+            // attach the survivor to itself.
+            let index = symbol_index(work);
+            if is_ancestor(i, j, work, &index) || is_ancestor(j, i, work, &index) {
+                continue;
+            }
+            let younger = work[j].anchor.clone();
+            let (aligned, percept_type) = (work[j].aligned, work[j].percept_type.clone());
+            work[j].removed = true;
+            let old = &mut work[i];
+            notes.push(format!(
+                "`{}` merged into `{}`: one object anchored twice",
+                younger.symbol, old.anchor.symbol
+            ));
+            if aligned && !old.aligned {
+                old.anchor.bbox = younger.bbox;
+                old.anchor.status = younger.status;
+                old.anchor.still = younger.still;
+                old.aligned = true;
+                old.percept_type = percept_type;
+            }
+            old.anchor.last_seen = old.anchor.last_seen.max(younger.last_seen);
+            old.anchor.confidence = old.anchor.confidence.max(younger.confidence);
+            if old.anchor.attachment.is_none() {
+                old.anchor.attachment = younger.attachment;
+            }
+            let survivor = old.anchor.symbol.clone();
+            for w in work.iter_mut() {
+                if let Some(att) = &mut w.anchor.attachment
+                    && att.parent == younger.symbol
+                {
+                    att.parent = survivor.clone();
+                }
+            }
+            for b in bindings.iter_mut() {
+                if b.bound.as_ref() == Some(&younger.symbol) {
+                    b.bound = Some(survivor.clone());
+                }
+                b.candidates.retain(|c| c.symbol != younger.symbol);
+            }
+        }
+    }
+}
+
+/// The overlap from which two anchors of one type are one object ([`merge_duplicates`]).
+const DUPLICATE_IOU: f64 = 0.7;
+
+fn iou(a: &BBox, b: &BBox) -> f64 {
+    let w = (a.x2.min(b.x2) - a.x1.max(b.x1)).max(0.0);
+    let h = (a.y2.min(b.y2) - a.y1.max(b.y1)).max(0.0);
+    let inter = w * h;
+    let union = a.width() * a.height() + b.width() * b.height() - inter;
+    if union <= 0.0 { 0.0 } else { inter / union }
+}
+
 /// Extension `average_still`: an object that no action moves stands still (H1), so the boxes seen
 /// of it are one box plus the detector's noise. While it is not moving and each new box stays within
 /// [`STILL_PX`] pixels (plus 5 % of its size) of the mean so far, the anchor's box is that mean (of at
-/// most [`STILL_MAX`] boxes, so it can follow a slow drift); otherwise the mean starts again here.
+/// most [`STILL_MAX`] boxes, so it can follow a slow drift). A box that strays is a detector's
+/// outlier and left out, unless [`STILL_STRAYS`] do in a row (the object did move): then the mean
+/// starts again there.
 fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
     let obs = [observed.x1, observed.y1, observed.x2, observed.y2];
-    let restart = StillBox { mean: obs, count: 1 };
+    let restart = StillBox { mean: obs, count: 1, strays: 0 };
     let next = match anchor.still {
-        Some(still) if !anchor.moving => {
+        Some(still) if !anchor.moving && !anchor.turning => {
             let m = still.mean;
             let tolerance = STILL_PX + 0.05 * scale(&observed);
             let near = (0..4).all(|k| (obs[k] - m[k]).abs() <= tolerance);
             if near {
                 let n = (still.count + 1).min(STILL_MAX);
                 let w = 1.0 / f64::from(n);
-                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n }
+                StillBox { mean: std::array::from_fn(|k| m[k] + (obs[k] - m[k]) * w), count: n, strays: 0 }
+            } else if still.count >= STILL_STRAYS && still.strays + 1 < STILL_STRAYS {
+                StillBox { strays: still.strays + 1, ..still }
             } else {
                 restart
             }
@@ -823,16 +1250,61 @@ fn average_still(anchor: &mut Anchor, observed: BBox) -> BBox {
     BBox::new(x1, y1, x2, y2)
 }
 
+/// Extension `still_stays`: the anchors no action may be moving (H1): established, not moving or
+/// turning, not attached (a child moves with its parent), and not one that an undecided action on
+/// identical objects may be moving.
+fn still_anchors(work: &[Work], bindings: &[Binding], on: bool) -> Vec<bool> {
+    if !on {
+        return vec![false; work.len()];
+    }
+    let undecided: HashSet<&Symbol> = bindings
+        .iter()
+        .filter(|b| b.bound.is_none() && !b.completed)
+        .flat_map(|b| b.candidates.iter().map(|c| &c.symbol))
+        .collect();
+    work.iter()
+        .map(|w| {
+            let a = &w.anchor;
+            !a.moving
+                && !a.turning
+                && a.attachment.is_none()
+                && a.confidence >= ESTABLISHED
+                && !undecided.contains(&a.symbol)
+        })
+        .collect()
+}
+
+/// Extension `still_stays`: whether a percept lies further from an anchor's box than a detector's
+/// noise explains (its centre more than [`STILL_MOVED_PX`] plus a fifth of the box's smaller side
+/// away).
+fn moved_away(percept: &BBox, anchor: &BBox) -> bool {
+    let [a, b] = [centre(percept), centre(anchor)];
+    let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    d > STILL_MOVED_PX + 0.2 * anchor.width().min(anchor.height())
+}
+
+const STILL_MOVED_PX: f64 = 3.0;
+/// How much dearer it is for an object no action moves to take a percept that lies away from it.
+const STILL_MOVED_FACTOR: f64 = 10.0;
+
 /// How far (pixels, plus 5 % of the box's size) a box of a still object may stray from the mean.
 const STILL_PX: f64 = 3.0;
 /// Boxes averaged at most for a still object.
 const STILL_MAX: u32 = 60;
+/// Boxes in a row that must stray from the mean of a still object before it starts again (fewer
+/// are a detector's outliers); also the boxes a mean needs before it is kept against a stray.
+const STILL_STRAYS: u32 = 3;
 
 /// The move an action started is over (or no longer believed): no motion state is left.
 fn stop_moving(anchor: &mut Anchor) {
+    if anchor.moving {
+        // Moved until now (or as long as it was believed to be moving).
+        anchor.last_moved = anchor.moving_until.max(anchor.moving_since).or(anchor.last_moved);
+    }
     anchor.moving = false;
     anchor.moving_until = None;
     anchor.moving_since = None;
+    anchor.move_track = Vec::new();
 }
 
 /// Whether two boxes could be the same object seen twice: their scales (square roots of the areas)
@@ -865,6 +1337,18 @@ fn has_anchored_ancestor(i: usize, work: &[Work], index: &HashMap<Symbol, usize>
     false
 }
 
+/// The outermost ancestor of an anchor in the attachment hierarchy (itself if it has no parent).
+fn root_of(i: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> usize {
+    let mut current = i;
+    for _ in 0..work.len() {
+        match work[current].anchor.attachment.as_ref().and_then(|a| index.get(&a.parent)) {
+            Some(&parent) => current = parent,
+            None => break,
+        }
+    }
+    current
+}
+
 fn is_ancestor(candidate: usize, of: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> bool {
     let mut current = of;
     for _ in 0..work.len() {
@@ -890,6 +1374,7 @@ fn geometry_of(child: &BBox, parent_symbol: Symbol, parent: &BBox, relation: Opt
         parent_size: size(parent),
         hidden: false,
         provisional: false,
+        settling: false,
     }
 }
 
@@ -976,6 +1461,53 @@ fn names_single_other(action: &Action, work: &[Work]) -> bool {
     })
 }
 
+/// The open binding an action event completes: the one of the same action and arguments whose
+/// expected end is nearest.
+fn open_binding(action: &Action, time: Time, bindings: &[Binding]) -> Option<usize> {
+    bindings
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| !b.completed && b.action.name == action.name && b.action.args == action.args)
+        .min_by_key(|(_, b)| b.action.expected_end.map_or(0, |e| (e - time).abs()))
+        .map(|(i, _)| i)
+}
+
+/// The single other object an action names besides its moving object, if there is one.
+fn single_other(action: &Action, work: &[Work], theta_anch: f64) -> Option<usize> {
+    action.args.iter().skip(1).find_map(|arg| {
+        let single =
+            work.iter().any(|w| !w.removed && w.anchor.symbol == *arg) || candidates(arg, work).len() == 1;
+        if single { resolve(arg, work, theta_anch) } else { None }
+    })
+}
+
+/// For an action that names a type as its moving object and another, single object: the anchor of
+/// that type (the established ones, if any) nearest that object, among those not inside another
+/// (a contained object comes over nothing). `None` if the moving object is named by symbol.
+fn nearest_to_other(action: &Action, work: &[Work], theta_anch: f64) -> Option<Symbol> {
+    let mover = action.args.first()?;
+    if work.iter().any(|w| !w.removed && w.anchor.symbol == *mover) {
+        return None;
+    }
+    let other = single_other(action, work, theta_anch)?;
+    let target = bottom_centre(&work[other].anchor.bbox);
+    let free = |i: &usize| !work[*i].anchor.attachment.as_ref().is_some_and(|a| a.hidden);
+    let all: Vec<usize> = (0..work.len())
+        .filter(|&i| !work[i].removed && work[i].anchor.object_type == *mover && i != other)
+        .filter(free)
+        .collect();
+    let established: Vec<usize> =
+        all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
+    let pool = if established.is_empty() { all } else { established };
+    pool.into_iter()
+        .map(|i| {
+            let p = bottom_centre(&work[i].anchor.bbox);
+            ((p[0] - target[0]).powi(2) + (p[1] - target[1]).powi(2), i)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, i)| work[i].anchor.symbol.clone())
+}
+
 /// For an action that names another, single object: the candidate nearest it.
 fn near_other(
     action: &Action,
@@ -1035,7 +1567,9 @@ fn resolve(arg: &str, work: &[Work], theta_anch: f64) -> Option<usize> {
     if let Some(i) = work.iter().position(|w| !w.removed && &*w.anchor.symbol == arg) {
         return Some(i);
     }
-    (0..work.len()).filter(|&i| !work[i].removed && &*work[i].anchor.object_type == arg).max_by(|&a, &b| {
+    // Among the established anchors of the type when there are any: a false detection of the type
+    // seen a moment ago is not the object that has been there all along (and is now hidden).
+    candidates(arg, work).into_iter().max_by(|&a, &b| {
         let (a, b) = (&work[a].anchor, &work[b].anchor);
         (a.is_anchored(theta_anch), a.last_seen)
             .cmp(&(b.is_anchored(theta_anch), b.last_seen))
@@ -1072,6 +1606,48 @@ fn put_over(c: usize, pa: usize, work: &mut [Work], time: Time) -> (BBox, bool) 
         return (p.bbox, true);
     }
     (work[pa].anchor.bbox, false)
+}
+
+/// Extension `infer_hidden`, for containers: a containing action completes over a single object,
+/// but every anchor of the container's type is inside another (or there is none): the container is
+/// an object not seen, now over that object. Its anchor is inferred there, the size of another
+/// anchor of its type if there is one (else twice the object's), established (confidence 0.5).
+fn infer_container(
+    action: &Action,
+    time: Time,
+    work: &mut Vec<Work>,
+    theta_anch: f64,
+    notes: &mut Vec<String>,
+) -> Option<Symbol> {
+    let object_type = action.args.first()?.clone();
+    let other = single_other(action, work, theta_anch)?;
+    let child = work[other].anchor.bbox;
+    let size = work
+        .iter()
+        .find(|w| !w.removed && w.anchor.object_type == object_type)
+        .map_or([2.0 * child.width(), 2.0 * child.height()], |w| size(&w.anchor.bbox));
+    let bbox = from_bottom_centre(bottom_centre(&child), size);
+    let used: HashSet<Symbol> = work.iter().map(|w| w.anchor.symbol.clone()).collect();
+    let symbol = fresh_symbol(&Percept::new("", &object_type, bbox), &used);
+    notes.push(format!(
+        "`{symbol}` ({object_type}) inferred over `{}`: no anchor of its type could have come over it",
+        work[other].anchor.symbol
+    ));
+    // Established: the action says it is there, as surely as a few sightings would.
+    let confidence = theta_anch.max(ESTABLISHED);
+    work.push(Work {
+        anchor: Anchor {
+            confidence,
+            ..Anchor::new(symbol.clone(), object_type, bbox, AnchorStatus::Occluded, time)
+        },
+        aligned: false,
+        previous_centre: None,
+        previous_confidence: confidence,
+        removed: false,
+        box_before: bbox,
+        percept_type: None,
+    });
+    Some(symbol)
 }
 
 /// Extension `infer_hidden`: an anchor for an object a containing action names but that was never
@@ -1193,6 +1769,7 @@ fn apply_rule(
                 let mut attachment = geometry_of(&w.anchor.bbox, parent_symbol, &parent_box, rel);
                 attachment.hidden = *hides_child;
                 attachment.provisional = guessed;
+                attachment.settling = *hides_child && params.extensions.average_still;
                 w.anchor.attachment = Some(attachment);
             }
             Effect::Detach { child, parent } => {
@@ -1225,11 +1802,25 @@ fn apply_rule(
                     work[o].anchor.moving = true;
                     work[o].anchor.moving_until = action.expected_end;
                     work[o].anchor.moving_since = Some(time);
+                    work[o].anchor.last_moved = Some(time);
+                    // The boxes seen before the move are not where it will stand.
+                    work[o].anchor.still = None;
+                    let b = work[o].anchor.bbox;
+                    let [x, y] = centre(&b);
+                    work[o].anchor.move_track = vec![[time as f64, x, y, b.width(), b.height()]];
                 }
             }
             Effect::StopMoving { object } => {
                 if let Some(o) = lookup(*object, work, notes) {
                     stop_moving(&mut work[o].anchor);
+                }
+            }
+            Effect::StartTurning { object } | Effect::StopTurning { object } => {
+                if let Some(o) = lookup(*object, work, notes) {
+                    let anchor = &mut work[o].anchor;
+                    anchor.turning = matches!(effect, Effect::StartTurning { .. });
+                    // The mean of the boxes before (or during) the turn is not the box after it.
+                    anchor.still = None;
                 }
             }
         }

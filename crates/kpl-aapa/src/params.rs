@@ -93,6 +93,33 @@ pub struct Extensions {
     /// not the latest detection with its noise (a contained object follows that steadier box too).
     /// A box that strays from the mean starts it again. Off by default: it describes the sensor.
     pub average_still: bool,
+    /// Objects do not move on their own (H1): an established anchor that no action is moving (not
+    /// moving, not turning, not attached, not one of the objects an undecided action on identical
+    /// objects may be moving) takes a percept that lies away from it (its centre further than 3 px
+    /// plus a fifth of the box's smaller side) only at ten times the cost. So an object released
+    /// where it stands does not take the percept of its identical twin that moves nearby. Off by
+    /// default: it needs every move to be an action (CATER's scenes, not a hand moving freely).
+    pub still_stays: bool,
+    /// Two anchors of one type on the same spot (boxes overlapping at an IoU of 0.7 or more, of
+    /// similar size), neither moving nor one inside the other (however deep), are one object
+    /// anchored twice (a detector that reported it twice, or under another class for a few
+    /// frames): the younger is merged into the older. Off by default: objects of one type can share a place (a casing top
+    /// mounted on a casing base); in CATER they cannot.
+    pub merge_duplicates: bool,
+    /// Which of several anchors of a type an action names is decided by where things are: an
+    /// action that puts its moving object over another, single object (`_contain(cone, snitch)`)
+    /// by the anchor of the type nearest that object when it completes (among all of the type, not
+    /// those inside another; if there is none, the container is inferred over the object with
+    /// `infer_hidden`), and a moving object inside a container only with its container (a cone
+    /// inside another is not what `_slide(cone)` moves unless its container moves too).
+    pub identity_by_place: bool,
+    /// Seconds for which an established anchor (confidence of at least 0.5) that disappears with
+    /// no explanation (not occluded, out of view or attached) keeps its confidence where it was
+    /// last seen (H1: objects do not move on their own), before `conf_minus` starts to take it
+    /// away. `0` is the paper's rule: such a lost anchor decays at once. A perception that leaves out
+    /// objects it should report (OPNet's perfect perception leaves out every object of a contained
+    /// object's class, identical ones too) then does not make AAPA forget them.
+    pub keep_lost: f64,
 }
 
 /// The speed profile of an action's move, for motion prediction.
@@ -104,8 +131,14 @@ pub enum MotionProfile {
     /// Start and stop smoothly (`3u² - 2u³` of the action's time fraction `u`, the shape of
     /// Blender's default keyframe easing and of typical arm trajectories): the velocity measured at
     /// fraction `u0` fixes the whole move, which decelerates to rest at the expected end.
-    #[default]
     EaseInOut,
+    /// The profile the move showed while it was seen: the positions seen since the move started are
+    /// fitted (least squares) by each of smooth (`3u² - 2u³`), linear (`u`), ease-in (`u²`) and
+    /// ease-out (`1 - (1 - u)²`) from where the move started, and the best fit continues the move
+    /// to the expected end (smooth unless another fits clearly better). Without positions to fit,
+    /// as [`MotionProfile::EaseInOut`].
+    #[default]
+    Fitted,
 }
 
 impl Default for Extensions {
@@ -114,12 +147,16 @@ impl Default for Extensions {
             predict_motion: true,
             reacquire: true,
             scale_attached: true,
-            motion_profile: MotionProfile::EaseInOut,
+            motion_profile: MotionProfile::Fitted,
             restore_partial_boxes: false,
             established_first: true,
             infer_hidden: true,
             infer_hidden_box: [0.42, 0.6],
             average_still: false,
+            still_stays: false,
+            merge_duplicates: false,
+            identity_by_place: true,
+            keep_lost: 0.0,
         }
     }
 }
@@ -186,6 +223,11 @@ pub enum Effect {
     StartMoving { object: usize },
     /// The action that moved the object is over.
     StopMoving { object: usize },
+    /// The object turns where it stands (CATER's `_rotate`): its box changes while it stays put,
+    /// so boxes are not averaged over the turn and nothing moves it while it is unseen.
+    StartTurning { object: usize },
+    /// The turn is over.
+    StopTurning { object: usize },
 }
 
 /// Where an attached child is believed to be at the moment of attachment.
@@ -234,11 +276,19 @@ impl Default for Params {
 
 impl Params {
     /// The paper's LA-CATER setting (IV-B) for a 320x240 video, with this implementation's
-    /// extensions and without spatial relations (the benchmark reads only the snitch).
+    /// extensions, `still_stays` (every move in CATER is an action), `merge_duplicates` (no two of
+    /// its objects share a place) and `keep_lost` for the length of a CATER video (10 s), and without
+    /// spatial relations (the benchmark reads only the snitch).
     pub fn cater() -> Params {
         Params {
             image: Some(ImageSize { width: 320.0, height: 240.0 }),
             spatial_relations: false,
+            extensions: Extensions {
+                keep_lost: 10.0,
+                still_stays: true,
+                merge_duplicates: true,
+                ..Extensions::default()
+            },
             ..Params::default()
         }
     }
@@ -273,6 +323,10 @@ impl Params {
                 infer_hidden: false,
                 infer_hidden_box: Extensions::default().infer_hidden_box,
                 average_still: false,
+                still_stays: false,
+                merge_duplicates: false,
+                identity_by_place: false,
+                keep_lost: 0.0,
             },
             ..Params::cater()
         }
@@ -305,6 +359,7 @@ impl ActionRule {
     /// | `move(agent, obj)` started / completed | obj moving / stopped |
     /// | `_contain(cone, obj)` completed | `attached(obj, cone)`, `contained(obj, cone)`, obj hidden |
     /// | `_slide(obj)`, `_pick_place(obj)`, `_contain(cone, ..)` started / completed | moving / stopped |
+    /// | `_rotate(obj)` started / completed | turning in place / done |
     /// | `_pick_place(cone)` started | the cone's children released |
     pub fn defaults() -> Vec<ActionRule> {
         use ActionPhase::{Completed, Started};
@@ -333,6 +388,8 @@ impl ActionRule {
                 vec![Effect::DetachChildren { parent: 0 }, Effect::StartMoving { object: 0 }],
             ),
             rule("_pick_place", Completed, vec![Effect::StopMoving { object: 0 }]),
+            rule("_rotate", Started, vec![Effect::StartTurning { object: 0 }]),
+            rule("_rotate", Completed, vec![Effect::StopTurning { object: 0 }]),
             rule("_contain", Started, vec![Effect::StartMoving { object: 0 }]),
             rule(
                 "_contain",
@@ -362,7 +419,10 @@ impl ActionRule {
                 }
                 Effect::Detach { child, parent } => (*child).max(parent.unwrap_or(0)) + 1,
                 Effect::DetachChildren { parent } => parent + 1,
-                Effect::StartMoving { object } | Effect::StopMoving { object } => object + 1,
+                Effect::StartMoving { object }
+                | Effect::StopMoving { object }
+                | Effect::StartTurning { object }
+                | Effect::StopTurning { object } => object + 1,
             })
             .max()
             .unwrap_or(0)

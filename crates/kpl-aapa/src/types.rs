@@ -145,6 +145,11 @@ pub struct Attachment {
     /// before it moves.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub provisional: bool,
+    /// The geometry is still being measured (extension `average_still`): a hidden child keeps its
+    /// box while its parent stands still, and the geometry is fixed again each cycle against the
+    /// parent's averaged box, until the parent first moves.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub settling: bool,
 }
 
 /// One anchor: a symbol grounded in percepts (III-B).
@@ -170,6 +175,12 @@ pub struct Anchor {
     pub moving: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_until: Option<Time>,
+    /// When an action last moved this object (its move's start, or its end once over).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_moved: Option<Time>,
+    /// Set while an action turns this object in place (its box changes, its place does not).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub turning: bool,
     /// Width and height when last seen with no other detection overlapping it (partial-box
     /// restoration).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -183,6 +194,11 @@ pub struct Anchor {
     /// When the action moving this object started.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_since: Option<Time>,
+    /// How this object's box was seen during the move in progress: `[time, centre x, centre y,
+    /// width, height]`, the first as it was when the move started (for
+    /// [`crate::MotionProfile::Fitted`], and to smooth a detector's boxes of a carrier).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub move_track: Vec<[f64; 5]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attachment: Option<Attachment>,
     /// `confidence >= theta_inf`: passed on for world state inference (III-B.3).
@@ -202,6 +218,13 @@ pub struct Anchor {
 pub struct StillBox {
     pub mean: [f64; 4],
     pub count: u32,
+    /// Boxes in a row that strayed from the mean (a detector's outliers, left out of it).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub strays: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 impl Anchor {
@@ -220,7 +243,10 @@ impl Anchor {
             velocity: [0.0, 0.0],
             moving: false,
             moving_until: None,
+            turning: false,
+            last_moved: None,
             moving_since: None,
+            move_track: Vec::new(),
             full_size: None,
             last_percept_box: None,
             partial: false,

@@ -71,15 +71,37 @@ fn an_anchored_object_hidden_behind_a_detection_is_occluded_and_stays_put() {
 
 #[test]
 fn an_unexplained_disappearance_is_lost_decays_and_is_removed() {
+    // The paper's rule: `keep_lost` off.
+    let mut params = Params::cater();
+    params.extensions.keep_lost = 0.0;
     let mut frames = still(vec![p("a", "cube", bx(100., 100., 120., 120.))], 11); // confidence 1.0
     frames.extend(still(vec![p("far", "cone", bx(0., 0., 10., 10.))], 12));
-    let worlds = run(&cater(), &frames);
+    let worlds = run(&Aapa::new(params).unwrap(), &frames);
     let lost = worlds[11].anchor("a").unwrap();
     assert_eq!(lost.status, AnchorStatus::Lost);
     assert!((lost.confidence - 0.9).abs() < 1e-9);
     // 1.0 - 11 * 0.1 < 0 on the 11th missed cycle.
     assert!(worlds[20].anchor("a").is_some());
     assert!(worlds[21].anchor("a").is_none());
+}
+
+#[test]
+fn an_established_object_that_vanishes_is_kept_for_keep_lost_seconds() {
+    // `Params::cater()` keeps an established anchor that vanishes unexplained for 10 s (H1), then
+    // the paper's decay takes it; a short-lived detection (not established) decays at once.
+    let mut frames =
+        still(vec![p("a", "cube", bx(100., 100., 120., 120.)), p("g", "cube", bx(0., 0., 9., 9.))], 1);
+    frames.extend(still(vec![p("a", "cube", bx(100., 100., 120., 120.))], 10)); // a: confidence 1.0
+    frames.extend(still(vec![p("far", "cone", bx(200., 0., 210., 10.))], 320));
+    let worlds = run(&cater(), &frames);
+    assert!(worlds[2].anchor("g").is_none(), "seen once, then lost: dropped");
+    let kept = worlds[300].anchor("a").unwrap();
+    assert_eq!((kept.status, kept.bbox), (AnchorStatus::Lost, bx(100., 100., 120., 120.)));
+    let full = worlds[10].anchor("a").unwrap().confidence;
+    assert!(full > 0.99 && kept.confidence == full, "{full} then {}", kept.confidence);
+    // Last seen at frame 10; 10 s later (frame 311) it starts to decay, 11 cycles later it is gone.
+    assert!(worlds[311].anchor("a").unwrap().confidence < full);
+    assert!(worlds[330].anchor("a").is_none());
 }
 
 #[test]

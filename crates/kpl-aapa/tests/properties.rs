@@ -83,9 +83,21 @@ fn check(previous: &WorldState, world: &WorldState, actions: &[Action], params: 
     // or its parents this cycle: one given now, or an earlier one on one of several identical
     // objects whose binding is decided now (its started effects, a pick-up that leaves the
     // contents behind for example, are applied when its motion tells which object it moves).
+    // An anchor merged into another (`merge_duplicates`: one object anchored twice) is not removed
+    // when the survivor holds its place in the hierarchy.
     let bindings_open = previous.bindings.iter().any(|b| b.bound.is_none());
+    let merged_keeping_parent = |a: &kpl_aapa::Anchor| {
+        let parent = a.attachment.as_ref().map(|t| &t.parent);
+        world.notes.iter().filter_map(|n| n.strip_prefix(&format!("`{}` merged into `", a.symbol))).any(
+            |rest| {
+                let survivor = rest.split('`').next().unwrap_or("");
+                world.anchor(survivor).and_then(|s| s.attachment.as_ref()).map(|t| &t.parent) == parent
+            },
+        )
+    };
     for a in &previous.anchors {
         if world.anchor(&a.symbol).is_none()
+            && !merged_keeping_parent(a)
             && ancestors_anchored(previous, &a.symbol, params.theta_anch)
             && actions.is_empty()
             && !bindings_open
@@ -100,6 +112,48 @@ fn check(previous: &WorldState, world: &WorldState, actions: &[Action], params: 
             );
         }
     }
+}
+
+/// The case proptest shrank an attachment cycle to (regressions file, `f784f963...`): `_contain(hand0,
+/// cube0)` infers a container `hand00` over `cube0`; `_contain(cube1, hand0)` puts `cube1`, unseen,
+/// over `hand00`, which moves it onto `cube0`'s spot. `merge_duplicates` then took `cube1` for
+/// `cube0` anchored twice and gave `cube0` its child `hand00`: `cube0` in `hand00` in `cube0`. An
+/// object inside another, however deep, is never merged with it.
+#[test]
+fn a_container_put_over_its_twins_container_is_not_merged_with_its_twin() {
+    let params = Params { spatial_relations: true, camera: None, ..Params::cater() };
+    let aapa = Aapa::new(params.clone()).unwrap();
+    let b = |x: f64, y: f64, w: f64, h: f64| BBox::new(x, y, x + w, y + h);
+    let frames: [(Vec<Percept>, Vec<Action>); 4] = [
+        (
+            vec![
+                Percept::new(
+                    "cube0",
+                    "cube",
+                    b(226.84464347811718, 0.0, 37.82426193126197, 56.97155228876072),
+                ),
+                Percept::new("cube1", "cube", b(0.0, 0.0, 5.0, 5.0)),
+                Percept::new("hand2", "hand", b(0.0, 0.0, 5.0, 5.0)),
+            ],
+            vec![],
+        ),
+        (vec![], vec![Action::completed("_contain", &["hand0", "cube0"])]),
+        (vec![Percept::new("cube0", "cube", b(0.0, 0.0, 35.428327324533235, 47.808628323302976))], vec![]),
+        (vec![], vec![Action::completed("_contain", &["cube1", "hand0"])]),
+    ];
+    let mut world = WorldState::default();
+    for (k, (percepts, actions)) in frames.iter().enumerate() {
+        let next = aapa.step((k as i64 + 1) * 33_333, percepts, actions, None, &world).unwrap();
+        check(&world, &next, actions, &params);
+        world = next;
+    }
+    // `cube1` is not taken for `cube0`: never established and not seen, it is dropped (and
+    // `hand00` detached from it); `cube0` stays in `hand00`.
+    assert!(!world.notes.iter().any(|n| n.contains("merged")), "{:?}", world.notes);
+    assert!(world.notes.iter().any(|n| n.contains("`hand00` detached: its parent `cube1` was dropped")));
+    let parent = |s: &str| world.anchor(s).and_then(|a| a.attachment.as_ref()).map(|t| t.parent.to_string());
+    assert_eq!(parent("cube0").as_deref(), Some("hand00"), "{:?}", world.anchors);
+    assert_eq!(parent("hand00"), None, "{:?}", world.anchors);
 }
 
 proptest! {

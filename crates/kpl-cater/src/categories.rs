@@ -56,7 +56,7 @@ fn mask(frames: usize, ranges: impl IntoIterator<Item = (i64, i64)>) -> Vec<bool
 
 /// The containment ranges of objects by cones: `(cone, contained instance, from, to)`, with `to`
 /// the start of the cone's next `_pick_place` or `open_end` when there is none.
-fn containments(scene: &Scene, open_end: i64) -> Vec<(&str, &str, i64, i64, usize)> {
+pub(crate) fn containments(scene: &Scene, open_end: i64) -> Vec<(&str, &str, i64, i64, usize)> {
     let mut out = Vec::new();
     for (cone, moves) in &scene.movements {
         if !is_cone_instance(cone) {

@@ -15,16 +15,21 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::categories::{FrameCategories, carried_frames, contained_frames, visible_frames};
+use crate::classes::{SNITCH_INDEX, opnet_index};
 use crate::detector::{DetectorNoise, detect_video, perfect};
+use crate::detector_b::{DetectorBNoise, detect_video_b};
 use crate::error::CaterError;
+use crate::formats::pickle::write_perception_pickle;
 use crate::formats::{
     Annotations, CameraField, FRAMES, GroundTruth, PerceptionFile, Scene, read_json, write_annotation_file,
     write_json,
 };
 use crate::layout::{
-    ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, ground_truth_path,
-    perception_path, scene_path,
+    ANNOTATIONS_DIR, CARRIED_FILE, CONTAINMENT_FILE, DETECTOR_PICKLES_DIR, LABELS_DIR, PERCEPTION_DIR,
+    PERFECT_PICKLES_DIR, Perception, VISIBLE_FILE, ground_truth_path, perception_path, pickle_path,
+    scene_path,
 };
+use crate::perfect_pickles::{Occlusion, perfect_perception};
 use crate::render::{Camera, Rendered, render};
 use crate::sim::{Motion, directions, simulate};
 
@@ -33,6 +38,22 @@ use crate::sim::{Motion, directions, simulate};
 pub struct GeneratorConfig {
     pub motion: Motion,
     pub noise: DetectorNoise,
+    pub noise_b: DetectorBNoise,
+    pub layout: Layout,
+}
+
+/// Which files a generated directory has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Layout {
+    /// This project's: `scenes/` with the scene JSON and `<video>_bb.json`, `perception/` with the
+    /// three perceptions as JSON.
+    #[default]
+    Kpl,
+    /// LA-CATER's, as OPNet's code reads it: `scenes/`, `labels/<video>_bb.json`, OPNet's pickles
+    /// in `perfect_perception/` (made by OPNet's rule, [`crate::perfect_pickles`]),
+    /// `od_perception/` (the detector) and `od_perception_b/` (the second detector), and
+    /// `samples.txt`. A detection whose class is not one of OPNet's gets label `-1`.
+    LaCater,
 }
 
 /// How many frames fall in each category over a set of videos (OPNet's definitions).
@@ -69,8 +90,11 @@ pub struct Manifest {
     pub generator: String,
     pub seed: u64,
     pub videos: usize,
-    /// `max-two` (LA-CATER) or `all` (every object moves).
+    /// `max-two` (LA-CATER), `all` (every object moves) or `hard` (this project's hard scenes).
     pub motion: String,
+    /// `kpl` or `la-cater` (which files, [`Layout`]).
+    #[serde(default)]
+    pub layout: String,
     pub frame_mix: FrameMix,
     /// Videos drawn again because objects collided.
     pub redraws: usize,
@@ -87,6 +111,10 @@ pub struct GeneratedVideo {
     pub ground_truth: GroundTruth,
     pub perfect: PerceptionFile,
     pub detector: PerceptionFile,
+    pub detector_b: PerceptionFile,
+    /// OPNet's perfect perception (its rule, or the union of nearer boxes in hard scenes): per
+    /// frame `(OPNet label, [x1, y1, x2, y2])`.
+    pub opnet_perfect: Vec<Vec<(i64, [i64; 4])>>,
     pub categories: FrameCategories,
     pub redraws: usize,
 }
@@ -122,6 +150,12 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
     let mut detector_classes = classes.clone();
     let detector_frames =
         detect_video(&mut rng, &frames, &mut detector_classes, &object_class, &config.noise);
+    // The second detector draws from a generator of its own.
+    let mut rng_b = ChaCha8Rng::seed_from_u64(seed ^ DETECTOR_B_SEED);
+    rng_b.set_stream(index as u64);
+    let mut detector_b_classes = classes.clone();
+    let detector_b_frames =
+        detect_video_b(&mut rng_b, &frames, &mut detector_b_classes, &object_class, &config.noise_b);
     let objects = sim
         .objects
         .iter()
@@ -141,7 +175,19 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
         movements: sim.movements,
         camera: Some(CameraField::Location(sim.camera)),
     };
-    let visible = visible_frames(&scene, &ground_truth, FRAMES, 0.0).unwrap_or_else(|_| vec![false; FRAMES]);
+    let occlusion = if config.motion == Motion::Hard {
+        Occlusion::Union { camera: sim.camera }
+    } else {
+        Occlusion::OneBox { visible_ratio: 0.0 }
+    };
+    let opnet_perfect = perfect_perception(&scene, &ground_truth, FRAMES, occlusion)
+        .unwrap_or_else(|| vec![Vec::new(); FRAMES]);
+    let visible = if config.motion == Motion::Hard {
+        // Visible when OPNet's rule, with the union of nearer boxes, keeps the snitch.
+        opnet_perfect.iter().map(|f| f.iter().any(|(label, _)| *label == i64::from(SNITCH_INDEX))).collect()
+    } else {
+        visible_frames(&scene, &ground_truth, FRAMES, 0.0).unwrap_or_else(|_| vec![false; FRAMES])
+    };
     let categories = FrameCategories {
         visible,
         contained: contained_frames(&scene, FRAMES),
@@ -153,13 +199,23 @@ pub fn generate_video(seed: u64, index: usize, config: &GeneratorConfig) -> Gene
             perception: "perfect".into(),
             classes,
             frames: perfect_frames,
+            ..PerceptionFile::default()
         },
         detector: PerceptionFile {
-            video: name,
+            video: name.clone(),
             perception: "detector".into(),
             classes: detector_classes,
             frames: detector_frames,
+            ..PerceptionFile::default()
         },
+        detector_b: PerceptionFile {
+            video: name,
+            perception: "detector-b".into(),
+            classes: detector_b_classes,
+            frames: detector_b_frames,
+            ..PerceptionFile::default()
+        },
+        opnet_perfect,
         scene,
         ground_truth,
         categories,
@@ -185,7 +241,7 @@ pub fn generate(
     threads: usize,
     config: &GeneratorConfig,
 ) -> Result<Manifest, CaterError> {
-    for sub in ["scenes", "perception", ANNOTATIONS_DIR] {
+    for sub in ["scenes", ANNOTATIONS_DIR] {
         create_dir(&dir.join(sub))?;
     }
     let next = AtomicUsize::new(0);
@@ -200,7 +256,7 @@ pub fn generate(
                         break;
                     }
                     let video = generate_video(seed, index, config);
-                    if let Err(e) = write_video(dir, &video) {
+                    if let Err(e) = write_video(dir, &video, config.layout) {
                         if let Ok(mut slot) = first_error.lock() {
                             slot.get_or_insert(e);
                         }
@@ -233,13 +289,20 @@ pub fn generate(
     write_annotation_file(&annotations.join(CONTAINMENT_FILE), &contained)?;
     write_annotation_file(&annotations.join(CARRIED_FILE), &carried)?;
     write_annotation_file(&annotations.join(VISIBLE_FILE), &visible)?;
+    if config.layout == Layout::LaCater {
+        // OPNet's list of a split: one video file per line.
+        let samples: String = categories.values().map(|(name, ..)| format!("{name}.avi\n")).collect();
+        let path = dir.join("samples.txt");
+        std::fs::write(&path, samples).map_err(|source| CaterError::Io { path, source })?;
+    }
     let manifest = Manifest {
         generator: format!("kpl-cater {}", env!("CARGO_PKG_VERSION")),
         seed,
         videos,
-        motion: match config.motion {
-            Motion::MaxTwo => "max-two".into(),
-            Motion::All => "all".into(),
+        motion: config.motion.name().into(),
+        layout: match config.layout {
+            Layout::Kpl => "kpl".into(),
+            Layout::LaCater => "la-cater".into(),
         },
         frame_mix: mix,
         redraws,
@@ -248,17 +311,61 @@ pub fn generate(
     Ok(manifest)
 }
 
-/// Writes one video's four files, creating the layout's folders if needed.
-pub fn write_video(dir: &Path, video: &GeneratedVideo) -> Result<(), CaterError> {
-    for sub in ["scenes", "perception"] {
-        create_dir(&dir.join(sub))?;
-    }
+/// Writes one video's files in a layout, creating its folders if needed.
+pub fn write_video(dir: &Path, video: &GeneratedVideo, layout: Layout) -> Result<(), CaterError> {
     let name = &video.scene.video;
+    create_dir(&dir.join("scenes"))?;
     video.scene.write(&scene_path(dir, name))?;
-    video.ground_truth.write(&ground_truth_path(dir, name))?;
-    video.perfect.write(&perception_path(dir, name, Perception::Perfect))?;
-    video.detector.write(&perception_path(dir, name, Perception::Detector))
+    match layout {
+        Layout::Kpl => {
+            create_dir(&dir.join(PERCEPTION_DIR))?;
+            video.ground_truth.write(&ground_truth_path(dir, name))?;
+            video.perfect.write(&perception_path(dir, name, Perception::Perfect))?;
+            video.detector.write(&perception_path(dir, name, Perception::Detector))?;
+            video.detector_b.write(&perception_path(dir, name, Perception::DetectorB))
+        }
+        Layout::LaCater => {
+            for sub in
+                [LABELS_DIR, PERFECT_PICKLES_DIR, DETECTOR_PICKLES_DIR, Perception::DetectorB.pickle_dir()]
+            {
+                create_dir(&dir.join(sub))?;
+            }
+            video.ground_truth.write(&dir.join(LABELS_DIR).join(format!("{name}_bb.json")))?;
+            write_perception_pickle(
+                &pickle_path(&dir.join(PERFECT_PICKLES_DIR), name),
+                &video.opnet_perfect,
+            )?;
+            for (perception, file) in
+                [(Perception::Detector, &video.detector), (Perception::DetectorB, &video.detector_b)]
+            {
+                write_perception_pickle(
+                    &pickle_path(&dir.join(perception.pickle_dir()), name),
+                    &opnet_labels(file),
+                )?;
+            }
+            Ok(())
+        }
+    }
 }
+
+/// A perception's frames with OPNet's class indices (`-1` for a class OPNet does not have) and
+/// boxes rounded to whole pixels.
+fn opnet_labels(file: &PerceptionFile) -> Vec<Vec<(i64, [i64; 4])>> {
+    let labels: Vec<i64> = file.classes.iter().map(|c| opnet_index(c).map_or(-1, i64::from)).collect();
+    file.frames
+        .iter()
+        .map(|f| {
+            f.iter()
+                .map(|d| {
+                    (labels.get(d.class as usize).copied().unwrap_or(-1), d.bbox.map(|v| v.round() as i64))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Xor-ed into the seed for the second detector's generator.
+const DETECTOR_B_SEED: u64 = 0xde7e_c70b;
 
 pub fn read_manifest(dir: &Path) -> Result<Manifest, CaterError> {
     read_json(&dir.join("manifest.json"))

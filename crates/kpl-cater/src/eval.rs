@@ -14,48 +14,129 @@ use serde::{Deserialize, Serialize};
 use crate::categories::{FrameCategories, carried_frames, contained_frames, visible_frames};
 use crate::error::CaterError;
 use crate::formats::{
-    Annotations, GroundTruth, IntBox, PerceptionFile, SNITCH_CLASS, Scene, read_annotation_file,
+    Annotations, Dropped, GroundTruth, IntBox, PerceptionFile, SNITCH_CLASS, Scene, read_annotation_file,
     write_predictions,
 };
 use crate::layout::{
-    CARRIED_FILE, CONTAINMENT_FILE, Perception, VISIBLE_FILE, annotations_dir, find_ground_truth,
-    list_videos, perception_path, pickle_path, scene_path,
+    CARRIED_FILE, CONTAINMENT_FILE, PERCEPTION_DIR, Perception, VISIBLE_FILE, annotations_dir,
+    find_ground_truth, list_videos, perception_path, pickle_path, scene_path,
 };
-use crate::models::{Model, predict};
+use crate::models::{Model, predict_traced};
 use crate::score::{Category, CategoryTable, FramesScored, VideoScore, score_video};
 
 /// Where a video's perception comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PerceptionSource {
-    /// This project's JSON in the data directory.
+    /// This project's JSON in the data directory (`perception/<video>_<kind>.json`).
     Json(Perception),
     /// OPNet's per-video pickles `<video>.pkl` in this directory.
-    Pickles(PathBuf),
+    Pickles { dir: PathBuf, boxes: Boxes },
+}
+
+/// What a perception's boxes are: exact (perfect perception: the ground truth's boxes of the
+/// objects seen) or a detector's, with noise. Averaging the boxes of objects standing still
+/// (`average_still`) helps only the latter, and costs the former its exactness.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Boxes {
+    Exact,
+    Noisy,
+    /// Decided per video: exact if every box perceived is, pixel for pixel, the ground-truth box of
+    /// an object in that frame (as perfect perception's are; a detector's never all are).
+    Measured,
 }
 
 impl PerceptionSource {
+    /// A short name for tables.
     pub fn name(&self) -> String {
         match self {
             PerceptionSource::Json(p) => p.name().to_owned(),
-            PerceptionSource::Pickles(dir) => format!("pickles {}", dir.display()),
+            PerceptionSource::Pickles { dir, .. } => format!("pickles {}", dir.display()),
         }
     }
 
-    /// Whether its boxes are a detector's, with noise: this project's detector perception and
-    /// OPNet's pickles (its detector's `od_perception`; for its perfect-perception pickles,
-    /// `--params` can turn `average_still` off).
-    pub fn noisy(&self) -> bool {
-        !matches!(self, PerceptionSource::Json(Perception::Perfect))
+    /// Where the perception is read from and what its boxes are taken to be, for the output.
+    pub fn describe(&self, data: &Path) -> String {
+        match self {
+            PerceptionSource::Json(p) => format!(
+                "{} ({}: this project's JSON, {})",
+                p.name(),
+                if p.exact() { "exact boxes" } else { "a detector's boxes" },
+                perception_path(data, "<video>", *p).display()
+            ),
+            PerceptionSource::Pickles { dir, boxes } => format!(
+                "OPNet's pickles in {} ({})",
+                dir.display(),
+                match boxes {
+                    Boxes::Exact => "exact boxes, as given",
+                    Boxes::Noisy => "a detector's boxes, as given",
+                    Boxes::Measured => "exact or a detector's, measured per video against the ground truth",
+                }
+            ),
+        }
+    }
+
+    pub fn boxes(&self) -> Boxes {
+        match self {
+            PerceptionSource::Json(p) if p.exact() => Boxes::Exact,
+            PerceptionSource::Json(_) => Boxes::Noisy,
+            PerceptionSource::Pickles { boxes, .. } => *boxes,
+        }
     }
 
     pub fn load(&self, data: &Path, video: &str) -> Result<PerceptionFile, CaterError> {
         match self {
             PerceptionSource::Json(p) => PerceptionFile::read(&perception_path(data, video, *p)),
-            PerceptionSource::Pickles(dir) => {
+            PerceptionSource::Pickles { dir, .. } => {
                 PerceptionFile::read_pickle(&pickle_path(dir, video), video, "pickle")
             }
         }
     }
+
+    /// The perception a data directory holds for `kind`, as it comes: this project's JSON
+    /// (`perception/`), else LA-CATER's pickles (`perfect_perception/` for perfect perception,
+    /// `od_perception/` for the detector, `od_perception_b/` for the second detector).
+    pub fn find(data: &Path, kind: Perception) -> Result<PerceptionSource, CaterError> {
+        if !data.is_dir() {
+            let source = std::io::Error::new(std::io::ErrorKind::NotFound, "no such data directory");
+            return Err(CaterError::Io { path: data.to_owned(), source });
+        }
+        let json_dir = data.join(PERCEPTION_DIR);
+        let suffix = format!("_{}.json", kind.name());
+        let has_json = std::fs::read_dir(&json_dir).is_ok_and(|mut entries| {
+            entries.any(|e| e.is_ok_and(|e| e.file_name().to_string_lossy().ends_with(&suffix)))
+        });
+        if has_json {
+            return Ok(PerceptionSource::Json(kind));
+        }
+        let pickles = data.join(kind.pickle_dir());
+        if pickles.is_dir() {
+            let boxes = if kind.exact() { Boxes::Exact } else { Boxes::Noisy };
+            return Ok(PerceptionSource::Pickles { dir: pickles, boxes });
+        }
+        Err(CaterError::invalid(
+            data,
+            format!(
+                "no {} perception: neither {}/<video>{suffix} nor OPNet's pickles in {}/ (or give --pickles DIR)",
+                kind.name(),
+                PERCEPTION_DIR,
+                kind.pickle_dir()
+            ),
+        ))
+    }
+}
+
+/// Whether every detection of a perception is, exactly, the ground-truth box of an object in its
+/// frame (`[x, y, x + w, y + h]`): perfect perception's are, a detector's are not.
+pub fn boxes_are_exact(perception: &PerceptionFile, truth: &GroundTruth) -> bool {
+    perception.frames.iter().enumerate().all(|(f, detections)| {
+        detections.iter().all(|d| {
+            truth.objects.values().any(|boxes| {
+                boxes.get(f).is_some_and(|&[x, y, w, h]| {
+                    d.bbox == [f64::from(x), f64::from(y), f64::from(x + w), f64::from(y + h)]
+                })
+            })
+        })
+    })
 }
 
 /// How the visible category is decided.
@@ -74,8 +155,12 @@ pub struct EvalOptions {
     pub data: PathBuf,
     pub model: Model,
     pub perception: PerceptionSource,
-    /// AAPA parameters; the model's defaults when `None`.
+    /// AAPA parameters for every video, as given; when `None`, the model's defaults for the
+    /// perception's boxes ([`Model::params_for`]) with `param_overrides` over them.
     pub params: Option<Params>,
+    /// A JSON object of parameters merged over the defaults (objects field by field), as
+    /// `kpl cater eval --params FILE` gives it.
+    pub param_overrides: Option<serde_json::Value>,
     pub threads: usize,
     /// Write each video's predictions as `<video>_bb.json` here.
     pub predictions_dir: Option<PathBuf>,
@@ -85,6 +170,9 @@ pub struct EvalOptions {
     pub annotations: Option<PathBuf>,
     pub frames: FramesScored,
     pub visible: VisibleFrom,
+    /// Write the world state of every frame of these videos as JSON lines,
+    /// `<predictions_dir>/<video>_worlds.jsonl` (AAPA models; needs `predictions_dir`).
+    pub trace: Vec<String>,
 }
 
 impl EvalOptions {
@@ -95,13 +183,50 @@ impl EvalOptions {
             model,
             perception: PerceptionSource::Json(perception),
             params: None,
+            param_overrides: None,
             threads: 1,
             predictions_dir: None,
             videos: None,
             annotations: None,
             frames: FramesScored::All,
             visible: VisibleFrom::Opnet,
+            trace: Vec::new(),
         }
+    }
+
+    /// The parameters for a video whose boxes are exact or noisy.
+    pub fn params_for(&self, noisy: bool) -> Result<Params, String> {
+        if let Some(params) = &self.params {
+            return Ok(params.clone());
+        }
+        let base = self.model.params_for(noisy);
+        let Some(overrides) = &self.param_overrides else { return Ok(base) };
+        let mut value =
+            serde_json::to_value(base).map_err(|e| format!("encoding default parameters: {e}"))?;
+        if !overrides.is_object() {
+            return Err("expected a JSON object of AAPA parameters".into());
+        }
+        merge(&mut value, overrides);
+        let params: Params = serde_json::from_value(value).map_err(|e| e.to_string())?;
+        kpl_aapa::Aapa::new(params.clone()).map_err(|e| e.to_string())?;
+        Ok(params)
+    }
+}
+
+/// Merges `over` into `base`: objects field by field, anything else replaced.
+fn merge(base: &mut serde_json::Value, over: &serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                match b.get_mut(k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k.clone(), v.clone());
+                    }
+                }
+            }
+        }
+        (slot, v) => *slot = v.clone(),
     }
 }
 
@@ -124,9 +249,20 @@ pub struct VideoResult {
 pub struct Report {
     pub model: String,
     pub perception: String,
+    /// Where the perception was read from and what its boxes were taken to be.
+    pub perception_source: String,
     /// Videos scored.
     pub videos: usize,
+    /// Of those, the videos whose boxes were taken as a detector's (noisy), so averaged while
+    /// still (`average_still`, for the models that have it).
+    pub noisy_videos: usize,
+    /// The parameters used for exact boxes and for noisy ones (AAPA models; the heuristic has none).
+    pub params: [Option<Params>; 2],
     pub skipped: Vec<Skipped>,
+    /// Detections dropped on reading (a label no class has, a bad box), over all scored videos, and
+    /// in how many videos.
+    pub dropped: Dropped,
+    pub dropped_videos: usize,
     /// Where the categories came from: `annotation files` or `scenes`.
     pub categories_from: String,
     pub frames: FramesScored,
@@ -137,6 +273,52 @@ pub struct Report {
     /// Frames scored per category, over all videos.
     pub frame_counts: [usize; 5],
     pub per_video: Vec<VideoResult>,
+}
+
+impl Report {
+    /// The AAPA options that matter for the output: which extensions are on, and whether boxes
+    /// were averaged while still, in how many videos.
+    pub fn options(&self) -> String {
+        let on = |p: &Params| {
+            let e = &p.extensions;
+            let mut names = Vec::new();
+            for (name, flag) in [
+                ("predict_motion", e.predict_motion),
+                ("reacquire", e.reacquire),
+                ("scale_attached", e.scale_attached),
+                ("restore_partial_boxes", e.restore_partial_boxes),
+                ("established_first", e.established_first),
+                ("infer_hidden", e.infer_hidden),
+                ("still_stays", e.still_stays),
+                ("merge_duplicates", e.merge_duplicates),
+                ("identity_by_place", e.identity_by_place),
+            ] {
+                if flag {
+                    names.push(name.to_owned());
+                }
+            }
+            if e.keep_lost > 0.0 {
+                names.push(format!("keep_lost {} s", e.keep_lost));
+            }
+            if names.is_empty() { "none (as published)".to_owned() } else { names.join(", ") }
+        };
+        let averaging = |p: &Option<Params>| p.as_ref().is_some_and(|p| p.extensions.average_still);
+        match &self.params {
+            [None, None] => "no parameters (not an AAPA model)".to_owned(),
+            [exact, noisy] => {
+                let any = exact.as_ref().or(noisy.as_ref());
+                let extensions = any.map_or(String::new(), on);
+                let exact_videos = self.videos - self.noisy_videos;
+                format!(
+                    "extensions {extensions}; average_still {} for exact boxes ({exact_videos} videos), {} for a \
+                     detector's ({} videos)",
+                    if averaging(exact) { "on" } else { "off" },
+                    if averaging(noisy) { "on" } else { "off" },
+                    self.noisy_videos
+                )
+            }
+        }
+    }
 }
 
 /// OPNet's annotation files, those present.
@@ -240,6 +422,18 @@ pub fn evaluate_video(
     params: &Params,
     frames_scored: FramesScored,
 ) -> Result<(VideoScore, Vec<IntBox>), String> {
+    evaluate_video_traced(video, categories, model, params, frames_scored, |_, _| {})
+}
+
+/// [`evaluate_video`], handing each frame's world state to `trace`.
+pub fn evaluate_video_traced(
+    video: &VideoData,
+    categories: &FrameCategories,
+    model: Model,
+    params: &Params,
+    frames_scored: FramesScored,
+    trace: impl FnMut(usize, &kpl_aapa::WorldState),
+) -> Result<(VideoScore, Vec<IntBox>), String> {
     let truth = video
         .ground_truth
         .snitch_boxes(Path::new(""))
@@ -257,8 +451,17 @@ pub fn evaluate_video(
             (0..frames).find(|&f| video.perception.has_class(f, SNITCH_CLASS))
         }
     };
-    let predictions = predict(model, params, &video.scene, &video.perception).map_err(|e| e.to_string())?;
+    let predictions =
+        predict_traced(model, params, &video.scene, &video.perception, trace).map_err(|e| e.to_string())?;
     Ok((score_video(&predictions, &truth, categories, first_frame), predictions))
+}
+
+/// One video's outcome in [`evaluate`].
+#[derive(Clone)]
+struct Scored {
+    score: VideoScore,
+    noisy: bool,
+    dropped: Dropped,
 }
 
 /// Evaluates a model over a data directory.
@@ -288,10 +491,12 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
         }
         None => AnnotationSet::read(&annotations_dir(&options.data))?,
     };
+    let bad_params = |e: String| CaterError::invalid(Path::new("--params"), e);
     let params =
-        options.params.clone().unwrap_or_else(|| options.model.params_for(options.perception.noisy()));
+        [options.params_for(false).map_err(bad_params)?, options.params_for(true).map_err(bad_params)?];
+    let boxes = options.perception.boxes();
     let next = AtomicUsize::new(0);
-    type Outcome = Result<VideoScore, String>;
+    type Outcome = Result<Scored, String>;
     let results: Mutex<Vec<Option<Outcome>>> = Mutex::new(vec![None; videos.len()]);
     let fatal: Mutex<Option<CaterError>> = Mutex::new(None);
     std::thread::scope(|scope| {
@@ -308,12 +513,37 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
                         .and_then(|video| {
                             let categories =
                                 categories_of(&options.data, &video, &annotations, &options.visible)?;
-                            evaluate_video(&video, &categories, options.model, &params, options.frames)
+                            let noisy = match boxes {
+                                Boxes::Exact => false,
+                                Boxes::Noisy => true,
+                                Boxes::Measured => !boxes_are_exact(&video.perception, &video.ground_truth),
+                            };
+                            let mut worlds = String::new();
+                            let traced = options.trace.contains(name) && options.predictions_dir.is_some();
+                            let (score, predictions) = evaluate_video_traced(
+                                &video,
+                                &categories,
+                                options.model,
+                                &params[usize::from(noisy)],
+                                options.frames,
+                                |_, world| {
+                                    if traced && let Ok(line) = serde_json::to_string(world) {
+                                        worlds.push_str(&line);
+                                        worlds.push('\n');
+                                    }
+                                },
+                            )?;
+                            if let (true, Some(dir)) = (traced, &options.predictions_dir) {
+                                let path = dir.join(format!("{name}_worlds.jsonl"));
+                                std::fs::write(&path, worlds)
+                                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                            }
+                            Ok((Scored { score, noisy, dropped: video.perception.dropped }, predictions))
                         });
                     let outcome = match (outcome, &options.predictions_dir) {
-                        (Ok((score, predictions)), Some(dir)) => {
+                        (Ok((scored, predictions)), Some(dir)) => {
                             match write_predictions(&dir.join(format!("{name}_bb.json")), &predictions) {
-                                Ok(()) => Ok(score),
+                                Ok(()) => Ok(scored),
                                 Err(e) => {
                                     if let Ok(mut slot) = fatal.lock() {
                                         slot.get_or_insert(e);
@@ -323,7 +553,7 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
                                 }
                             }
                         }
-                        (outcome, _) => outcome.map(|(score, _)| score),
+                        (outcome, _) => outcome.map(|(scored, _)| scored),
                     };
                     if let Ok(mut r) = results.lock() {
                         r[index] = Some(outcome);
@@ -337,9 +567,15 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
     }
     let mut per_video = Vec::new();
     let mut skipped = Vec::new();
+    let (mut noisy_videos, mut dropped, mut dropped_videos) = (0, Dropped::default(), 0);
     for (name, outcome) in videos.iter().zip(results.into_inner().unwrap_or_default()) {
         match outcome {
-            Some(Ok(score)) => per_video.push(VideoResult { video: name.clone(), score }),
+            Some(Ok(scored)) => {
+                noisy_videos += usize::from(scored.noisy);
+                dropped.add(&scored.dropped);
+                dropped_videos += usize::from(scored.dropped.total() > 0);
+                per_video.push(VideoResult { video: name.clone(), score: scored.score });
+            }
             Some(Err(reason)) => skipped.push(Skipped { video: name.clone(), reason }),
             None => skipped.push(Skipped { video: name.clone(), reason: "not evaluated".into() }),
         }
@@ -347,11 +583,18 @@ pub fn evaluate(options: &EvalOptions) -> Result<Report, CaterError> {
     let scores: Vec<VideoScore> = per_video.iter().map(|v| v.score.clone()).collect();
     let frame_counts = std::array::from_fn(|c| scores.iter().map(|s| s.frames[c]).sum());
     let categories_from = if annotations.is_empty() { "scenes" } else { "annotation files" };
+    let [exact, noisy] = params;
+    let aapa = options.model != Model::Heuristic;
     Ok(Report {
         model: options.model.name().to_owned(),
         perception: options.perception.name(),
+        perception_source: options.perception.describe(&options.data),
         videos: per_video.len(),
+        noisy_videos,
+        params: if aapa { [Some(exact), Some(noisy)] } else { [None, None] },
         skipped,
+        dropped,
+        dropped_videos,
         categories_from: categories_from.to_owned(),
         frames: options.frames,
         iou: CategoryTable::from_scores(&scores, true),

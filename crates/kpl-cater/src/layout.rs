@@ -1,17 +1,21 @@
-//! Where a data directory keeps each file, in LA-CATER's layout:
+//! Where a data directory keeps each file. Both this project's layout and LA-CATER's (as OPNet's
+//! configurations name its folders) are read as they come:
 //!
 //! ```text
 //! DIR/scenes/<video>.json                        CATER scene JSON
 //! DIR/scenes/<video>_bb.json                     ground truth, beside the scene (as CATER's renderer
-//!                                                writes it); DIR/labels/ (OPNet's test data) and
-//!                                                DIR/bb/ are looked in too
-//! DIR/perception/<video>_{perfect,detector}.json this project's perception
+//!                                                writes it); DIR/labels/ (LA-CATER, OPNet's
+//!                                                `labels_dir`) and DIR/bb/ are looked in too
+//! DIR/perception/<video>_<perception>.json       this project's perception (perfect, detector,
+//!                                                detector-b)
+//! DIR/perfect_perception/<video>.pkl             OPNet's perception pickles: perfect perception,
+//! DIR/od_perception/<video>.pkl                  its detector's (OPNet's `sample_dir`), and the
+//! DIR/od_perception_b/<video>.pkl                second detector's (this project's)
 //! DIR/containment_and_occlusions/*.txt           OPNet's frame annotations, when present
 //! DIR/manifest.json                              what generated the directory
 //! ```
 //!
-//! OPNet's perception pickles live in a directory of their own (`<video>.pkl`, OPNet's
-//! `sample_dir`). The videos of a directory are its scenes, or the names a list file gives (OPNet's
+//! The videos of a directory are its scenes, or the names a list file gives (OPNet's
 //! `samples.txt`: one video per line, a name or a path whose stem is the name).
 
 use std::path::{Path, PathBuf};
@@ -20,22 +24,52 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::CaterError;
 
-/// A perception file of this project's JSON layout.
+/// A perception of a video: perfect perception (the ground-truth boxes of the objects seen) or one
+/// of two simulated detectors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[serde(rename_all = "kebab-case")]
 pub enum Perception {
     Perfect,
+    /// The detector calibrated against the AAPA paper's Faster R-CNN ([`crate::detector`]).
     Detector,
+    /// A second, independent detector with other kinds of noise ([`crate::detector_b`]).
+    DetectorB,
 }
 
 impl Perception {
+    pub const ALL: [Perception; 3] = [Perception::Perfect, Perception::Detector, Perception::DetectorB];
+
     pub fn name(self) -> &'static str {
         match self {
             Perception::Perfect => "perfect",
             Perception::Detector => "detector",
+            Perception::DetectorB => "detector-b",
+        }
+    }
+
+    /// Whether its boxes are exact (the ground truth's).
+    pub fn exact(self) -> bool {
+        self == Perception::Perfect
+    }
+
+    /// Where LA-CATER keeps OPNet's pickles of this perception in a data directory.
+    pub fn pickle_dir(self) -> &'static str {
+        match self {
+            Perception::Perfect => PERFECT_PICKLES_DIR,
+            Perception::Detector => DETECTOR_PICKLES_DIR,
+            Perception::DetectorB => "od_perception_b",
         }
     }
 }
+
+/// This project's perception JSON, in a data directory.
+pub const PERCEPTION_DIR: &str = "perception";
+/// OPNet's perception pickles in LA-CATER: its perfect perception and its detector's (`sample_dir`
+/// in OPNet's configurations).
+pub const PERFECT_PICKLES_DIR: &str = "perfect_perception";
+pub const DETECTOR_PICKLES_DIR: &str = "od_perception";
+/// Where LA-CATER keeps the ground truth (`labels_dir` in OPNet's configurations).
+pub const LABELS_DIR: &str = "labels";
 
 /// OPNet's annotation files, by the names its README gives them.
 pub const CONTAINMENT_FILE: &str = "containment_annotations.txt";
@@ -58,12 +92,12 @@ pub fn ground_truth_path(dir: &Path, video: &str) -> PathBuf {
 pub fn find_ground_truth(dir: &Path, video: &str) -> PathBuf {
     let name = format!("{video}_bb.json");
     let candidates =
-        [dir.join("scenes").join(&name), dir.join("labels").join(&name), dir.join("bb").join(&name)];
+        [dir.join("scenes").join(&name), dir.join(LABELS_DIR).join(&name), dir.join("bb").join(&name)];
     candidates.iter().find(|p| p.is_file()).unwrap_or(&candidates[0]).clone()
 }
 
 pub fn perception_path(dir: &Path, video: &str, perception: Perception) -> PathBuf {
-    dir.join("perception").join(format!("{video}_{}.json", perception.name()))
+    dir.join(PERCEPTION_DIR).join(format!("{video}_{}.json", perception.name()))
 }
 
 pub fn pickle_path(dir: &Path, video: &str) -> PathBuf {
@@ -99,8 +133,7 @@ pub fn list_videos(dir: &Path) -> Result<Vec<String>, CaterError> {
 /// stem is the name; blank lines and lines starting with `#` are skipped. A name listed twice is a
 /// data error.
 pub fn read_video_list(path: &Path) -> Result<Vec<String>, CaterError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let text = crate::formats::read_capped_text(path, crate::formats::MAX_LIST_BYTES)?;
     let mut names = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for (n, line) in text.lines().enumerate() {

@@ -4,9 +4,11 @@
 //! - [`formats`]: `<video>_bb.json`, CATER scene JSON, OPNet's perception pickles and annotation
 //!   files, this project's perception JSON, prediction files; [`classes`]: class names and OPNet's
 //!   class indices; [`layout`]: where a data directory keeps them.
-//! - [`sim`], [`render`], [`detector`]: the generator (CATER's own procedure for objects and
-//!   movements, CLEVR's camera at 320x240 with depth-ordered occlusion, perfect perception and a
-//!   calibrated detector); [`dataset`]: deterministic, parallel generation of a directory.
+//! - [`sim`], [`render`], [`detector`], [`detector_b`]: the generator (CATER's own procedure for
+//!   objects and movements, and hard scenes of this project's; CLEVR's camera at 320x240 with
+//!   depth-ordered occlusion, perfect perception, a calibrated detector and a second, independent
+//!   one); [`perfect_pickles`]: OPNet's perfect perception by its script's rule; [`dataset`]:
+//!   deterministic, parallel generation of a directory in this project's layout or LA-CATER's.
 //! - [`models`]: OPNet's heuristic baseline and AAPA (with and without actions, and as published).
 //! - [`categories`]: OPNet's frame categories; [`score`]: its IoU scoring with ±SEM; [`eval`] runs a
 //!   model over a directory and reports skipped videos with their reasons.
@@ -24,11 +26,13 @@ pub mod categories;
 pub mod classes;
 pub mod dataset;
 pub mod detector;
+pub mod detector_b;
 mod error;
 pub mod eval;
 pub mod formats;
 pub mod layout;
 pub mod models;
+pub mod perfect_pickles;
 pub mod render;
 pub mod score;
 pub mod sim;

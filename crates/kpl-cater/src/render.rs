@@ -107,6 +107,23 @@ fn outline(object: &SimObject, state: &ObjectState, camera: &Camera) -> Vec<V3> 
             .collect()
     };
     match object.shape {
+        Shape::Sphere | Shape::Snitch if object.elongation != 1.0 => {
+            // An ellipsoid, `elongation` times longer along its own x axis than across, turned
+            // with the object (hard scenes' winged snitch).
+            let (a, b) = (s * object.elongation.sqrt(), s / object.elongation.sqrt());
+            let mut pts = Vec::with_capacity(6 * 12 + 2);
+            pts.push(place([0.0, 0.0, b]));
+            pts.push(place([0.0, 0.0, -b]));
+            for i in 1..=6 {
+                let polar = i as f64 / 7.0 * std::f64::consts::PI;
+                for k in 0..12 {
+                    let t = k as f64 / 12.0 * std::f64::consts::TAU;
+                    let (sp, cp) = polar.sin_cos();
+                    pts.push(place([a * sp * t.cos(), b * sp * t.sin(), b * cp]));
+                }
+            }
+            pts
+        }
         Shape::Sphere | Shape::Snitch => {
             // The circle perpendicular to the line of sight.
             let v = normalize(sub(c, camera.location));

@@ -49,7 +49,7 @@ pub const ROTATE_ANGLE: f64 = 90.0 / 180.0 * CATER_PI;
 #[allow(clippy::approx_constant, reason = "CATER's own approximation, kept to rotate as it does")]
 const CATER_PI: f64 = 3.14;
 
-/// How many objects move per segment.
+/// How many objects move per segment, and how.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Motion {
     /// At most two objects or stacks (`--max_motions=2`, LA-CATER).
@@ -57,13 +57,84 @@ pub enum Motion {
     MaxTwo,
     /// Every object or stack (CATER's `all_actions`).
     All,
+    /// This project's hard scenes (not CATER's procedure; see [`HardScenes`]).
+    Hard,
 }
 
 impl Motion {
     fn max_motions(self) -> usize {
         match self {
             Motion::MaxTwo => 2,
-            Motion::All => usize::MAX,
+            Motion::All | Motion::Hard => usize::MAX,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Motion::MaxTwo => "max-two",
+            Motion::All => "all",
+            Motion::Hard => "hard",
+        }
+    }
+}
+
+/// What [`Motion::Hard`] changes in CATER's procedure, to make scenes that are hard to follow:
+///
+/// - any number of stacks move in a time slot (1 to all, drawn per slot), their moves starting 0
+///   to 20 frames into the slot and lasting 15 to 45 frames, so simultaneous moves start and end
+///   at different frames;
+/// - a contain is tried in 60 % of the slots, half of them onto the snitch's stack (so a cone comes
+///   over a cone that holds the snitch: nested containment, moved as one when the outer cone
+///   slides); in 30 % of the contains the stack contained slides first in the same slot and the cone
+///   comes down over it where it stops (a contain onto a stack that is itself carried);
+/// - each move follows one of four motion profiles: smooth (Blender's easing), linear, ease-in or
+///   ease-out;
+/// - the snitch has wings (its silhouette is an ellipsoid 1.6 times as long as it is wide), so its
+///   `_rotate` changes its box while it stays put, and a snitch standing alone rotates in 30 % of
+///   its moves;
+/// - more identical objects: 40 % of the random objects copy the class of one already there, cones
+///   included;
+/// - occlusion is decided by the union of the nearer objects' boxes (the generator's visibility
+///   annotation and perfect perception), not by one box at a time as OPNet's scripts do.
+#[derive(Debug, Clone, Copy)]
+pub struct HardScenes;
+
+impl HardScenes {
+    pub const CONTAIN_PROBABILITY: f64 = 0.6;
+    pub const SNITCH_TARGET: f64 = 0.5;
+    pub const TARGET_MOVES_FIRST: f64 = 0.3;
+    pub const SNITCH_ROTATES: f64 = 0.3;
+    pub const TWIN_PROBABILITY: f64 = 0.4;
+    /// The snitch's wings: its silhouette's length over its width.
+    pub const SNITCH_ELONGATION: f64 = 1.6;
+    pub const START_OFFSET_MAX: usize = 20;
+    pub const DURATION: (usize, usize) = (15, 45);
+}
+
+/// How a move proceeds between two keyframes: the fraction of the way covered at a fraction `u` of
+/// the time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Profile {
+    /// Blender's default easing (`3u² - 2u³`).
+    #[default]
+    Smooth,
+    Linear,
+    /// Starts slowly (`u²`).
+    EaseIn,
+    /// Stops slowly (`1 - (1 - u)²`).
+    EaseOut,
+}
+
+impl Profile {
+    pub const ALL: [Profile; 4] = [Profile::Smooth, Profile::Linear, Profile::EaseIn, Profile::EaseOut];
+
+    pub fn at(self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        match self {
+            Profile::Smooth => u * u * (3.0 - 2.0 * u),
+            Profile::Linear => u,
+            Profile::EaseIn => u * u,
+            Profile::EaseOut => 1.0 - (1.0 - u) * (1.0 - u),
         }
     }
 }
@@ -97,6 +168,9 @@ pub struct SimObject {
     pub shape: Shape,
     /// Blender's scale: half extent of a cube, radius of a sphere, cylinder or cone base.
     pub size: f64,
+    /// A sphere's (the snitch's) length along its own x axis over its width: 1 for a ball, more
+    /// for the winged snitch of hard scenes.
+    pub elongation: f64,
 }
 
 /// An object's pose in one frame (as rendered: eased between keyframes).
@@ -176,12 +250,14 @@ fn overlap(a: [f64; 3], size_a: f64, b: [f64; 3], size_b: f64) -> bool {
     d - size_a - size_b < MIN_DIST
 }
 
-/// One keyframe of an object: frame, location, tilt.
+/// One keyframe of an object: frame, location, tilt, and how the object gets there from the
+/// previous keyframe.
 #[derive(Debug, Clone, Copy)]
 struct Keyframe {
     frame: usize,
     location: [f64; 3],
     tilt: f64,
+    profile: Profile,
 }
 
 /// The state of one video's generation.
@@ -200,6 +276,9 @@ struct Generator<'a> {
     /// `contains[cone][frame]`: the object the cone contains (CATER's `MovementRecord.contains`).
     contains: Vec<Vec<Option<usize>>>,
     max_motions: usize,
+    motion: Motion,
+    /// The profile of the move being keyframed.
+    profile: Profile,
 }
 
 /// Linear interpolation of CATER's `move_to_location` over `start..=end`.
@@ -260,8 +339,22 @@ impl Generator<'_> {
     }
 
     fn keyframe(&mut self, object: usize, frame: usize) {
-        let k = Keyframe { frame, location: self.current[object], tilt: self.tilt[object] };
+        let k = Keyframe {
+            frame,
+            location: self.current[object],
+            tilt: self.tilt[object],
+            profile: self.profile,
+        };
         self.keyframes[object].push(k);
+    }
+
+    /// The profile of the next move: smooth as Blender's default, or in hard scenes any of four.
+    fn draw_profile(&mut self) {
+        self.profile = if self.motion == Motion::Hard {
+            *Profile::ALL.choose(self.rng).unwrap_or(&Profile::Smooth)
+        } else {
+            Profile::Smooth
+        };
     }
 
     /// Sets an object's recorded locations over `start..=end` and holds the last one after.
@@ -293,7 +386,8 @@ impl Generator<'_> {
     }
 
     /// CATER's `add_movements` for one stack; returns whether the stack splits (its top picked off).
-    fn move_group(&mut self, g: usize, start: usize, end: usize) -> bool {
+    /// `forced` makes it slide (hard scenes: a stack that moves before a cone comes over it).
+    fn move_group(&mut self, g: usize, start: usize, end: usize, forced: Option<Act>) -> bool {
         let members = self.groups[g].clone();
         let others: Vec<usize> = self
             .groups
@@ -310,6 +404,21 @@ impl Generator<'_> {
         } else {
             &[(Act::Slide, false), (Act::PickPlace, false), (Act::Rotate, false)]
         };
+        let forced: &[(Act, bool)] = match forced {
+            Some(Act::Slide) => &[(Act::Slide, false)],
+            _ => choices,
+        };
+        let choices = if self.motion == Motion::Hard
+            && members.len() == 1
+            && self.objects[top].shape == Shape::Snitch
+            && forced.len() > 1
+            && self.rng.random_bool(HardScenes::SNITCH_ROTATES)
+        {
+            &[(Act::Rotate, false)]
+        } else {
+            forced
+        };
+        self.draw_profile();
         let mut trials = 0;
         let (act, split, target) = loop {
             let &(act, split) = choices.choose(self.rng).unwrap_or(&(Act::NoOp, false));
@@ -406,10 +515,16 @@ impl Generator<'_> {
         self.keyframe(object, end);
     }
 
-    /// A move's frames: it starts 0 to 10 frames into the segment and lasts 20 to 30 frames.
+    /// A move's frames: it starts 0 to 10 frames into the segment and lasts 20 to 30 frames (hard
+    /// scenes: 0 to 20, and 15 to 45).
     fn draw_times(&mut self, segment_start: usize) -> (usize, usize) {
-        let frames = self.rng.random_range(MOVEMENT_MIN..=MOVEMENT_MAX);
-        let start = segment_start + self.rng.random_range(0..=10);
+        let (frames, offset) = if self.motion == Motion::Hard {
+            let (lo, hi) = HardScenes::DURATION;
+            (self.rng.random_range(lo..=hi), self.rng.random_range(0..=HardScenes::START_OFFSET_MAX))
+        } else {
+            (self.rng.random_range(MOVEMENT_MIN..=MOVEMENT_MAX), self.rng.random_range(0..=10))
+        };
+        let start = segment_start + offset;
         (start, (start + frames).min(LAST_KEYFRAME as usize))
     }
 
@@ -424,12 +539,18 @@ impl Generator<'_> {
         order.shuffle(self.rng);
         order.retain(|g| Some(*g) != ignore);
         order.truncate(max_motions);
+        if self.motion == Motion::Hard && !order.is_empty() {
+            // Any number of stacks, at least one unless a contain runs.
+            let least = usize::from(ignore.is_none());
+            let count = self.rng.random_range(least..=order.len());
+            order.truncate(count);
+        }
         let mut last = None;
         let mut splits = Vec::new();
         for &g in &order {
             let (start, end) = self.draw_times(segment_start);
             last = Some(last.map_or(end, |l: usize| l.max(end)));
-            if self.move_group(g, start, end) {
+            if self.move_group(g, start, end, None) {
                 splits.push(g);
             }
         }
@@ -490,6 +611,71 @@ impl Generator<'_> {
         None
     }
 
+    /// Hard scenes' contain: onto the snitch's stack half of the time, else a random pair; in some,
+    /// the stack slides first and the cone comes down over it where it stops. Then single moves of
+    /// any number of other stacks. `None` if no pair could contain.
+    fn hard_contain_and_moves(&mut self, segment_start: usize) -> Option<usize> {
+        for _ in 0..100 {
+            let snitch_group = self.groups.iter().position(|m| m.contains(&0));
+            let pair: Vec<usize> = match snitch_group {
+                Some(g2) if self.rng.random_bool(HardScenes::SNITCH_TARGET) => {
+                    let cones: Vec<usize> = (0..self.groups.len()).filter(|&g| g != g2).collect();
+                    match cones.choose(self.rng) {
+                        Some(&g1) => vec![g1, g2],
+                        None => continue,
+                    }
+                }
+                _ => {
+                    (0..self.groups.len()).collect::<Vec<_>>().choose_multiple(self.rng, 2).copied().collect()
+                }
+            };
+            let [g1, g2] = pair[..] else { return None };
+            let moves_first = self.rng.random_bool(HardScenes::TARGET_MOVES_FIRST);
+            let (start, end) = self.draw_times(segment_start);
+            if !self.can_contain(g1, g2, end) {
+                continue;
+            }
+            let (cone, target) = (self.groups[g1][0], self.groups[g2][0]);
+            let (start, end, moved_end) = if moves_first {
+                // The stack slides first; the cone starts with it and comes down over it after it
+                // stops (the last 20 % of the contain).
+                let (slide_start, slide_end) = self.draw_times(segment_start);
+                let snapshot = (self.current.clone(), self.locations.clone(), self.keyframes.clone());
+                let movements = self.movements.clone();
+                self.move_group(g2, slide_start, slide_end, Some(Act::Slide));
+                let slid =
+                    self.movements[target].last().is_some_and(|m| m.kind() == Some(MovementKind::Slide));
+                let frames = end - start;
+                let start = start.min(slide_start);
+                let needed = ((slide_end + 2 - start) as f64 / 0.8).ceil() as usize;
+                let end = (start + frames.max(needed)).min(LAST_KEYFRAME as usize);
+                let descent = start + (0.8 * (end - start + 1) as f64) as usize;
+                if !slid || descent <= slide_end || !self.can_contain(g1, g2, end) {
+                    // Undo the slide: no contain this time.
+                    (self.current, self.locations, self.keyframes) = snapshot;
+                    self.movements = movements;
+                    continue;
+                }
+                (start, end, Some(slide_end))
+            } else {
+                (start, end, None)
+            };
+            self.draw_profile();
+            let to = [self.current[target][0], self.current[target][1]];
+            let (positions, _) = pick_place(self.current[cone], to[0], to[1], start, end);
+            self.pick_place_keyframes(cone, to, start, end);
+            self.record(cone, MovementKind::Contain, Some(target), start, end);
+            self.set_locations(cone, start, &positions);
+            let contents = self.groups.remove(g2);
+            let g1 = if g1 > g2 { g1 - 1 } else { g1 };
+            self.groups[g1].extend(contents);
+            let singles = self.single_moves(segment_start, Some(g1), usize::MAX);
+            let last = moved_end.map_or(end, |m| m.max(end));
+            return Some(singles.map_or(last, |s| s.max(last)));
+        }
+        None
+    }
+
     /// CATER's `record.was_contained(a, b, frame)`: b is inside a (at any depth) at that frame.
     fn was_contained(&self, a: usize, b: usize, frame: usize) -> bool {
         let mut current = Some(a);
@@ -527,8 +713,10 @@ pub fn sample_camera(rng: &mut ChaCha8Rng) -> [f64; 3] {
     BASE_CAMERA.map(|v| v + rng.random_range(-CAMERA_JITTER..CAMERA_JITTER))
 }
 
-/// CATER's `add_random_objects`: the snitch, a medium and a large cone, then random objects.
-fn sample_objects(rng: &mut ChaCha8Rng) -> Vec<SimObject> {
+/// CATER's `add_random_objects`: the snitch, a medium and a large cone, then random objects (in
+/// hard scenes, 40 % of them copies of an object already there, and a winged snitch).
+fn sample_objects(rng: &mut ChaCha8Rng, motion: Motion) -> Vec<SimObject> {
+    let hard = motion == Motion::Hard;
     let count = rng.random_range(5..=10);
     let dirs = directions();
     let cardinal: Vec<[f64; 3]> =
@@ -549,6 +737,19 @@ fn sample_objects(rng: &mut ChaCha8Rng) -> Vec<SimObject> {
                 ("gold", "metal")
             } else {
                 (*COLORS.choose(rng).unwrap_or(&"gray"), *MATERIALS.choose(rng).unwrap_or(&"rubber"))
+            };
+            // Hard scenes: a twin of an object already there (not the snitch).
+            let twin = if hard && i >= 3 && rng.random_bool(HardScenes::TWIN_PROBABILITY) {
+                objects[1..].choose(rng).map(|o| {
+                    let info = &o.info;
+                    (info.size.clone(), o.size, info.shape.clone(), info.color.clone(), info.material.clone())
+                })
+            } else {
+                None
+            };
+            let (size_name, size, shape, color, material) = match &twin {
+                Some((sn, sz, sh, c, m)) => (sn.as_str(), *sz, sh.as_str(), c.as_str(), m.as_str()),
+                None => (size_name, size, shape, color, material),
             };
             let mut tries = 0;
             let (x, y) = loop {
@@ -585,16 +786,11 @@ fn sample_objects(rng: &mut ChaCha8Rng) -> Vec<SimObject> {
                 },
                 shape: Shape::from_name(shape),
                 size,
+                elongation: if hard && i == 0 { HardScenes::SNITCH_ELONGATION } else { 1.0 },
             });
         }
         return objects;
     }
-}
-
-/// Blender's easing between two keyframes with flat handles.
-fn ease(u: f64) -> f64 {
-    let u = u.clamp(0.0, 1.0);
-    u * u * (3.0 - 2.0 * u)
 }
 
 /// An object's rendered pose at a frame, from its keyframes.
@@ -609,7 +805,7 @@ fn pose_at(keyframes: &[Keyframe], initial: [f64; 3], frame: usize) -> ([f64; 3]
             if b.frame == a.frame {
                 return (b.location, b.tilt);
             }
-            let e = ease((frame - a.frame) as f64 / (b.frame - a.frame) as f64);
+            let e = b.profile.at((frame - a.frame) as f64 / (b.frame - a.frame) as f64);
             let location = std::array::from_fn(|k| a.location[k] + (b.location[k] - a.location[k]) * e);
             return (location, a.tilt + (b.tilt - a.tilt) * e);
         }
@@ -623,7 +819,7 @@ pub fn simulate(rng: &mut ChaCha8Rng, motion: Motion) -> Simulation {
     let camera = sample_camera(rng);
     let mut redraws = 0;
     loop {
-        let objects = sample_objects(rng);
+        let objects = sample_objects(rng, motion);
         let n = objects.len();
         let initial: Vec<[f64; 3]> = objects.iter().map(|o| o.info.coords).collect();
         let mut generator = Generator {
@@ -636,12 +832,20 @@ pub fn simulate(rng: &mut ChaCha8Rng, motion: Motion) -> Simulation {
             movements: vec![Vec::new(); n],
             contains: vec![vec![None; KEYFRAMES]; n],
             max_motions: motion.max_motions(),
+            motion,
+            profile: Profile::Smooth,
             objects,
         };
         let mut frame = 0;
         let mut collided = false;
         while frame <= LAST_KEYFRAME as usize - MOVEMENT_MAX {
-            let end = if generator.rng.random_bool(0.5) {
+            let end = if motion == Motion::Hard {
+                if generator.rng.random_bool(HardScenes::CONTAIN_PROBABILITY) {
+                    generator.hard_contain_and_moves(frame)
+                } else {
+                    generator.single_moves(frame, None, usize::MAX)
+                }
+            } else if generator.rng.random_bool(0.5) {
                 generator.contain_and_moves(frame)
             } else {
                 generator.single_moves(frame, None, generator.max_motions)

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 
 use kpl_cater::CaterError;
 use kpl_cater::classes::{SNITCH_INDEX, is_large_cone, opnet_class, opnet_classes, opnet_index, parse_class};
-use kpl_cater::dataset::{self, GeneratorConfig};
+use kpl_cater::dataset::{self, GeneratorConfig, Layout};
+use kpl_cater::eval::{Boxes, PerceptionSource, boxes_are_exact};
 use kpl_cater::formats::{
-    CameraField, GroundTruth, MovementKind, PerceptionFile, SNITCH_KEY, Scene, read_annotation_file,
+    CameraField, Dropped, GroundTruth, MovementKind, PerceptionFile, SNITCH_KEY, Scene, read_annotation_file,
     read_predictions, write_predictions,
 };
 use kpl_cater::layout::{self, Perception};
@@ -76,7 +77,7 @@ fn a_scene_as_cater_writes_it_is_read() {
 fn generated_files_round_trip_and_lie_where_opnet_looks() {
     let dir = scratch("roundtrip");
     let video = dataset::generate_video(3, 5, &GeneratorConfig::default());
-    dataset::write_video(&dir, &video).unwrap();
+    dataset::write_video(&dir, &video, Layout::Kpl).unwrap();
     let name = &video.scene.video;
     // `<video>_bb.json` beside the scene, as CATER's renderer writes it.
     assert_eq!(layout::find_ground_truth(&dir, name), dir.join("scenes").join(format!("{name}_bb.json")));
@@ -84,7 +85,11 @@ fn generated_files_round_trip_and_lie_where_opnet_looks() {
     let truth = GroundTruth::read(&layout::find_ground_truth(&dir, name)).unwrap();
     assert_eq!(truth, video.ground_truth);
     assert_eq!(truth.frames(), 300);
-    for (mode, file) in [(Perception::Perfect, &video.perfect), (Perception::Detector, &video.detector)] {
+    for (mode, file) in [
+        (Perception::Perfect, &video.perfect),
+        (Perception::Detector, &video.detector),
+        (Perception::DetectorB, &video.detector_b),
+    ] {
         assert_eq!(&PerceptionFile::read(&layout::perception_path(&dir, name, mode)).unwrap(), file);
     }
     // The ground truth beside the scenes is not taken for a video.
@@ -104,6 +109,60 @@ fn generated_files_round_trip_and_lie_where_opnet_looks() {
     let path = dir.join("p_bb.json");
     write_predictions(&path, &predictions).unwrap();
     assert_eq!(read_predictions(&path).unwrap(), predictions);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn la_caters_layout_is_found_as_it_comes() {
+    // LA-CATER as OPNet's configurations name its folders: scenes/, labels/<video>_bb.json,
+    // perfect_perception/ and od_perception/ (OPNet's pickles); no perception/ of this project's.
+    let dir = scratch("la-cater");
+    let video = dataset::generate_video(3, 5, &GeneratorConfig::default());
+    dataset::write_video(&dir, &video, Layout::LaCater).unwrap();
+    let name = &video.scene.video;
+    assert!(!dir.join("perception").exists());
+    assert_eq!(layout::find_ground_truth(&dir, name), dir.join("labels").join(format!("{name}_bb.json")));
+    let perfect = PerceptionSource::find(&dir, Perception::Perfect).unwrap();
+    assert_eq!(
+        perfect,
+        PerceptionSource::Pickles { dir: dir.join("perfect_perception"), boxes: Boxes::Exact }
+    );
+    let detector = PerceptionSource::find(&dir, Perception::Detector).unwrap();
+    assert_eq!(detector, PerceptionSource::Pickles { dir: dir.join("od_perception"), boxes: Boxes::Noisy });
+    assert!(perfect.describe(&dir).contains("perfect_perception"));
+    // The perfect perception pickle holds OPNet's perfect perception, and its boxes are the ground
+    // truth's, pixel for pixel.
+    let file = perfect.load(&dir, name).unwrap();
+    let truth = GroundTruth::read(&layout::find_ground_truth(&dir, name)).unwrap();
+    assert!(boxes_are_exact(&file, &truth));
+    let expected: Vec<Vec<(&str, [f64; 4])>> = video
+        .opnet_perfect
+        .iter()
+        .map(|f| f.iter().map(|(l, b)| (opnet_class(*l).unwrap(), b.map(|v| v as f64))).collect())
+        .collect();
+    let got: Vec<Vec<(&str, [f64; 4])>> =
+        file.frames.iter().map(|f| f.iter().map(|d| (file.class_of(d), d.bbox)).collect()).collect();
+    assert_eq!(got, expected);
+    // The detector's: a class OPNet does not have is label -1 in the pickle, dropped and counted on
+    // reading; the other detections are the detector's, rounded to whole pixels.
+    let file = detector.load(&dir, name).unwrap();
+    assert!(!boxes_are_exact(&file, &truth));
+    let unknown: usize = video
+        .detector
+        .frames
+        .iter()
+        .flatten()
+        .filter(|d| opnet_index(video.detector.class_of(d)).is_none())
+        .count();
+    assert_eq!(file.dropped.unknown_class, unknown);
+    let kept: usize = file.frames.iter().map(Vec::len).sum();
+    assert_eq!(kept + unknown, video.detector.frames.iter().map(Vec::len).sum::<usize>());
+    // A directory with neither this project's perception nor pickles says what it looked for.
+    let e = PerceptionSource::find(&dir, Perception::DetectorB).map(|_| ());
+    assert!(e.is_ok(), "od_perception_b/ is written too");
+    std::fs::remove_dir_all(dir.join("od_perception_b")).unwrap();
+    let e = PerceptionSource::find(&dir, Perception::DetectorB).unwrap_err().to_string();
+    assert!(e.contains("od_perception_b") && e.contains("perception/"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -196,6 +255,16 @@ fn bad_data_is_an_error_that_says_what_is_wrong() {
         .unwrap();
         expect_invalid(PerceptionFile::read(&p), says);
     }
+    // A bad detection among good ones costs that detection: dropped and counted.
+    std::fs::write(
+        &p,
+        r#"{"video": "v", "perception": "detector", "classes": ["a"],
+            "frames": [[[0, 0, 0, 1, 1], [7, 0, 0, 1, 1]], [[0, 1, 1, 2, 2], [0, 5, 0, 1, 1]], [[0, 1, 1, 2, 2]]]}"#,
+    )
+    .unwrap();
+    let file = PerceptionFile::read(&p).unwrap();
+    assert_eq!(file.dropped, Dropped { unknown_class: 1, bad_box: 1 });
+    assert_eq!(file.frames.iter().map(Vec::len).collect::<Vec<_>>(), vec![1, 1, 1]);
     let a = dir.join("a.txt");
     for (text, says) in [
         ("v\t1,2,x\n", "line 1: `x` is not a frame number"),

@@ -102,6 +102,7 @@ fn cone_slides_away_with_the_snitch() -> VideoData {
         perception: "perfect".into(),
         classes: vec![SNITCH_CLASS.into(), CONE.into(), CUBE.into()],
         frames,
+        ..PerceptionFile::default()
     };
     VideoData { scene, ground_truth, perception }
 }
@@ -240,6 +241,7 @@ fn scripted(
         perception: "perfect".into(),
         classes: classes.iter().map(|c| (*c).to_owned()).collect(),
         frames,
+        ..PerceptionFile::default()
     };
     VideoData { scene, ground_truth, perception }
 }

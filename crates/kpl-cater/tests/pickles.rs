@@ -1,7 +1,9 @@
 //! OPNet's per-video perception pickles, written by Python's pickle with numpy exactly as OPNet's
 //! scripts write them (`tests/oracle/pickles.py`: protocols 2 to 5, numpy int64 arrays, lists of
 //! boxes with numpy labels, float32 and big-endian arrays, empty frames), read back by
-//! `PerceptionFile::read_pickle` frame for frame; malformed ones are data errors naming the file.
+//! `PerceptionFile::read_pickle` frame for frame; malformed ones are data errors naming the file (a
+//! pickle of 2,000 nested lists too, which would overflow the decoder's stack); a detection whose
+//! label is outside OPNet's class indices (`-1`) is dropped and counted, not the file.
 //! Needs the Python of `scripts/test` (`KPL_PYTHON`, with numpy).
 #![allow(clippy::unwrap_used, clippy::print_stderr, reason = "tests report and fail loudly")]
 
@@ -51,11 +53,23 @@ fn opnets_pickles_are_read_as_python_wrote_them() {
         ("bad_box.pkl", "bad box"),
         ("bad_shared.pkl", "appears twice"),
         ("not_a_pickle.pkl", "not a pickle"),
+        ("nested.pkl", "nested"),
     ] {
         let e = PerceptionFile::read_pickle(&dir.join(bad), "v", "detector").unwrap_err();
         assert!(e.is_data_error(), "{bad}: {e}");
         let message = e.to_string();
         assert!(message.contains(bad) && message.contains(says), "{bad}: {message}");
     }
+    // One detection labelled -1 among good ones: dropped and counted, the rest read.
+    let file = PerceptionFile::read_pickle(&dir.join("minus_one.pkl"), "v", "detector").unwrap();
+    assert_eq!(file.dropped.unknown_class, 1);
+    let last: Vec<(&str, [f64; 4])> = file.frames[3].iter().map(|d| (file.class_of(d), d.bbox)).collect();
+    assert_eq!(
+        last,
+        vec![
+            (opnet_class(63).unwrap(), [0.0, 0.0, 319.0, 239.0]),
+            (opnet_class(192).unwrap(), [30.0, 40.0, 50.0, 60.0])
+        ]
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

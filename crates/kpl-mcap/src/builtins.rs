@@ -112,8 +112,9 @@ impl Unit for Record {
     }
 }
 
-/// Registers `file.mcap` (source and sink).
+/// Registers `file.mcap` (source and sink) and `ros2.replay`.
 pub fn register(registry: &mut Registry) {
+    crate::replay_ros2::register(registry);
     registry.add_source(
         replay_entry(
             "file.mcap",

@@ -12,6 +12,9 @@
 //!   percepts as points, verdicts as logs, the [`scene`]'s roads, occluders and camera), written
 //!   beside each stream's own channel so Foxglove's 3D panel draws a recording as it is.
 //! - [`recover`]: what a file cut short by a killed run still holds.
+//! - [`replay_ros2`]: the `ros2.replay` source: a bag's topic through a `ros2.subscribe` mapping.
+//! - [`rosbag2`]: rosbag2 bags (a folder with `metadata.yaml` and the MCAP file) of the topics a
+//!   spec's `ros2.publish` sinks declare.
 //!
 //! A recording converts to JSON lines and back without losing anything: the stream's name is the
 //! channel's topic and the sample is the line's `valid`, `available` and `value`.
@@ -47,6 +50,8 @@ pub mod builtins;
 pub mod foxglove;
 pub mod read;
 pub mod recover;
+pub mod replay_ros2;
+pub mod rosbag2;
 pub mod scene;
 pub mod schema;
 pub mod write;

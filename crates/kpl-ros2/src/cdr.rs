@@ -98,16 +98,7 @@ pub fn encode_into(schema: &Schema, value: &MsgValue, out: &mut Vec<u8>) -> Resu
 
 /// Decodes a message with its encapsulation header.
 pub fn decode(schema: &Schema, bytes: &[u8]) -> Result<MsgValue, CdrError> {
-    if bytes.len() < 4 {
-        return Err(CdrError::NoHeader);
-    }
-    let little = match (bytes[0], bytes[1]) {
-        (0, 1) => true,
-        (0, 0) => false,
-        (a, b) => return Err(CdrError::Encapsulation(a, b)),
-    };
-    let mut r = Reader { data: &bytes[4..], pos: 0, little, path: Vec::new(), pads: None };
-    r.read_struct(schema, schema.root_index())
+    Reader::after_header(bytes, None)?.read_struct(schema, schema.root_index())
 }
 
 /// The message with its padding bytes zeroed (and the decoded value), so that encodings by
@@ -123,15 +114,7 @@ pub fn canonical(schema: &Schema, bytes: &[u8]) -> Result<(Vec<u8>, MsgValue), C
 
 /// Where a message's padding bytes are: (offset from the start, length), and the decoded value.
 pub fn padding(schema: &Schema, bytes: &[u8]) -> Result<(Vec<(usize, usize)>, MsgValue), CdrError> {
-    if bytes.len() < 4 {
-        return Err(CdrError::NoHeader);
-    }
-    let little = match (bytes[0], bytes[1]) {
-        (0, 1) => true,
-        (0, 0) => false,
-        (a, b) => return Err(CdrError::Encapsulation(a, b)),
-    };
-    let mut r = Reader { data: &bytes[4..], pos: 0, little, path: Vec::new(), pads: Some(Vec::new()) };
+    let mut r = Reader::after_header(bytes, Some(Vec::new()))?;
     let value = r.read_struct(schema, schema.root_index())?;
     let pads = r.pads.unwrap_or_default().into_iter().map(|(at, len)| (at + 4, len)).collect();
     Ok((pads, value))
@@ -298,6 +281,17 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
+    /// A reader of the message after its encapsulation header (CDR, little or big endian).
+    fn after_header(bytes: &'a [u8], pads: Option<Vec<(usize, usize)>>) -> Result<Reader<'a>, CdrError> {
+        let little = match bytes {
+            [0, 1, _, _, ..] => true,
+            [0, 0, _, _, ..] => false,
+            [a, b, _, _, ..] => return Err(CdrError::Encapsulation(*a, *b)),
+            _ => return Err(CdrError::NoHeader),
+        };
+        Ok(Reader { data: &bytes[4..], pos: 0, little, path: Vec::new(), pads })
+    }
+
     fn malformed(&self, message: impl Into<String>) -> CdrError {
         CdrError::Malformed { path: self.path.join("."), offset: self.pos + 4, message: message.into() }
     }

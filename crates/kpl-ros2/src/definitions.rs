@@ -67,6 +67,12 @@ impl Definitions {
         defs
     }
 
+    /// The shipped packages, parsed once per process.
+    pub fn shipped() -> &'static Definitions {
+        static SHIPPED: std::sync::OnceLock<Definitions> = std::sync::OnceLock::new();
+        SHIPPED.get_or_init(Definitions::builtin)
+    }
+
     /// Adds a parsed definition (replacing one of the same name).
     pub fn insert(&mut self, def: MessageDef) {
         self.types.insert(def.name.clone(), Arc::new(def));
@@ -271,6 +277,39 @@ impl Schema {
     pub fn type_hash(&self) -> String {
         crate::hash::rihs01(self)
     }
+
+    /// The type's definition as rosbag2 writes it in a recording's schema (encoding `ros2msg`):
+    /// the type's `.msg` text, then each type it uses once, in the order a depth-first walk of
+    /// the fields meets them, as a line of 80 `=`, a line `MSG: pkg/Name` and that type's text.
+    /// [`Definitions::schema_of_ros2msg`] reads it back.
+    pub fn ros2msg(&self) -> String {
+        let mut out = String::new();
+        let mut seen = vec![false; self.structs.len()];
+        let mut stack = vec![self.root];
+        while let Some(i) = stack.pop() {
+            if std::mem::replace(&mut seen[i], true) {
+                continue;
+            }
+            let def = &self.structs[i].def;
+            if i != self.root {
+                if !out.ends_with('\n') {
+                    out.push('\n');
+                }
+                out.push_str(&"=".repeat(80));
+                out.push_str(&format!("\nMSG: {}/{}\n", def.name.package, def.name.name));
+            }
+            out.push_str(&def.text);
+            // Pushed in reverse, so the first field's type is walked first.
+            for field in self.structs[i].fields.iter().rev() {
+                if let SchemaBase::Struct(j) = field.base
+                    && !seen[j]
+                {
+                    stack.push(j);
+                }
+            }
+        }
+        out
+    }
 }
 
 struct SchemaBuilder<'a> {
@@ -339,6 +378,33 @@ mod tests {
         ] {
             assert!(defs.names().any(|n| &*n.package == package), "{package}");
         }
+    }
+
+    #[test]
+    fn a_schema_as_rosbag2_writes_it_reads_back_as_the_same_type() {
+        let defs = Definitions::builtin();
+        let empty = Definitions::default();
+        for name in defs.names() {
+            let schema = defs.schema(name).unwrap();
+            let text = schema.ros2msg();
+            // Every type it uses is in the text, once.
+            let sections = text.matches("\nMSG: ").count();
+            assert_eq!(sections, schema.structs().len() - 1, "{name}");
+            let back = empty.schema_of_ros2msg(&name.to_string(), &text).unwrap();
+            assert_eq!(back.type_hash(), schema.type_hash(), "{name}");
+        }
+        let text = defs.schema_of("geometry_msgs/msg/PoseStamped").unwrap().ros2msg();
+        let order: Vec<&str> = text.lines().filter_map(|l| l.strip_prefix("MSG: ")).collect();
+        assert_eq!(
+            order,
+            [
+                "std_msgs/Header",
+                "builtin_interfaces/Time",
+                "geometry_msgs/Pose",
+                "geometry_msgs/Point",
+                "geometry_msgs/Quaternion"
+            ]
+        );
     }
 
     #[test]

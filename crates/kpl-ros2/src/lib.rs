@@ -7,7 +7,10 @@
 //! - [`hash`]: RIHS01 type hashes;
 //! - [`cdr`]: the dynamic CDR codec (with the encapsulation header), [`json`]: messages as JSON;
 //! - [`mapping`]: fields of messages into KPL values and back, as a spec declares it;
-//! - [`wire`]: rmw_zenoh's keys, attachment, liveliness tokens and QoS.
+//! - [`topic`]: a topic's type and mapping as a spec's call declares them, checked the same
+//!   way by `kpl check` and a run;
+//! - [`wire`]: rmw_zenoh's keys, attachment, liveliness tokens and QoS;
+//! - [`rosbag2`]: a bag's `metadata.yaml` and the QoS profiles of its topics.
 //!
 //! The sources and sinks that use a zenoh session live in `kpl-zenoh`; docs/ros2.md describes
 //! the whole.
@@ -19,6 +22,8 @@ pub mod hash;
 pub mod json;
 pub mod mapping;
 pub mod msg;
+pub mod rosbag2;
+pub mod topic;
 pub mod wire;
 
 pub use cdr::MsgValue;

@@ -97,8 +97,8 @@ pub fn check(spec: &ast::Spec, registry: &Registry) -> Checked {
     check_in(spec, registry, None)
 }
 
-/// [`check`] for a spec read from a file in `dir`: parameter checks may look for the files a
-/// spec names relative to itself (a Python unit's module).
+/// Checks a parsed spec against a registry, as a spec of the folder `dir`: the checks of calls
+/// whose parameters name files (a ROS 2 topic's `msgs`) read them from there.
 pub fn check_in(spec: &ast::Spec, registry: &Registry, dir: Option<&std::path::Path>) -> Checked {
     let mut checker = Checker {
         registry,
@@ -134,6 +134,7 @@ struct Checker<'a> {
     diagnostics: Vec<Diagnostic>,
     types: TypeTable,
     names: BTreeMap<String, (Named, Span)>,
+    /// The spec's folder, for the checks of calls that read files.
     dir: Option<&'a std::path::Path>,
 }
 
@@ -1147,7 +1148,7 @@ impl Resolver<'_, '_, '_> {
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
         // Borrow the checker's parts separately: the formula checker reads the types and the
         // registry while the scope resolves stream names and marks streams used.
-        let Checker { registry, types, diagnostics, names, dir: _ } = &mut *self.checker;
+        let Checker { registry, types, diagnostics, names, .. } = &mut *self.checker;
         let mut scope = MonitorScope {
             refs: BTreeMap::new(),
             names,

@@ -213,14 +213,14 @@ pub struct Entry {
 }
 
 /// What a parameter check sees of one call: its parameters (defaults filled in), the declared
-/// output type (sources, units) and the types of its input streams, in order.
+/// output type (sources, units), the types of its input streams, in order, and the spec's folder,
+/// where a parameter's relative path is read from (`None` for a spec without a file: standard
+/// input, a string).
 #[derive(Debug, Clone, Copy)]
 pub struct CallTypes<'a> {
     pub params: &'a BTreeMap<String, Value>,
     pub output: Option<&'a ValueType>,
     pub inputs: &'a [ValueType],
-    /// The spec file's directory, when the spec was read from a file (`kpl check FILE`): where
-    /// files a parameter names relative to the spec are looked for.
     pub dir: Option<&'a std::path::Path>,
 }
 

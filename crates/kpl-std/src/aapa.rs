@@ -338,7 +338,8 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
     };
     let motion_profile = match ctx.param("motion_profile").and_then(Value::as_str) {
         Some("constant_velocity") => MotionProfile::ConstantVelocity,
-        _ => MotionProfile::EaseInOut,
+        Some("ease_in_out") => MotionProfile::EaseInOut,
+        _ => MotionProfile::Fitted,
     };
     let action_rules = match ctx.param("action_rules").and_then(Value::as_str).unwrap_or("") {
         "" => ActionRule::defaults(),
@@ -371,6 +372,10 @@ fn params(ctx: &BuildContext<'_>) -> Result<Params, BuildError> {
             infer_hidden: boolean(ctx, "infer_hidden")?,
             infer_hidden_box: Extensions::default().infer_hidden_box,
             average_still: boolean(ctx, "average_still")?,
+            still_stays: boolean(ctx, "still_stays")?,
+            merge_duplicates: boolean(ctx, "merge_duplicates")?,
+            identity_by_place: boolean(ctx, "identity_by_place")?,
+            keep_lost: float(ctx, "keep_lost")?,
         },
     })
 }
@@ -507,9 +512,9 @@ fn anchor_entry() -> Entry {
     .param(b("predict_motion", ext.predict_motion, "extension: an unseen object an action is moving continues its move until the action's expected end"))
     .param(Param::optional(
         "motion_profile",
-        ParamType::Choice(vec!["ease_in_out".into(), "constant_velocity".into()]),
-        Value::str("ease_in_out"),
-        "extension: how an unseen move proceeds (with predict_motion)",
+        ParamType::Choice(vec!["fitted".into(), "ease_in_out".into(), "constant_velocity".into()]),
+        Value::str("fitted"),
+        "extension: how an unseen move proceeds (with predict_motion): fitted to the positions seen (smooth, linear, ease-in or ease-out), ease_in_out, or constant_velocity",
     ))
     .param(b("reacquire", ext.reacquire, "extension: a confirmed new anchor takes over an unseen older anchor of its type"))
     .param(b("scale_attached", ext.scale_attached, "extension: a carried child scales its offset and size with its parent's box"))
@@ -532,6 +537,26 @@ fn anchor_entry() -> Entry {
         "average_still",
         ext.average_still,
         "extension: the box of an object no action moves is the mean of its boxes since it last moved",
+    ))
+    .param(b(
+        "still_stays",
+        ext.still_stays,
+        "extension: an object no action moves takes a percept away from it only at ten times the cost (H1: every move is an action)",
+    ))
+    .param(b(
+        "merge_duplicates",
+        ext.merge_duplicates,
+        "extension: two anchors of one type on the same spot, neither moving, are one object: the younger is merged into the older",
+    ))
+    .param(b(
+        "identity_by_place",
+        ext.identity_by_place,
+        "extension: which of identical objects an action means is decided by where things are (a contain by the object it covers)",
+    ))
+    .param(f(
+        "keep_lost",
+        ext.keep_lost,
+        "extension: seconds for which an established anchor that vanishes unexplained keeps its confidence (0: the paper's decay)",
     ))
     .param(Param::optional(
         "action_rules",

@@ -14,15 +14,15 @@
 //! router, multicast scouting off), apart from the session of the streams between hosts: ROS 2's
 //! graph is its own.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::Duration;
 
 use kpl_core::{Time, Value, ValueType};
-use kpl_ros2::mapping::{InMap, InSpec, MapError, OutMap, OutSpec};
+use kpl_ros2::mapping::{InMap, MapError, OutMap};
 use kpl_ros2::wire::{self, Attachment, EntityKind, Node, Qos};
-use kpl_ros2::{Definitions, Schema, cdr};
+use kpl_ros2::{Schema, cdr, topic};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source};
@@ -84,13 +84,8 @@ pub fn register(registry: &mut Registry) {
             needs_wall_clock(ctx)?;
             let common = Common::new(ctx)?;
             let output = ctx.process.output.clone().unwrap_or(ValueType::Any);
-            let spec = InSpec {
-                each: non_empty(ctx, "each"),
-                identity: non_empty(ctx, "identity"),
-                stamp: non_empty(ctx, "stamp"),
-                entries: list_param(ctx, "map"),
-            };
-            let map = InMap::compile(&common.schema, &spec, &output).map_err(|e| map_error(ctx, &spec.entries, &e))?;
+            let spec = topic::in_spec(params(ctx));
+            let map = InMap::compile(&common.schema, &spec, &output).map_err(|e| map_error(ctx, &e))?;
             let idle = match ctx.param("idle") {
                 Some(Value::Duration(d)) => *d,
                 _ => 3_000_000,
@@ -110,51 +105,11 @@ pub fn register(registry: &mut Registry) {
             needs_wall_clock(ctx)?;
             let common = Common::new(ctx)?;
             let input = ctx.process.inputs.first().map_or(ValueType::Any, |i| i.stream.ty.clone());
-            let spec = OutSpec { each: non_empty(ctx, "each"), entries: list_param(ctx, "map") };
-            let map = OutMap::compile(common.schema.clone(), &spec, &input).map_err(|e| map_error(ctx, &spec.entries, &e))?;
+            let spec = topic::out_spec(params(ctx));
+            let map = OutMap::compile(common.schema.clone(), &spec, &input).map_err(|e| map_error(ctx, &e))?;
             Ok(Box::new(Publish { common, map, open: None, buffer: Vec::new(), published: 0, failures: 0 }))
         },
     );
-}
-
-/// The shipped message definitions, parsed once for `kpl check`.
-fn shipped() -> &'static Definitions {
-    static SHIPPED: OnceLock<Definitions> = OnceLock::new();
-    SHIPPED.get_or_init(Definitions::builtin)
-}
-
-/// The schema of a call's `type` for `kpl check`: a problem if it is not a shipped type and no
-/// `msgs` folder is named; `None` (checked when the run starts, where the folder is read) if it
-/// may be the user's.
-fn checked_schema(call: &CallTypes<'_>) -> Result<Option<Arc<Schema>>, ParamProblem> {
-    let text = |name: &str| call.params.get(name).and_then(Value::as_str).unwrap_or("");
-    match shipped().schema_of(text("type")) {
-        Ok(schema) => Ok(Some(schema)),
-        Err(_) if !text("msgs").is_empty() => Ok(None),
-        Err(e) => Err(ParamProblem {
-            param: "type".into(),
-            element: None,
-            range: (0, 0),
-            message: e.to_string(),
-            hint: e.hint().map(String::from).or_else(|| {
-                Some(
-                    "a shipped type (docs/ros2.md), or name a folder of your own `.msg` files in `msgs`"
-                        .into(),
-                )
-            }),
-        }),
-    }
-}
-
-fn text_param(call: &CallTypes<'_>, name: &str) -> Option<String> {
-    call.params.get(name).and_then(Value::as_str).filter(|s| !s.is_empty()).map(String::from)
-}
-
-fn list_of(call: &CallTypes<'_>, name: &str) -> Vec<String> {
-    match call.params.get(name) {
-        Some(Value::List(items)) => items.iter().filter_map(|v| v.as_str().map(String::from)).collect(),
-        _ => Vec::new(),
-    }
 }
 
 /// A mapping error as `kpl check` reports it: in the entry of `map` (or the parameter) it names.
@@ -166,33 +121,17 @@ fn problem(e: MapError) -> ParamProblem {
     ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
 }
 
-/// `kpl check` of `ros2.subscribe`: its type, and its mapping against the type and the stream's.
+/// `kpl check` of `ros2.subscribe`: its type (shipped, or of `msgs` beside the spec), and its
+/// mapping against the type and the stream's.
 fn check_subscribe(call: &CallTypes<'_>) -> Vec<ParamProblem> {
-    let schema = match checked_schema(call) {
-        Ok(Some(schema)) => schema,
-        Ok(None) => return Vec::new(),
-        Err(p) => return vec![p],
-    };
     let Some(output) = call.output else { return Vec::new() };
-    let spec = InSpec {
-        each: text_param(call, "each"),
-        identity: text_param(call, "identity"),
-        stamp: text_param(call, "stamp"),
-        entries: list_of(call, "map"),
-    };
-    InMap::compile(&schema, &spec, output).err().map(problem).into_iter().collect()
+    topic::check_in(call.params, output, call.dir).err().map(problem).into_iter().collect()
 }
 
 /// `kpl check` of `ros2.publish`: its type, and its mapping against the type and the input's.
 fn check_publish(call: &CallTypes<'_>) -> Vec<ParamProblem> {
-    let schema = match checked_schema(call) {
-        Ok(Some(schema)) => schema,
-        Ok(None) => return Vec::new(),
-        Err(p) => return vec![p],
-    };
     let Some(input) = call.inputs.first() else { return Vec::new() };
-    let spec = OutSpec { each: text_param(call, "each"), entries: list_of(call, "map") };
-    OutMap::compile(schema, &spec, input).err().map(problem).into_iter().collect()
+    topic::check_out(call.params, input, call.dir).err().map(problem).into_iter().collect()
 }
 
 fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
@@ -205,26 +144,14 @@ fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
     }
 }
 
-fn non_empty(ctx: &BuildContext<'_>, name: &str) -> Option<String> {
-    ctx.param(name).and_then(Value::as_str).filter(|s| !s.is_empty()).map(String::from)
+/// The call's parameters (defaults filled in by the checker).
+fn params<'c>(ctx: &'c BuildContext<'_>) -> &'c BTreeMap<String, Value> {
+    static NONE: BTreeMap<String, Value> = BTreeMap::new();
+    ctx.call().map_or(&NONE, |c| &c.params)
 }
 
-fn list_param(ctx: &BuildContext<'_>, name: &str) -> Vec<String> {
-    match ctx.param(name) {
-        Some(Value::List(items)) => items.iter().filter_map(|v| v.as_str().map(String::from)).collect(),
-        _ => Vec::new(),
-    }
-}
-
-fn map_error(ctx: &BuildContext<'_>, entries: &[String], e: &MapError) -> BuildError {
-    let at = match e.entry {
-        Some(i) => {
-            format!("`{}` of `map` (\"{}\")", &entries[i].get(e.range.0..e.range.1).unwrap_or(""), entries[i])
-        }
-        None => format!("`{}`", e.param),
-    };
-    let hint = e.hint.as_ref().map(|h| format!("; {h}")).unwrap_or_default();
-    ctx.error(format!("{at}: {}{hint}", e.message))
+fn map_error(ctx: &BuildContext<'_>, e: &MapError) -> BuildError {
+    ctx.error(topic::describe(params(ctx), e))
 }
 
 /// What both ends have: the topic, its type and the node.
@@ -260,20 +187,7 @@ impl Common {
             .ok()
             .filter(|d| *d <= 232)
             .ok_or_else(|| ctx.error(format!("`domain`: {domain} is not a ROS 2 domain id (0 to 232)")))?;
-        let mut defs = Definitions::builtin();
-        let msgs = str_param("msgs");
-        if !msgs.is_empty() {
-            let folder = ctx.input_path(&msgs);
-            defs.add_folder(&folder).map_err(|errors| {
-                let list: Vec<String> = errors.iter().map(ToString::to_string).collect();
-                ctx.error(format!("`msgs`: {}", list.join("; ")))
-            })?;
-        }
-        let ty = str_param("type");
-        let schema = defs.schema_of(&ty).map_err(|e| {
-            let hint = e.hint().map(|h| format!("; {h}")).unwrap_or_default();
-            ctx.error(format!("`type`: {e}{hint}"))
-        })?;
+        let schema = topic::schema_in(params(ctx), &ctx.input_path("")).map_err(|e| map_error(ctx, &e))?;
         let depth = ctx.param("depth").and_then(Value::as_i64).unwrap_or(10);
         let depth = u32::try_from(depth)
             .ok()

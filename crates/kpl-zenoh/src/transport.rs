@@ -243,6 +243,8 @@ pub struct ZenohTransport {
     hosts: Arc<HostWatch>,
     outbound: Mutex<Vec<Arc<Outbound>>>,
     inbound: Mutex<Vec<Arc<Mutex<InboundReport>>>>,
+    /// What this host's receivers acknowledge: closing waits for the ends they have to go out.
+    acks: Mutex<Vec<Arc<AckState>>>,
     /// Another process running this host of the deployment, once heard of.
     clash: Arc<Clash>,
     hello: tokio::task::JoinHandle<()>,
@@ -394,6 +396,7 @@ impl ZenohTransport {
             hosts,
             outbound: Mutex::new(Vec::new()),
             inbound: Mutex::new(Vec::new()),
+            acks: Mutex::new(Vec::new()),
             clash,
             hello,
             _hellos: hellos,
@@ -427,10 +430,28 @@ impl ZenohTransport {
                 report,
             )
             .await?;
+            if let Ok(mut acks) = self.acks.lock() {
+                acks.push(receiver.acks.clone());
+            }
             receivers.insert(key, receiver);
         }
         *declared = Some(receivers);
         Ok(())
+    }
+
+    /// Waits (at most [`FLUSH_ENDS`]) until the acknowledgment of every end this host has went
+    /// out: a consumer that closes its session first leaves the producer waiting for an end it
+    /// has (the acknowledging task may not have run yet since the end arrived).
+    async fn flush_ends(&self) {
+        let acks = self.acks.lock().map(|a| a.clone()).unwrap_or_default();
+        let step = Duration::from_millis(10);
+        for _ in 0..FLUSH_ENDS.as_millis() / step.as_millis() {
+            if !acks.iter().any(|a| a.end_unsent()) {
+                return;
+            }
+            tokio::time::sleep(step).await;
+        }
+        tracing::warn!("the acknowledgment of a stream's end did not go out within {FLUSH_ENDS:?}");
     }
 
     /// Who is still missing: for each consuming host not subscribed yet, the streams it lacks.
@@ -580,6 +601,7 @@ impl Transport for ZenohTransport {
         Box::pin(async move {
             self.hello.abort();
             self.declared.lock().await.take();
+            self.flush_ends().await;
             if let Ok(mut tokens) = self.tokens.lock() {
                 tokens.clear();
             }
@@ -1222,9 +1244,14 @@ impl Inbox {
 }
 
 /// What a receiver acknowledges, shared with the task that sends the acknowledgments.
+/// How long closing a host waits for the acknowledgments of the ends it has to go out.
+const FLUSH_ENDS: Duration = Duration::from_secs(2);
+
 #[derive(Default)]
 struct AckState {
     ack: Mutex<crate::flow::Ack>,
+    /// The last acknowledgment handed to zenoh.
+    sent: Mutex<crate::flow::Ack>,
     /// Send now (progress, the end, or the receiver closing).
     wake: tokio::sync::Notify,
     closing: std::sync::atomic::AtomicBool,
@@ -1233,6 +1260,12 @@ struct AckState {
 impl AckState {
     fn ack(&self) -> crate::flow::Ack {
         self.ack.lock().map(|a| *a).unwrap_or_default()
+    }
+
+    /// The consumer has an end whose acknowledgment has not gone out yet.
+    fn end_unsent(&self) -> bool {
+        let ack = self.ack();
+        ack.end && self.sent.lock().map(|s| *s != ack).unwrap_or(false)
     }
 
     /// The consumer took the producer's run `incarnation` up to `position`.
@@ -1287,11 +1320,29 @@ async fn acknowledge(
             Envelope { host: host.clone(), incarnation: instance, sequence: number, unfinished: false };
         let attachment = envelope.seal(&ack_key, &payload, secret.as_ref());
         number += 1;
-        if let Err(e) = publisher.put(payload).attachment(attachment).await {
-            if session.is_closed() {
-                return;
+        // Progress may be dropped under congestion (the next one says more); the end may not.
+        let put = if ack.end {
+            session
+                .put(&ack_key, payload)
+                .attachment(attachment)
+                .congestion_control(CongestionControl::Block)
+                .priority(zenoh::qos::Priority::InteractiveHigh)
+                .await
+        } else {
+            publisher.put(payload).attachment(attachment).await
+        };
+        match put {
+            Ok(()) => {
+                if let Ok(mut sent) = state.sent.lock() {
+                    *sent = ack;
+                }
             }
-            tracing::debug!("cannot acknowledge on `{ack_key}`: {e}");
+            Err(e) => {
+                if session.is_closed() {
+                    return;
+                }
+                tracing::debug!("cannot acknowledge on `{ack_key}`: {e}");
+            }
         }
         if closing && !ack.end {
             return;

@@ -9,10 +9,10 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Args, Subcommand, ValueEnum};
-use kpl_aapa::Params;
 use kpl_cater::CaterError;
-use kpl_cater::dataset::{self, GeneratorConfig, Manifest};
-use kpl_cater::eval::{self, EvalOptions, PerceptionSource, Report, VisibleFrom, per_video_csv};
+use kpl_cater::dataset::{self, GeneratorConfig, Layout, Manifest};
+use kpl_cater::eval::{self, Boxes, EvalOptions, PerceptionSource, Report, VisibleFrom, per_video_csv};
+use kpl_cater::formats;
 use kpl_cater::layout::{self, Perception};
 use kpl_cater::models::Model;
 use kpl_cater::score::{Category, CategoryTable, FramesScored};
@@ -23,7 +23,8 @@ pub enum Command {
     /// Generate videos by CATER's procedure: scene JSON, `<video>_bb.json`, perfect and detector
     /// perception, OPNet's annotation files.
     #[command(after_help = "Examples:\n  kpl cater generate --videos 20 --seed 1 --out out/cater\n  \
-                      kpl cater generate --videos 20 --seed 2 --motion all --out out/cater-all\n\n\
+                      kpl cater generate --videos 20 --seed 2 --motion all --out out/cater-all\n  \
+                      kpl cater generate --videos 20 --seed 3 --motion hard --layout la-cater --out out/la-hard\n\n\
                       LA-CATER's test set has 1371 videos (docs/cater.md).")]
     Generate(GenerateArgs),
     /// Run a model over a data directory and print mean IoU and L2 per category (Table I's layout).
@@ -43,6 +44,19 @@ enum MotionArg {
     MaxTwo,
     /// Every object or stack moves in every segment (CATER's all_actions).
     All,
+    /// This project's hard scenes: any number of moves per slot at different frames, contains onto
+    /// the snitch's stack (nested cones), moving targets, four motion profiles, a winged snitch
+    /// that rotates, identical objects, occlusion by the union of nearer boxes (docs/cater.md).
+    Hard,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum LayoutArg {
+    /// This project's: scenes/, perception/ as JSON.
+    Kpl,
+    /// LA-CATER's as OPNet's code reads it: scenes/, labels/, perfect_perception/, od_perception/,
+    /// od_perception_b/ (OPNet's pickles), samples.txt.
+    LaCater,
 }
 
 #[derive(Debug, Args)]
@@ -56,9 +70,12 @@ pub struct GenerateArgs {
     /// Output directory (created if missing).
     #[arg(long)]
     out: PathBuf,
-    /// How many objects move per segment.
+    /// How many objects move per segment, and how.
     #[arg(long, value_enum, default_value = "max-two")]
     motion: MotionArg,
+    /// Which files to write.
+    #[arg(long, value_enum, default_value = "kpl")]
+    layout: LayoutArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -80,8 +97,20 @@ enum ModelArg {
 enum PerceptionArg {
     /// Ground-truth boxes of the visible objects.
     Perfect,
-    /// The simulated detector.
+    /// The simulated detector (calibrated against the AAPA paper's Faster R-CNN).
     Detector,
+    /// The second, independent simulated detector.
+    DetectorB,
+}
+
+impl PerceptionArg {
+    fn perception(self) -> Perception {
+        match self {
+            PerceptionArg::Perfect => Perception::Perfect,
+            PerceptionArg::Detector => Perception::Detector,
+            PerceptionArg::DetectorB => Perception::DetectorB,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -102,15 +131,18 @@ enum VisibleArg {
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Data directory: `scenes/` (scene JSON and `<video>_bb.json`; `labels/` or `bb/` are looked in
-    /// for the latter too) and this project's `perception/`.
+    /// Data directory, in this project's layout or LA-CATER's as it comes: `scenes/` (scene JSON,
+    /// and `<video>_bb.json` there or in `labels/`), the perception in `perception/` (this
+    /// project's JSON) or `perfect_perception/` and `od_perception/` (OPNet's pickles), OPNet's
+    /// annotation files in `containment_and_occlusions/`.
     #[arg(long)]
     data: PathBuf,
     #[arg(long, value_enum)]
     model: ModelArg,
-    /// This project's perception file to use.
-    #[arg(long, value_enum, default_value = "perfect")]
-    perception: PerceptionArg,
+    /// Which perception (default: perfect). With --pickles it says what the pickles are; without,
+    /// their boxes are measured: exact if every box is the ground truth's.
+    #[arg(long, value_enum)]
+    perception: Option<PerceptionArg>,
     /// Read OPNet's per-video perception pickles (`<video>.pkl`) from this directory instead.
     #[arg(long, value_name = "DIR")]
     pickles: Option<PathBuf>,
@@ -139,6 +171,10 @@ pub struct EvalArgs {
     /// Write each video's predictions as `<video>_bb.json` into this directory.
     #[arg(long, value_name = "DIR")]
     predictions: Option<PathBuf>,
+    /// Also write this video's world state in every frame (AAPA's anchors, attachments, bindings)
+    /// as `<video>_worlds.jsonl` into the --predictions directory; may be given several times.
+    #[arg(long, value_name = "VIDEO", requires = "predictions")]
+    trace: Vec<String>,
     /// Exit with 1 if any video was skipped (they are always listed).
     #[arg(long)]
     strict: bool,
@@ -178,6 +214,9 @@ impl From<CaterError> for Failure {
     }
 }
 
+/// The most bytes a `--params` file may have (it holds a few dozen parameters).
+const MAX_PARAMS_BYTES: u64 = 1 << 20;
+
 fn threads(requested: Option<usize>) -> usize {
     requested.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1)
 }
@@ -189,6 +228,11 @@ fn generate(args: GenerateArgs) -> Result<(), Failure> {
         motion: match args.motion {
             MotionArg::MaxTwo => Motion::MaxTwo,
             MotionArg::All => Motion::All,
+            MotionArg::Hard => Motion::Hard,
+        },
+        layout: match args.layout {
+            LayoutArg::Kpl => Layout::Kpl,
+            LayoutArg::LaCater => Layout::LaCater,
         },
         ..GeneratorConfig::default()
     };
@@ -225,18 +269,44 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
         ModelArg::AapaNoActions => Model::AapaNoActions,
         ModelArg::AapaPaper => Model::AapaPaper,
     };
-    let perception = match (&args.pickles, args.perception) {
-        (Some(dir), _) => PerceptionSource::Pickles(dir.clone()),
-        (None, PerceptionArg::Perfect) => PerceptionSource::Json(Perception::Perfect),
-        (None, PerceptionArg::Detector) => PerceptionSource::Json(Perception::Detector),
+    let perception = match &args.pickles {
+        Some(dir) => PerceptionSource::Pickles {
+            dir: dir.clone(),
+            boxes: match args.perception {
+                None => Boxes::Measured,
+                Some(p) if p.perception().exact() => Boxes::Exact,
+                Some(_) => Boxes::Noisy,
+            },
+        },
+        None => PerceptionSource::find(
+            &args.data,
+            args.perception.map_or(Perception::Perfect, PerceptionArg::perception),
+        )?,
     };
-    let params = match &args.params {
+    let param_overrides = match &args.params {
         None => None,
-        Some(path) => Some(read_params(path, model, perception.noisy())?),
+        Some(path) => {
+            let text = formats::read_capped_text(path, MAX_PARAMS_BYTES)?;
+            let value: serde_json::Value =
+                serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;
+            if !value.is_object() {
+                return Err(Failure::Data(format!(
+                    "{}: expected a JSON object of AAPA parameters",
+                    path.display()
+                )));
+            }
+            Some(value)
+        }
     };
     let videos = match &args.videos {
         None => None,
         Some(path) => Some(layout::read_video_list(path)?),
+    };
+    let visible = match args.visible {
+        VisibleArg::Opnet => VisibleFrom::Opnet,
+        VisibleArg::Perception => {
+            VisibleFrom::Perception(PerceptionSource::find(&args.data, Perception::Perfect)?)
+        }
     };
     #[allow(clippy::disallowed_methods)] // how long the command took, reported beside its results
     let started = Instant::now();
@@ -244,7 +314,8 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
         data: args.data.clone(),
         model,
         perception,
-        params,
+        params: None,
+        param_overrides,
         threads: threads(args.threads),
         predictions_dir: args.predictions.clone(),
         videos,
@@ -253,10 +324,8 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
             FramesArg::All => FramesScored::All,
             FramesArg::FromFirstDetection => FramesScored::FromFirstDetection,
         },
-        visible: match args.visible {
-            VisibleArg::Opnet => VisibleFrom::Opnet,
-            VisibleArg::Perception => VisibleFrom::Perception(PerceptionSource::Json(Perception::Perfect)),
-        },
+        visible,
+        trace: args.trace.clone(),
     })?;
     let elapsed = started.elapsed().as_secs_f64();
     let mut stdout = std::io::stdout().lock();
@@ -267,6 +336,15 @@ fn evaluate(args: EvalArgs) -> Result<(), Failure> {
     }
     if report.skipped.len() > 20 {
         eprintln!("... and {} more skipped videos (all are in --json)", report.skipped.len() - 20);
+    }
+    if report.dropped.total() > 0 {
+        eprintln!(
+            "dropped {} detections in {} videos: {} with a label that names no class (such as -1), {} with a bad box",
+            report.dropped.total(),
+            report.dropped_videos,
+            report.dropped.unknown_class,
+            report.dropped.bad_box
+        );
     }
     eprintln!(
         "evaluated {} videos ({} skipped) in {elapsed:.2} s; categories from {}",
@@ -295,21 +373,6 @@ fn write_file(path: &Path, text: &str) -> Result<(), Failure> {
     std::fs::write(path, text).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))
 }
 
-fn read_params(path: &Path, model: Model, noisy_boxes: bool) -> Result<Params, Failure> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| Failure::Usage(format!("{}: {e}", path.display())))?;
-    // Fields missing from the file keep the model's defaults.
-    let mut base = serde_json::to_value(model.params_for(noisy_boxes))
-        .map_err(|e| Failure::Usage(format!("encoding default parameters: {e}")))?;
-    let overrides: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))?;
-    let (Some(base_map), serde_json::Value::Object(over)) = (base.as_object_mut(), overrides) else {
-        return Err(Failure::Data(format!("{}: expected a JSON object of AAPA parameters", path.display())));
-    };
-    base_map.extend(over);
-    serde_json::from_value(base).map_err(|e| Failure::Data(format!("{}: {e}", path.display())))
-}
-
 /// `{"model", "perception", "videos", "skipped", "frames", "categories_from", "frame_counts",
 /// "iou": {category: {mean, sem, videos}}, "l2": {...}}`.
 fn json_report(report: &Report) -> serde_json::Value {
@@ -329,6 +392,15 @@ fn json_report(report: &Report) -> serde_json::Value {
     serde_json::json!({
         "model": report.model,
         "perception": report.perception,
+        "perception_source": report.perception_source,
+        "options": report.options(),
+        "params": {"exact_boxes": report.params[0], "noisy_boxes": report.params[1]},
+        "noisy_videos": report.noisy_videos,
+        "dropped_detections": {
+            "unknown_class": report.dropped.unknown_class,
+            "bad_box": report.dropped.bad_box,
+            "videos": report.dropped_videos,
+        },
         "videos": report.videos,
         "skipped": report.skipped,
         "frames": report.frames,
@@ -341,6 +413,8 @@ fn json_report(report: &Report) -> serde_json::Value {
 
 fn table(report: &Report) -> String {
     let mut out = format!("{} videos, {} perception\n", report.videos, report.perception);
+    out.push_str(&format!("perception: {}\n", report.perception_source));
+    out.push_str(&format!("options: {}\n", report.options()));
     for (title, t) in [("Mean IoU ±SEM", &report.iou), ("Mean L2 ±SEM", &report.l2)] {
         out.push_str(&format!("{title:<18}"));
         for c in Category::ALL {

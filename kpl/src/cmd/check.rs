@@ -30,8 +30,9 @@ pub fn check_file(file: &SourceFile) -> (Vec<kpl_syntax::Diagnostic>, Option<kpl
     if parse.has_errors() {
         return (parse.diagnostics, None);
     }
-    let dir = file.path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let checked = kpl_semantic::check_in(&parse.spec, &crate::registry::signatures(), Some(dir));
+    // A spec's parameters that name files (a ROS 2 topic's `msgs`) are read beside it.
+    let dir = (file.path != Path::new("-")).then(|| file.path.parent().unwrap_or(Path::new("")));
+    let checked = kpl_semantic::check_in(&parse.spec, &crate::registry::signatures(), dir);
     let mut diagnostics = parse.diagnostics;
     diagnostics.extend(checked.diagnostics);
     (diagnostics, checked.spec)

@@ -3,7 +3,9 @@
 //! `available` and `value` are the message, copied as JSON; order is kept. Going to MCAP, the
 //! streams are also written in Foxglove's schemas for its 3D panel (`kpl_mcap::foxglove`; the
 //! roads, occluders and camera of `--spec`), unless `--no-foxglove`. Going from MCAP, a file cut
-//! short by a killed run gives what its chunks hold (`kpl_mcap::recover`).
+//! short by a killed run gives what its chunks hold (`kpl_mcap::recover`). To a rosbag2 bag (an
+//! output without extension), the samples of the streams the spec's `ros2.publish` sinks publish
+//! become CDR messages of their topics, mapped as a run publishes them (`kpl_mcap::rosbag2`).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -12,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
-use kpl_core::read::{LineReader, MAX_RECORDING_LINE};
+use kpl_core::read::{LineError, LineReader, MAX_RECORDING_LINE};
 use kpl_core::{Value, ValueType};
 use kpl_mcap::foxglove::{Role, ViewChannels, ViewId, Views};
 use kpl_mcap::read::{RawEvent, Reader};
@@ -23,12 +25,14 @@ use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n  kpl run specs/ros2/replay.kpl --out out/replay\n  kpl convert out/replay/tracks.jsonl out/replay/cars --spec specs/ros2/markers.kpl\n\nThe direction follows the extensions (.jsonl, .mcap; none: a rosbag2 bag, written through the\nros2.publish sinks of --spec, each sample of the stream a sink publishes a message of its topic). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
 )]
 pub struct Args {
     /// The recording to read (.jsonl or .mcap).
     pub input: PathBuf,
-    /// The file to write (.mcap or .jsonl).
+    /// The file to write (.mcap or .jsonl), or a rosbag2 bag: a folder (no extension) with
+    /// `metadata.yaml` and the bag's MCAP file, of the topics the --spec's ros2.publish sinks
+    /// publish.
     pub output: PathBuf,
     /// The spec that made the recording: gives each stream's type for the MCAP schemas (without
     /// it, a stream's schema accepts any value).
@@ -67,9 +71,27 @@ pub fn run(args: Args) -> ExitCode {
             to_mcap(&args.input, &args.output, &types, compression, views)
         }
         ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
+        ("jsonl", "") => {
+            let Some(path) = &args.spec else {
+                eprintln!(
+                    "error: a rosbag2 bag is written through the ros2.publish sinks of the spec that made the recording: name it with --spec"
+                );
+                return ExitCode::from(2);
+            };
+            let spec = match super::check::load_checked(path) {
+                Ok(spec) => spec,
+                Err(code) => return code,
+            };
+            if args.no_foxglove || args.compression != "zstd" {
+                eprintln!(
+                    "warning: --no-foxglove and --compression apply to MCAP recordings, not to a rosbag2 bag"
+                );
+            }
+            to_rosbag2(&args.input, &args.output, &spec, path.parent().unwrap_or(Path::new("")))
+        }
         (from, to) => {
             eprintln!(
-                "error: kpl convert goes from .jsonl to .mcap or from .mcap to .jsonl, not from `.{from}` to `.{to}`"
+                "error: kpl convert goes from .jsonl to .mcap, from .mcap to .jsonl, or from .jsonl to a rosbag2 bag (a folder: no extension), not from `.{from}` to `.{to}`"
             );
             return ExitCode::from(2);
         }
@@ -104,6 +126,15 @@ fn stream_types(spec: &kpl_semantic::hir::Spec) -> BTreeMap<String, (ValueType, 
     types
 }
 
+/// A read error that ended a conversion, with what was written before it.
+fn read_error(input: &Path, error: &LineError, samples: u64, output: &Path) -> String {
+    format!(
+        "cannot read {}: {error}; the {samples} sample(s) before it are in {}",
+        input.display(),
+        output.display()
+    )
+}
+
 struct Converted {
     samples: u64,
     skipped: u64,
@@ -113,6 +144,47 @@ fn skip(location: &str, error: &str) {
     eprintln!("skipped {location}: {error}");
 }
 
+/// The samples of a JSON-lines recording, in order. A line that is not a sample is said (`skip`)
+/// and counted in `skipped`; a line too long (`/dev/zero` has no line break) ends the reading
+/// with an error: the file is not a recording.
+struct RecordingSamples {
+    lines: LineReader<BufReader<File>>,
+    number: u64,
+    input: PathBuf,
+}
+
+impl RecordingSamples {
+    fn open(input: &Path) -> Result<RecordingSamples, String> {
+        let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+        let lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
+        Ok(RecordingSamples { lines, number: 0, input: input.to_path_buf() })
+    }
+
+    /// The next sample and where it is (`FILE:LINE`), `None` at the end, or the read error.
+    fn next(&mut self, skipped: &mut u64) -> Result<Option<(String, SampleLine)>, LineError> {
+        loop {
+            self.number += 1;
+            let location = format!("{}:{}", self.input.display(), self.number);
+            let Some(line) = self.lines.next_line()? else { return Ok(None) };
+            let Ok(line) = std::str::from_utf8(line) else {
+                skip(&location, "the line is not UTF-8 text");
+                *skipped += 1;
+                continue;
+            };
+            if line.trim().is_empty() {
+                continue;
+            }
+            match read_line(line) {
+                Ok(line) => return Ok(Some((location, line))),
+                Err(error) => {
+                    skip(&location, &error);
+                    *skipped += 1;
+                }
+            }
+        }
+    }
+}
+
 fn to_mcap(
     input: &Path,
     output: &Path,
@@ -120,46 +192,20 @@ fn to_mcap(
     compression: Compression,
     mut views: Option<Views>,
 ) -> Result<Converted, String> {
-    let file = kpl_core::read::open(input).map_err(|e| e.to_string())?;
+    let mut samples = RecordingSamples::open(input)?;
     let mut recorder = Recorder::create(output, compression).map_err(|e| e.to_string())?;
     let mut streams: BTreeMap<String, (StreamId, Option<ViewId>)> = BTreeMap::new();
     let mut channels = ViewChannels::default();
     let mut messages = Vec::new();
     let mut converted = Converted { samples: 0, skipped: 0 };
-    let mut lines = LineReader::new(BufReader::new(file), MAX_RECORDING_LINE);
-    let mut number = 0u64;
     loop {
-        number += 1;
-        let location = format!("{}:{number}", input.display());
-        // A line too long (`/dev/zero` has no line break) ends the conversion: the file is not a
-        // recording. What was converted before it is kept in the MCAP file.
-        let line = match lines.next_line() {
-            Ok(Some(line)) => line,
+        // What was converted before a read error is kept in the MCAP file.
+        let line = match samples.next(&mut converted.skipped) {
+            Ok(Some((_, line))) => line,
             Ok(None) => break,
             Err(error) => {
                 recorder.finish().map_err(|e| e.to_string())?;
-                return Err(format!(
-                    "cannot read {}: {error}; the {} sample(s) before it are in {}",
-                    input.display(),
-                    converted.samples,
-                    output.display()
-                ));
-            }
-        };
-        let Ok(line) = std::str::from_utf8(line) else {
-            skip(&location, "the line is not UTF-8 text");
-            converted.skipped += 1;
-            continue;
-        };
-        if line.trim().is_empty() {
-            continue;
-        }
-        let line = match read_line(line) {
-            Ok(line) => line,
-            Err(error) => {
-                skip(&location, &error);
-                converted.skipped += 1;
-                continue;
+                return Err(read_error(input, &error, converted.samples, output));
             }
         };
         let (id, view) = match streams.get(&line.stream) {
@@ -187,6 +233,73 @@ fn to_mcap(
         converted.samples += 1;
     }
     recorder.finish().map_err(|e| e.to_string())?;
+    Ok(converted)
+}
+
+/// A recording into a rosbag2 bag (the folder `output`): each sample of a stream that a
+/// `ros2.publish` sink of the spec publishes becomes a message of that sink's topic, mapped as the
+/// run publishes it. Samples of other streams are counted and said, not written.
+fn to_rosbag2(
+    input: &Path,
+    output: &Path,
+    spec: &kpl_semantic::hir::Spec,
+    dir: &Path,
+) -> Result<Converted, String> {
+    use kpl_mcap::rosbag2::{BagWriter, publications};
+    let mut publications = publications(spec, dir)?;
+    if publications.is_empty() {
+        return Err("the spec has no ros2.publish sink: a bag holds the ROS 2 topics a spec publishes".into());
+    }
+    let mut samples = RecordingSamples::open(input)?;
+    let mut bag = BagWriter::create(output).map_err(|e| e.to_string())?;
+    let mut topics = Vec::new();
+    for p in &publications {
+        topics.push(bag.add_topic(&p.topic, &p.schema, p.qos).map_err(|e| e.to_string())?);
+    }
+    let mut converted = Converted { samples: 0, skipped: 0 };
+    let mut unpublished: BTreeMap<String, u64> = BTreeMap::new();
+    loop {
+        let (location, line) = match samples.next(&mut converted.skipped) {
+            Ok(Some(sample)) => sample,
+            Ok(None) => break,
+            Err(error) => {
+                bag.finish().map_err(|e| e.to_string())?;
+                return Err(read_error(input, &error, converted.samples, output));
+            }
+        };
+        let mut published = false;
+        for (p, topic) in publications.iter_mut().zip(&topics) {
+            if p.stream != line.stream {
+                continue;
+            }
+            published = true;
+            let message = Value::from_json(&line.value, &p.stream_type)
+                .map_err(|e| e.to_string())
+                .and_then(|value| p.encode(line.valid, &value).map(<[u8]>::to_vec));
+            match message {
+                Ok(message) => {
+                    bag.write(*topic, line.available, &message).map_err(|e| e.to_string())?;
+                    converted.samples += 1;
+                }
+                Err(error) => {
+                    skip(&location, &format!("`{}` on {}: {error}", line.stream, p.topic));
+                    converted.skipped += 1;
+                }
+            }
+        }
+        if !published {
+            *unpublished.entry(line.stream).or_default() += 1;
+        }
+    }
+    let written = bag.finish().map_err(|e| e.to_string())?;
+    for topic in &written.topics {
+        eprintln!("{}: {} message(s) of {}", topic.name, topic.message_count, topic.type_name);
+    }
+    for (stream, count) in unpublished {
+        eprintln!(
+            "note: {count} sample(s) of `{stream}` are not in the bag: no ros2.publish of the spec publishes it"
+        );
+    }
     Ok(converted)
 }
 

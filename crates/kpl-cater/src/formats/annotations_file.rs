@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::LAST_KEYFRAME;
+use super::{LAST_KEYFRAME, MAX_LIST_BYTES, read_capped_text};
 use crate::error::CaterError;
 
 /// Video name -> annotated frames (sorted, as written).
@@ -16,8 +16,7 @@ pub type Annotations = BTreeMap<String, Vec<usize>>;
 /// Reads an annotation file. A frame number that is not a number, or is past frame 300, is a data
 /// error naming the line.
 pub fn read_annotation_file(path: &Path) -> Result<Annotations, CaterError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let text = read_capped_text(path, MAX_LIST_BYTES)?;
     let mut out = Annotations::new();
     for (n, line) in text.lines().enumerate() {
         if line.trim().is_empty() {

@@ -17,6 +17,7 @@ mod annotations_file;
 mod ground_truth;
 mod perception;
 pub mod pickle;
+mod pickle_guard;
 mod scene;
 
 use std::path::Path;
@@ -28,7 +29,7 @@ use crate::error::CaterError;
 
 pub use annotations_file::{Annotations, read_annotation_file, write_annotation_file};
 pub use ground_truth::GroundTruth;
-pub use perception::{Detection, PerceptionFile};
+pub use perception::{Detection, Dropped, MAX_DROPPED_SHARE, PerceptionFile};
 pub use scene::{CameraField, Directions, Locations, Movement, MovementKind, Scene, SceneObject};
 
 /// Frames per video (LA-CATER's labels cover the first 300 of the 301 rendered frames).
@@ -49,8 +50,44 @@ pub const MAX_COORDINATE: f64 = 100_000.0;
 /// An integer box `[x1, y1, x2, y2]`, OPNet's convention (inclusive pixel corners).
 pub type IntBox = [i32; 4];
 
+/// The most bytes a scene JSON, `_bb.json`, perception or prediction file may have. LA-CATER's are
+/// well under 1 MiB; a larger input (a device such as `/dev/zero`, a wrong file) is refused before
+/// it can fill the memory.
+pub const MAX_JSON_BYTES: u64 = 64 << 20;
+/// The most bytes an annotation file or a list of videos may have (OPNet's annotation files for
+/// all 14,000 videos of LA-CATER would be about 17 MiB).
+pub const MAX_LIST_BYTES: u64 = 64 << 20;
+/// The most bytes a perception pickle may have (OPNet's are about 100 KiB).
+pub const MAX_PICKLE_BYTES: u64 = 16 << 20;
+
+/// Reads a whole file through `kpl_core::read` (the workspace's one capped reader), refusing one
+/// larger than `cap` bytes (a data error naming the file): a regular file that large is refused
+/// before it is read, a device or pipe is read to one byte past the cap and no further, so neither
+/// can exhaust the memory. A directory is refused too.
+pub fn read_capped(path: &Path, cap: u64) -> Result<Vec<u8>, CaterError> {
+    use kpl_core::read::{ReadError, read_file};
+    let limit = usize::try_from(cap).unwrap_or(usize::MAX);
+    read_file(path, limit).map_err(|e| match e {
+        ReadError::Io { path, source } => CaterError::Io { path, source },
+        ReadError::TooLarge { path, limit } => CaterError::invalid(
+            &path,
+            format!(
+                "larger than {}, the most this kind of file may have (is it the right file, not a device?)",
+                kpl_core::read::size_in_words(limit)
+            ),
+        ),
+        ReadError::Directory { path } => CaterError::invalid(&path, "a directory, not a file"),
+    })
+}
+
+/// [`read_capped`] as UTF-8 text.
+pub fn read_capped_text(path: &Path, cap: u64) -> Result<String, CaterError> {
+    String::from_utf8(read_capped(path, cap)?)
+        .map_err(|e| CaterError::invalid(path, format!("not UTF-8 text: {e}")))
+}
+
 pub(crate) fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, CaterError> {
-    let bytes = std::fs::read(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
+    let bytes = read_capped(path, MAX_JSON_BYTES)?;
     serde_json::from_slice(&bytes).map_err(|source| CaterError::Json { path: path.to_owned(), source })
 }
 

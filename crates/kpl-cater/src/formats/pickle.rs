@@ -13,8 +13,9 @@
 
 use std::path::Path;
 
-use serde_pickle::{DeOptions, HashableValue, Value};
+use serde_pickle::{DeOptions, HashableValue, SerOptions, Value};
 
+use super::{MAX_PICKLE_BYTES, pickle_guard, read_capped};
 use crate::error::CaterError;
 
 /// Per frame, `(label, [x1, y1, x2, y2])` for each object perceived.
@@ -22,11 +23,14 @@ pub type PickleFrames = Vec<Vec<(i64, [f64; 4])>>;
 
 /// Reads a perception pickle's frames.
 pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
-    let file =
-        std::fs::File::open(path).map_err(|source| CaterError::Io { path: path.to_owned(), source })?;
-    let reader = std::io::BufReader::new(file);
-    let value = serde_pickle::value_from_reader(
-        reader,
+    let bytes = read_capped(path, MAX_PICKLE_BYTES)?;
+    // Refuse what would overflow the decoder's stack or expand beyond any perception's size before
+    // decoding (see `pickle_guard`).
+    pickle_guard::check(&bytes).map_err(|reason| {
+        CaterError::invalid(path, format!("not a pickle of OPNet's perception: {reason}"))
+    })?;
+    let value = serde_pickle::value_from_slice(
+        &bytes,
         DeOptions::new().keep_restore_state().replace_unresolved_globals(),
     )
     .map_err(|e| CaterError::invalid(path, format!("not a pickle serde-pickle can read: {e}")))?;
@@ -66,6 +70,33 @@ pub fn read_perception_pickle(path: &Path) -> Result<PickleFrames, CaterError> {
         frames.push(detections);
     }
     Ok(frames)
+}
+
+/// Writes a perception pickle in OPNet's layout, `{"bb": [frame boxes], "labels": [frame labels]}`,
+/// as plain lists of integers (what OPNet's perfect perception script writes for boxes; OPNet's
+/// readers turn labels into numpy arrays either way).
+pub fn write_perception_pickle(path: &Path, frames: &[Vec<(i64, [i64; 4])>]) -> Result<(), CaterError> {
+    let bb = frames
+        .iter()
+        .map(|f| {
+            Value::List(
+                f.iter().map(|(_, b)| Value::List(b.iter().map(|v| Value::I64(*v)).collect())).collect(),
+            )
+        })
+        .collect();
+    let labels =
+        frames.iter().map(|f| Value::List(f.iter().map(|(l, _)| Value::I64(*l)).collect())).collect();
+    let value = Value::Dict(
+        [
+            (HashableValue::String("bb".into()), Value::List(bb)),
+            (HashableValue::String("labels".into()), Value::List(labels)),
+        ]
+        .into_iter()
+        .collect(),
+    );
+    let bytes = serde_pickle::value_to_vec(&value, SerOptions::new())
+        .map_err(|e| CaterError::invalid(path, format!("encoding the pickle: {e}")))?;
+    std::fs::write(path, bytes).map_err(|source| CaterError::Io { path: path.to_owned(), source })
 }
 
 fn sequence(value: &Value) -> Option<&[Value]> {

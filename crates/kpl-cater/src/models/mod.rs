@@ -108,6 +108,17 @@ pub fn predict(
     scene: &Scene,
     perception: &PerceptionFile,
 ) -> Result<Vec<IntBox>, CaterError> {
+    predict_traced(model, params, scene, perception, |_, _| {})
+}
+
+/// [`predict`], handing each frame's world state to `trace` (AAPA models).
+pub fn predict_traced(
+    model: Model,
+    params: &Params,
+    scene: &Scene,
+    perception: &PerceptionFile,
+    mut trace: impl FnMut(usize, &WorldState),
+) -> Result<Vec<IntBox>, CaterError> {
     let frames = perception.frames.len();
     match model {
         Model::Heuristic => Ok(heuristic(perception)),
@@ -129,6 +140,7 @@ pub fn predict(
                 world = aapa
                     .step_from(frame as Time * FRAME_US, &percepts, frame_actions, None, world)
                     .map_err(|source| CaterError::Aapa { video: scene.video.clone(), frame, source })?;
+                trace(frame, &world);
                 out.push(
                     world
                         .best_of_type(SNITCH_CLASS, params.theta_anch)

@@ -11,6 +11,12 @@ perception/<video>_<mode>.json) it computes, as OPNet's scripts do:
 - the analysis (ResultsAnalyzer + analyze_iou_offline.py): per video the mean IoU over all frames
   and over the frames of each category, from a directory of prediction files.
 
+It also makes OPNet's perfect perception pickles (its `visible_only` mode, with OPNet's class
+indices) from a directory in LA-CATER's layout, or the same with occlusion by the union of the
+nearer objects' boxes (hard scenes):
+
+    python opnet.py perfect-pickles DATA OUT_DIR opnet|union
+
 Usage: python opnet.py DATA PERCEPTION PREDICTIONS_DIR OUT.json
 Writes {"annotations": {video: {"contained", "carried", "visible"}},
         "heuristic": {video: [[x1, y1, x2, y2], ...]},
@@ -99,6 +105,69 @@ def visible(scene, boxes, frames, ratio=0.0):
         if not any(covered(s[1], p[1], s[2], p[2], 1.0 - ratio) for p in others):
             out.append(f)
     return out
+
+
+def opnet_class_indices():
+    """OPNet's object_indices.py table, by its rule: sizes large, medium, small; materials metal,
+    rubber; within each, color_shape sorted, the snitch (gold spl) among the small metal ones."""
+    colors = ["blue", "brown", "cyan", "gray", "green", "purple", "red", "yellow"]
+    shapes = ["cone", "cube", "cylinder", "sphere"]
+    table = []
+    for size in ["large", "medium", "small"]:
+        for material in ["metal", "rubber"]:
+            group = sorted([(c, s) for c in colors for s in shapes]
+                           + ([("gold", "spl")] if (size, material) == ("small", "metal") else []))
+            table += [f"{size}_{c}_{s}_{material}" for c, s in group]
+    return {name: i for i, name in enumerate(table)}
+
+
+def perfect_perception(scene, boxes, frames, ratio=0.0, camera=None):
+    """get_perfect_perception_and_visible_snitch_ratio.py, visible_only: every object not contained
+    (by class) and not occluded. With `camera`, an object is occluded when the boxes of the nearer
+    objects cover all its pixels together (rasterized here), distances from that camera."""
+    indices = opnet_class_indices()
+    hidden = {}
+    classes = {o["instance"]: obj_class(o) for o in scene["objects"]}
+    for _, other, start, end, _ in cone_contains(scene["movements"], 300):
+        hidden.setdefault(indices[classes[other]], []).append((start, end))
+    out_bb, out_labels = [], []
+    for f in range(frames):
+        shown = []
+        for o in scene["objects"]:
+            label = indices[obj_class(o)]
+            if any(s <= f <= e for s, e in hidden.get(label, [])):
+                continue
+            x, y, w, h = boxes[obj_class(o) + "_" + o["instance"]][f]
+            loc = np.array(o["locations"][str(f)])
+            shown.append((label, [x, y, x + w, y + h], loc))
+        occluded = [False] * len(shown)
+        if camera is None:
+            dist = [np.linalg.norm(CAMERA - s[2]) for s in shown]
+            for i in range(len(shown)):
+                for j in range(i, len(shown)):
+                    a, b = shown[i][1], shown[j][1]
+                    inter = max(0, min(a[2], b[2]) - max(a[0], b[0]) + 1) * max(0, min(a[3], b[3]) - max(a[1], b[1]) + 1)
+                    area_a = (a[2] - a[0] + 1) * (a[3] - a[1] + 1)
+                    area_b = (b[2] - b[0] + 1) * (b[3] - b[1] + 1)
+                    if inter / min(area_a, area_b) >= 1.0 - ratio:
+                        if area_a < area_b and dist[i] > dist[j]:
+                            occluded[i] = True
+                        elif area_b < area_a and dist[j] > dist[i]:
+                            occluded[j] = True
+        else:
+            dist = [np.linalg.norm(np.array(camera) - s[2]) for s in shown]
+            for i, (_, a, _) in enumerate(shown):
+                mask = np.zeros((a[3] - a[1] + 1, a[2] - a[0] + 1), dtype=bool)
+                for j, (_, b, _) in enumerate(shown):
+                    if dist[j] < dist[i]:
+                        x1, y1 = max(a[0], b[0]) - a[0], max(a[1], b[1]) - a[1]
+                        x2, y2 = min(a[2], b[2]) - a[0], min(a[3], b[3]) - a[1]
+                        if x1 <= x2 and y1 <= y2:
+                            mask[y1:y2 + 1, x1:x2 + 1] = True
+                occluded[i] = bool(mask.all())
+        out_bb.append([s[1] for s, o in zip(shown, occluded) if not o])
+        out_labels.append(np.array([s[0] for s, o in zip(shown, occluded) if not o]))
+    return {"bb": out_bb, "labels": out_labels}
 
 
 def heuristic(perception):
@@ -195,7 +264,24 @@ def masked_mean(values, frames):
     return None if mask.sum() == 0 else float(np.mean(values[mask]))
 
 
+def write_perfect_pickles(data, out, union):
+    """Writes OPNet's perfect perception pickles of every video of a LA-CATER layout directory
+    (scenes/, labels/) into `out`, as OPNet's script saves them (pickle.dump, default protocol)."""
+    import pickle
+    out.mkdir(parents=True, exist_ok=True)
+    for scene_path in sorted((data / "scenes").glob("*.json")):
+        scene = json.load(open(scene_path))
+        boxes = json.load(open(data / "labels" / (scene_path.stem + "_bb.json")))
+        frames = len(next(iter(boxes.values())))
+        camera = scene["camera"] if union else None
+        with open(out / (scene_path.stem + ".pkl"), "wb") as f:
+            pickle.dump(perfect_perception(scene, boxes, frames, camera=camera), f)
+
+
 def main():
+    if sys.argv[1] == "perfect-pickles":
+        write_perfect_pickles(Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[4] == "union")
+        return
     data, perception_mode, predictions, out_path = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), sys.argv[4]
     result = {"annotations": {}, "heuristic": {}, "analysis": {}}
     for scene_path in sorted((data / "scenes").glob("*.json")):

@@ -67,4 +67,18 @@ shared = np.array([[1, 2, 3, 4]])
 write("bad_shared.pkl", {"bb": [shared, shared], "labels": [np.array([140]), np.array([140])]}, 4)
 (out / "not_a_pickle.pkl").write_bytes(b"this is not a pickle")
 
+# A detector's frames with one detection labelled -1 (outside OPNet's class indices): that
+# detection is dropped and counted, the others read.
+minus_one = [np.array(l, dtype=np.int64) for l in frames_labels]
+minus_one[3] = np.array([63, -1, 192], dtype=np.int64)
+write("minus_one.pkl", {"bb": [np.array(b, dtype=float).reshape(-1, 4).astype(np.int64) for b in frames_bb],
+                        "labels": minus_one}, 4)
+
+# 2,000 nested lists (about 4 KB): refused, not a stack overflow.
+sys.setrecursionlimit(10000)
+nested = []
+for _ in range(2000):
+    nested = [nested]
+write("nested.pkl", {"bb": nested, "labels": []}, 2)
+
 json.dump(expected, open(out / "expected.json", "w"))

@@ -269,7 +269,8 @@ field_names! {
     name = "name", args = "args", time = "time", camera = "camera", anchors = "anchors",
     relations = "relations", notes = "notes", bindings = "bindings", hidden = "hidden",
     still = "still", mean = "mean", count = "count", provisional = "provisional",
-    parent_size = "parent_size",
+    parent_size = "parent_size", turning = "turning", move_track = "move_track", settling = "settling",
+    strays = "strays", last_moved = "last_moved",
 }
 
 static NAMES: std::sync::LazyLock<Names> = std::sync::LazyLock::new(Names::new);
@@ -308,6 +309,9 @@ fn anchor_value(a: &Anchor) -> Value {
         last_percept_box,
         partial,
         moving_since,
+        move_track,
+        turning,
+        last_moved,
         attachment,
         for_inference,
         type_votes,
@@ -334,6 +338,15 @@ fn anchor_value(a: &Anchor) -> Value {
     if let Some(t) = moving_since {
         fields.push((n.moving_since.clone(), Value::Int(*t)));
     }
+    if !move_track.is_empty() {
+        fields.push((n.move_track.clone(), Value::List(move_track.iter().map(|p| floats(p)).collect())));
+    }
+    if *turning {
+        fields.push((n.turning.clone(), Value::Bool(true)));
+    }
+    if let Some(t) = last_moved {
+        fields.push((n.last_moved.clone(), Value::Int(*t)));
+    }
     if let Some(wh) = full_size {
         fields.push((n.full_size.clone(), floats(wh)));
     }
@@ -358,13 +371,19 @@ fn anchor_value(a: &Anchor) -> Value {
         if att.provisional {
             geometry.push((n.provisional.clone(), Value::Bool(true)));
         }
+        if att.settling {
+            geometry.push((n.settling.clone(), Value::Bool(true)));
+        }
         fields.push((n.attachment.clone(), named(geometry)));
     }
     if let Some(still) = still {
-        let mean = vec![
+        let mut mean = vec![
             (n.mean.clone(), floats(&still.mean)),
             (n.count.clone(), Value::Int(i64::from(still.count))),
         ];
+        if still.strays > 0 {
+            mean.push((n.strays.clone(), Value::Int(i64::from(still.strays))));
+        }
         fields.push((n.still.clone(), named(mean)));
     }
     if !type_votes.is_empty() {

@@ -1,0 +1,230 @@
+//! Writing rosbag2 bags, as `ros2 bag record` with its MCAP storage writes them, so ROS 2 tools
+//! (`ros2 bag play`/`info`, `rosbags`, Foxglove) open a KPL run: a folder with `metadata.yaml`
+//! and `<folder>_0.mcap` (profile `ros2`, one channel per topic with message encoding `cdr`, a
+//! `ros2msg` schema named `pkg/msg/Name`, the channel metadata `offered_qos_profiles` and
+//! `topic_type_hash`, the bag's metadata again in a `rosbag2` metadata record). A message's log
+//! and publish times are when it was published (the sample's available time); its valid time is
+//! in its `header.stamp`, as on the wire.
+//!
+//! [`Publications`] are the topics a spec's `ros2.publish` sinks declare: the samples of their
+//! input streams, mapped and encoded exactly as a run publishes them (`kpl convert` writes a
+//! recording through them).
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use kpl_core::{Time, Value, ValueType};
+use kpl_ros2::mapping::OutMap;
+use kpl_ros2::rosbag2::{Bag, BagTopic};
+use kpl_ros2::wire::{self, Qos};
+use kpl_ros2::{Schema, cdr, topic};
+use kpl_semantic::hir;
+use mcap::records::{MessageHeader, Metadata};
+
+use crate::write::{WriteError, mcap_time};
+
+/// A topic of a bag being written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicId(usize);
+
+struct Topic {
+    channel: u16,
+    sequence: u32,
+    info: BagTopic,
+}
+
+/// A rosbag2 bag being written: [`BagWriter::finish`] writes its metadata.
+pub struct BagWriter {
+    dir: PathBuf,
+    file: String,
+    writer: mcap::Writer<BufWriter<File>>,
+    topics: Vec<Topic>,
+    start: Option<u64>,
+    end: u64,
+}
+
+impl std::fmt::Debug for BagWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BagWriter").field("dir", &self.dir).field("file", &self.file).finish()
+    }
+}
+
+impl BagWriter {
+    /// Creates the bag's folder (and those it is in) and its MCAP file, replacing a bag of the
+    /// same name there.
+    pub fn create(dir: &Path) -> Result<BagWriter, WriteError> {
+        let name = dir.file_name().and_then(|n| n.to_str()).filter(|n| !n.is_empty()).unwrap_or("bag");
+        let file = format!("{name}_0.mcap");
+        let path = dir.join(&file);
+        let display = || path.display().to_string();
+        std::fs::create_dir_all(dir).map_err(|error| WriteError::Io { path: display(), error })?;
+        let out = File::create(&path).map_err(|error| WriteError::Io { path: display(), error })?;
+        let options = mcap::WriteOptions::new()
+            .profile("ros2")
+            .library(concat!("kpl ", env!("CARGO_PKG_VERSION")))
+            // rosbag2's MCAP storage writes uncompressed chunks by default.
+            .compression(None)
+            .compression_threads(0)
+            .disable_seeking(true);
+        let writer = options
+            .create(BufWriter::new(out))
+            .map_err(|error| WriteError::Mcap { path: display(), error })?;
+        Ok(BagWriter { dir: dir.to_path_buf(), file, writer, topics: Vec::new(), start: None, end: 0 })
+    }
+
+    fn mcap_error(&self, error: mcap::McapError) -> WriteError {
+        WriteError::Mcap { path: self.dir.join(&self.file).display().to_string(), error }
+    }
+
+    /// Adds a topic of messages of `schema`'s type, offered with `qos`.
+    pub fn add_topic(&mut self, name: &str, schema: &Schema, qos: Qos) -> Result<TopicId, WriteError> {
+        let type_name = schema.name().to_string();
+        let type_hash = schema.type_hash();
+        let schema_id = self
+            .writer
+            .add_schema(&type_name, "ros2msg", schema.ros2msg().as_bytes())
+            .map_err(|e| self.mcap_error(e))?;
+        let metadata = BTreeMap::from([
+            ("offered_qos_profiles".to_string(), kpl_ros2::rosbag2::qos_profiles(&qos, 0)),
+            ("topic_type_hash".to_string(), type_hash.clone()),
+        ]);
+        let channel =
+            self.writer.add_channel(schema_id, name, "cdr", &metadata).map_err(|e| self.mcap_error(e))?;
+        let info = BagTopic { name: name.to_string(), type_name, type_hash, qos, message_count: 0 };
+        self.topics.push(Topic { channel, sequence: 0, info });
+        Ok(TopicId(self.topics.len() - 1))
+    }
+
+    /// Writes one CDR message (with its encapsulation header) received at `time` (microseconds
+    /// since the epoch).
+    pub fn write(&mut self, topic: TopicId, time: Time, cdr: &[u8]) -> Result<(), WriteError> {
+        let Some(t) = self.topics.get_mut(topic.0) else { return Ok(()) };
+        t.sequence = t.sequence.wrapping_add(1);
+        t.info.message_count += 1;
+        let ns = mcap_time(time);
+        let header =
+            MessageHeader { channel_id: t.channel, sequence: t.sequence, log_time: ns, publish_time: ns };
+        self.start = Some(self.start.map_or(ns, |s| s.min(ns)));
+        self.end = self.end.max(ns);
+        self.writer.write_to_known_channel(&header, cdr).map_err(|e| self.mcap_error(e))
+    }
+
+    /// Writes the rest of the MCAP file (with the `rosbag2` metadata record) and `metadata.yaml`;
+    /// returns the bag's metadata.
+    pub fn finish(mut self) -> Result<Bag, WriteError> {
+        let start = self.start.unwrap_or(0);
+        let bag = Bag {
+            file: self.file.clone(),
+            start,
+            end: self.end.max(start),
+            topics: self.topics.iter().map(|t| t.info.clone()).collect(),
+        };
+        let metadata = Metadata {
+            name: "rosbag2".into(),
+            metadata: BTreeMap::from([("serialized_metadata".to_string(), bag.information(0))]),
+        };
+        self.writer.write_metadata(&metadata).map_err(|e| self.mcap_error(e))?;
+        self.writer.finish().map_err(|e| self.mcap_error(e))?;
+        let path = self.dir.join(&self.file).display().to_string();
+        self.writer.into_inner().flush().map_err(|error| WriteError::Io { path, error })?;
+        let yaml = self.dir.join("metadata.yaml");
+        std::fs::write(&yaml, bag.metadata_yaml())
+            .map_err(|error| WriteError::Io { path: yaml.display().to_string(), error })?;
+        Ok(bag)
+    }
+}
+
+/// A topic a spec's `ros2.publish` declares: the stream it publishes, its name (with the
+/// namespace), type, QoS and mapping.
+pub struct Publication {
+    /// The sink's name in the spec.
+    pub process: String,
+    /// The name of the stream it publishes, as a recording names it.
+    pub stream: String,
+    pub stream_type: ValueType,
+    pub topic: String,
+    pub schema: Arc<Schema>,
+    pub qos: Qos,
+    map: OutMap,
+    buffer: Vec<u8>,
+}
+
+impl std::fmt::Debug for Publication {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Publication").field("process", &self.process).field("topic", &self.topic).finish()
+    }
+}
+
+impl Publication {
+    /// The message of one sample, in CDR as the run publishes it.
+    pub fn encode(&mut self, valid: Time, value: &Value) -> Result<&[u8], String> {
+        let msg = self.map.apply(valid, value)?;
+        cdr::encode_into(&self.schema, &msg, &mut self.buffer).map_err(|e| e.to_string())?;
+        Ok(&self.buffer)
+    }
+}
+
+/// The `ros2.publish` sinks of a checked spec whose folder is `dir` (where `msgs` is read), in
+/// the spec's order; an error names the sink and what is wrong.
+pub fn publications(spec: &hir::Spec, dir: &Path) -> Result<Vec<Publication>, String> {
+    let mut out = Vec::new();
+    for process in &spec.processes {
+        let hir::ProcessKind::Sink(call) = &process.kind else { continue };
+        if call.entry != "ros2.publish" {
+            continue;
+        }
+        let Some(input) = process.inputs.first() else { continue };
+        let params = &call.params;
+        let err = |e: kpl_ros2::mapping::MapError| {
+            format!("sink `{}`: {}", process.name, topic::describe(params, &e))
+        };
+        let schema = topic::schema_in(params, dir).map_err(err)?;
+        let map = OutMap::compile(schema.clone(), &topic::out_spec(params), &input.stream.ty).map_err(err)?;
+        let namespace = topic::text(params, "namespace");
+        let name = topic::text(params, "topic");
+        wire::check_topic(name).map_err(|e| format!("sink `{}`: `topic`: {e}", process.name))?;
+        let depth = params.get("depth").and_then(Value::as_i64).unwrap_or(10);
+        let qos = Qos {
+            reliable: topic::text(params, "reliability") != "best_effort",
+            transient_local: topic::text(params, "durability") == "transient_local",
+            depth: u32::try_from(depth).ok().filter(|d| *d > 0),
+        };
+        out.push(Publication {
+            process: process.name.clone(),
+            stream: input.stream.name.clone(),
+            stream_type: input.stream.ty.clone(),
+            topic: wire::qualify(if namespace.is_empty() { "/" } else { namespace }, name),
+            schema,
+            qos,
+            map,
+            buffer: Vec::new(),
+        });
+    }
+    Ok(out)
+}
+
+/// The MCAP files of a bag: `path` itself if it is a file, else the folder's `.mcap` files in
+/// name order (rosbag2 splits a long recording into `<bag>_0.mcap`, `<bag>_1.mcap`, ...).
+pub fn bag_files(path: &Path) -> std::io::Result<Vec<PathBuf>> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(path)?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
+    // `_10` after `_9`: by the number before the extension, then by name.
+    files.sort_by_key(|p| {
+        let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+        let number = stem.rsplit('_').next().and_then(|n| n.parse::<u64>().ok()).unwrap_or(0);
+        (number, p.clone())
+    });
+    if files.is_empty() {
+        return Err(std::io::Error::new(std::io::ErrorKind::NotFound, "a folder without .mcap files"));
+    }
+    Ok(files)
+}
