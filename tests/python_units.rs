@@ -198,8 +198,8 @@ fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_go
     let out = fresh_dir("pyunits", "raises-out");
     let output = run(&python, &spec, &out, &[]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let summary = summary(&output);
-    let y = process(&summary, "y");
+    let first = summary(&output);
+    let y = process(&first, "y");
     assert_eq!((y["errors"].as_u64(), result(y, "failed calls"), result(y, "calls")), (Some(1), 1, 6));
     let example = y["error_examples"][0].as_str().unwrap();
     assert!(example.contains("ValueError: no good: 3"), "{example}");
@@ -216,9 +216,9 @@ fn a_unit_that_raises_is_reported_with_its_traceback_and_position_and_the_run_go
     let out = fresh_dir("pyunits", "raises-stop-out");
     let output = run(&python, &spec, &out, &[]);
     assert_eq!(output.status.code(), Some(1));
-    let summary = summary(&output);
-    assert_eq!(summary["ending"], "unit_stopped", "{summary}");
-    let failure = summary["failures"][0].as_str().unwrap();
+    let stopped = summary(&output);
+    assert_eq!(stopped["ending"], "unit_stopped", "{stopped}");
+    let failure = stopped["failures"][0].as_str().unwrap();
     assert!(
         failure.contains("ValueError: no good: 3") && failure.contains("policy stops the run"),
         "{failure}"
