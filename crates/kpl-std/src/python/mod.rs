@@ -4,8 +4,9 @@
 //! supervises: one worker per unit, restarted when it dies or hangs, its failures counted.
 //!
 //! In simulated time a call is lockstep: the runtime waits for the worker's answer before
-//! anything else happens (the call runs in `spawn_blocking`, which keeps tokio's paused clock
-//! from advancing), so a seeded run with a Python unit is byte-identical run to run. On the wall
+//! anything else happens (the call blocks the runtime's one thread, so tokio's paused clock
+//! cannot advance), so a seeded run with a Python unit is byte-identical run to run; on the
+//! wall clock it runs in `spawn_blocking`, so the other processes go on meanwhile. On the wall
 //! clock the call's latency becomes the output's available time (the runtime stamps what an
 //! asynchronous unit emits when its call returns).
 //!
@@ -130,6 +131,9 @@ struct Config {
     stop_on_error: bool,
     restarts: u64,
     synchronized: bool,
+    /// Simulated time: a call blocks the runtime's one thread until the worker answers (nothing
+    /// else may happen meanwhile anyway), without a hand-off to a blocking thread.
+    lockstep: bool,
 }
 
 fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
@@ -181,6 +185,7 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
         stop_on_error: string("on_error") == "stop",
         restarts: ctx.param("restarts").and_then(Value::as_i64).map_or(3, |n| n.max(0) as u64),
         synchronized: ctx.param("synchronized").and_then(Value::as_bool).unwrap_or(true),
+        lockstep: ctx.clock == kpl_runtime::ClockKind::Sim,
     };
     Ok(Box::new(PythonUnit::new(Arc::new(config), ctx.stats.clone())))
 }
@@ -291,7 +296,8 @@ impl PythonUnit {
         let worker = self.worker.take();
         let config = self.config.clone();
         let restart = self.started > 0 && worker.is_none();
-        let joined = tokio::task::spawn_blocking(move || {
+        let lockstep = config.lockstep;
+        let work = move || {
             let started = worker.is_none();
             let mut worker = match worker {
                 Some(worker) => worker,
@@ -302,8 +308,8 @@ impl PythonUnit {
             };
             let answer = worker.call(&body, config.timeout);
             (Some(worker), body, started, answer.map_err(StartError::Trouble))
-        })
-        .await;
+        };
+        let joined = if lockstep { Ok(work()) } else { tokio::task::spawn_blocking(work).await };
         let (worker, body, started, answer) =
             joined.map_err(|e| self.fail(format!("the call's thread failed: {e}")))?;
         self.call = body;

@@ -1,12 +1,15 @@
 //! One worker process of a process unit: started, greeted, called with a bounded wait, told to
-//! quit or killed. Its standard output carries the protocol's frames (read by a thread of its
-//! own, so a call can wait with a timeout); its standard error is kpl's.
+//! quit or killed. Its standard output carries the protocol's frames, read by the calling thread
+//! itself; a watchdog thread kills a worker that does not answer within the call's timeout (its
+//! output then ends, which ends the read). The watchdog wakes at deadlines only, never once per
+//! call, so a call costs two pipe writes and two wake-ups (kpl's and the worker's). Its standard
+//! error is kpl's.
 
 use std::io::{BufReader, BufWriter, Write};
 use std::path::PathBuf;
-use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
-use std::time::Duration;
+use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 use super::protocol::{self, Frame, Hello, Ready, WorkerError};
 
@@ -59,15 +62,111 @@ pub enum Answer {
 
 /// A running worker.
 pub struct Worker {
-    child: Child,
+    child: Arc<Mutex<Child>>,
+    pid: u32,
     stdin: BufWriter<ChildStdin>,
-    frames: Receiver<std::io::Result<Option<Frame>>>,
+    stdout: BufReader<ChildStdout>,
+    watch: Arc<Watch>,
     pub ready: Ready,
 }
 
 impl std::fmt::Debug for Worker {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Worker").field("pid", &self.child.id()).finish()
+        f.debug_struct("Worker").field("pid", &self.pid).finish()
+    }
+}
+
+/// The watchdog's shortest sleep while no call is under way.
+const MIN_IDLE: Duration = Duration::from_millis(10);
+
+/// What the watchdog of a worker watches: the call under way and its deadline.
+#[derive(Default)]
+struct Watch {
+    state: Mutex<Watched>,
+    wake: Condvar,
+}
+
+#[derive(Default)]
+struct Watched {
+    /// A call (or the start) is under way until `deadline`.
+    busy: bool,
+    deadline: Option<Instant>,
+    /// How long the watchdog sleeps while no call is under way (it then looks again).
+    idle: Duration,
+    /// When the watchdog wakes next, if it sleeps.
+    wakes_at: Option<Instant>,
+    /// The watchdog killed the worker for the call under way.
+    fired: bool,
+    quit: bool,
+}
+
+impl Watch {
+    /// A call starts: the worker must answer within `timeout`.
+    // The deadline is the wall clock's whatever the run's clock: a hung worker is a real wait.
+    #[allow(clippy::disallowed_methods)]
+    fn arm(&self, timeout: Duration) {
+        let Ok(mut s) = self.state.lock() else { return };
+        s.busy = true;
+        s.fired = false;
+        s.deadline = Instant::now().checked_add(timeout);
+        s.idle = s.idle.min(timeout).max(MIN_IDLE);
+        // Calls with the same timeout find the watchdog asleep until an earlier deadline (or for
+        // at most `idle`): it wakes before this one untold, so a call costs no wake-up of it.
+        // Only a shorter deadline than it sleeps for (the first call after the start) tells it.
+        if let (Some(deadline), Some(wakes_at)) = (s.deadline, s.wakes_at)
+            && deadline < wakes_at
+        {
+            self.wake.notify_all();
+        }
+    }
+
+    /// The call is over: whether the watchdog killed the worker meanwhile.
+    fn disarm(&self) -> bool {
+        match self.state.lock() {
+            Ok(mut s) => {
+                s.busy = false;
+                s.fired
+            }
+            Err(_) => false,
+        }
+    }
+
+    fn quit(&self) {
+        if let Ok(mut s) = self.state.lock() {
+            s.quit = true;
+        }
+        self.wake.notify_all();
+    }
+}
+
+/// Kills the worker when a call outlives its deadline; ends when told to or when the worker is
+/// gone.
+#[allow(clippy::disallowed_methods)] // see Watch::arm
+fn watchdog(watch: Arc<Watch>, child: Arc<Mutex<Child>>) {
+    let Ok(mut s) = watch.state.lock() else { return };
+    loop {
+        if s.quit {
+            return;
+        }
+        let now = Instant::now();
+        let wait = match s.deadline {
+            Some(deadline) if s.busy && now >= deadline => {
+                s.fired = true;
+                s.busy = false;
+                if let Ok(mut child) = child.lock() {
+                    let _ = child.kill();
+                }
+                s.idle
+            }
+            Some(deadline) if s.busy => deadline - now,
+            _ => s.idle,
+        };
+        s.wakes_at = now.checked_add(wait);
+        s = match watch.wake.wait_timeout(s, wait) {
+            Ok((s, _)) => s,
+            Err(_) => return,
+        };
+        s.wakes_at = None;
     }
 }
 
@@ -93,34 +192,36 @@ impl Worker {
             .map_err(|e| StartError::Spawn(format!("cannot run `{}`: {e}", launch.interpreter.display())))?;
         let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
             let _ = child.kill();
+            let _ = child.wait();
             return Err(StartError::Spawn("the worker has no standard input or output".into()));
         };
-        // One frame ahead at most: the worker answers one call at a time.
-        let (tx, frames) = sync_channel(1);
-        std::thread::Builder::new()
-            .name("kpl-unit-reader".into())
-            .spawn(move || {
-                let mut reader = BufReader::with_capacity(1 << 16, stdout);
-                loop {
-                    let frame = protocol::read_frame(&mut reader);
-                    let last = !matches!(frame, Ok(Some(_)));
-                    if tx.send(frame).is_err() || last {
-                        break;
-                    }
-                }
-            })
-            .map_err(|e| StartError::Spawn(format!("cannot start a reader thread: {e}")))?;
+        let pid = child.id();
+        let child = Arc::new(Mutex::new(child));
+        let watch = Arc::new(Watch::default());
+        if let Ok(mut s) = watch.state.lock() {
+            s.idle = launch.start_timeout.max(MIN_IDLE);
+        }
+        let (watched, killed) = (watch.clone(), child.clone());
+        if let Err(e) = std::thread::Builder::new()
+            .name("kpl-unit-watchdog".into())
+            .spawn(move || watchdog(watched, killed))
+        {
+            if let Ok(mut child) = child.lock() {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+            return Err(StartError::Spawn(format!("cannot start a watchdog thread: {e}")));
+        }
         let mut worker = Worker {
             child,
+            pid,
             stdin: BufWriter::with_capacity(1 << 16, stdin),
-            frames,
+            stdout: BufReader::with_capacity(1 << 16, stdout),
+            watch,
             ready: Ready { protocol: 0, wire: 0, kind: String::new(), implementation: String::new() },
         };
         let hello = serde_json::to_vec(&launch.hello).map_err(|e| StartError::Spawn(e.to_string()))?;
-        if let Err(e) = worker.send(protocol::HELLO, &hello) {
-            return Err(StartError::Trouble(worker.died(&e)));
-        }
-        match worker.receive(launch.start_timeout) {
+        match worker.exchange(protocol::HELLO, &hello, launch.start_timeout) {
             Ok(Frame { kind: protocol::READY, body }) => {
                 let ready: Ready = serde_json::from_slice(&body).map_err(|e| {
                     StartError::Trouble(Trouble::Protocol(format!("a ready frame that is not JSON: {e}")))
@@ -144,10 +245,7 @@ impl Worker {
 
     /// Calls the unit with a call frame's body and waits at most `timeout` for its answer.
     pub fn call(&mut self, body: &[u8], timeout: Duration) -> Result<Answer, Trouble> {
-        if let Err(e) = self.send(protocol::CALL, body) {
-            return Err(self.died(&e));
-        }
-        match self.receive(timeout)? {
+        match self.exchange(protocol::CALL, body, timeout)? {
             Frame { kind: protocol::OUTPUT, body } if body.is_empty() => Ok(Answer::Nothing),
             Frame { kind: protocol::OUTPUT, body } => Ok(Answer::Output(body)),
             Frame { kind: protocol::ERROR, body } => Ok(Answer::Raised(worker_error(&body))),
@@ -160,11 +258,10 @@ impl Worker {
     /// Tells the worker to quit and waits up to `grace` for it; kills it after that.
     pub fn quit(mut self, grace: Duration) {
         let _ = self.send(protocol::QUIT, &[]);
-        let _ = self.frames.recv_timeout(grace);
         let step = Duration::from_millis(10);
         let mut waited = Duration::ZERO;
         while waited < grace {
-            if let Ok(Some(_)) = self.child.try_wait() {
+            if let Some(Ok(Some(_))) = self.with_child(Child::try_wait) {
                 return;
             }
             std::thread::sleep(step);
@@ -174,13 +271,19 @@ impl Worker {
     }
 
     /// Kills the worker and reaps it.
-    pub fn kill(mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+    pub fn kill(self) {
+        self.with_child(|child| {
+            let _ = child.kill();
+            let _ = child.wait();
+        });
     }
 
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        self.pid
+    }
+
+    fn with_child<T>(&self, f: impl FnOnce(&mut Child) -> T) -> Option<T> {
+        self.child.lock().ok().map(|mut child| f(&mut child))
     }
 
     fn send(&mut self, kind: u8, body: &[u8]) -> std::io::Result<()> {
@@ -188,13 +291,19 @@ impl Worker {
         self.stdin.flush()
     }
 
-    fn receive(&mut self, timeout: Duration) -> Result<Frame, Trouble> {
-        match self.frames.recv_timeout(timeout) {
-            Ok(Ok(Some(frame))) => Ok(frame),
-            Ok(Ok(None)) => Err(self.died(&"it closed its output")),
-            Ok(Err(e)) => Err(self.died(&e)),
-            Err(RecvTimeoutError::Timeout) => Err(Trouble::Hung(timeout)),
-            Err(RecvTimeoutError::Disconnected) => Err(self.died(&"its output reader stopped")),
+    /// Sends a frame and reads the worker's answer on this thread; the watchdog ends both (by
+    /// killing the worker) when they take longer than `timeout`.
+    fn exchange(&mut self, kind: u8, body: &[u8], timeout: Duration) -> Result<Frame, Trouble> {
+        self.watch.arm(timeout);
+        let frame = self.send(kind, body).and_then(|()| protocol::read_frame(&mut self.stdout));
+        if self.watch.disarm() {
+            self.with_child(Child::wait);
+            return Err(Trouble::Hung(timeout));
+        }
+        match frame {
+            Ok(Some(frame)) => Ok(frame),
+            Ok(None) => Err(self.died(&"it closed its output")),
+            Err(e) => Err(self.died(&e)),
         }
     }
 
@@ -202,7 +311,7 @@ impl Worker {
     fn died(&mut self, what: &dyn std::fmt::Display) -> Trouble {
         let mut status = None;
         for _ in 0..50 {
-            if let Ok(Some(s)) = self.child.try_wait() {
+            if let Some(Ok(Some(s))) = self.with_child(Child::try_wait) {
                 status = Some(s);
                 break;
             }
@@ -211,8 +320,10 @@ impl Worker {
         match status {
             Some(status) => Trouble::Died(describe_exit(status)),
             None => {
-                let _ = self.child.kill();
-                let _ = self.child.wait();
+                self.with_child(|child| {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                });
                 Trouble::Died(format!("stopped answering ({what}) and was killed"))
             }
         }
@@ -221,10 +332,13 @@ impl Worker {
 
 impl Drop for Worker {
     fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
+        self.watch.quit();
+        self.with_child(|child| {
+            if let Ok(None) = child.try_wait() {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+        });
     }
 }
 
