@@ -25,7 +25,7 @@ use crate::BenchError;
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl bench python --python .venv/bin/python\n  kpl bench python --calls 200000 --repeat 5"
+    after_help = "Examples:\n  kpl bench python --python .venv/bin/python\n  kpl bench python --python .venv/bin/python --calls 200000 --repeat 5"
 )]
 pub struct Args {
     /// Calls per run.
