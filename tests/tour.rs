@@ -131,7 +131,39 @@ fn workspace(name: &str) -> PathBuf {
     copy_dir(&root().join("specs"), &dir.join("specs"));
     std::fs::create_dir_all(dir.join("bin")).unwrap();
     std::os::unix::fs::symlink(env!("CARGO_BIN_EXE_kpl"), dir.join("bin/kpl")).unwrap();
+    // The `.venv` that `scripts/test` makes at the repository's root (examples name
+    // `.venv/bin/python`): the oracles' environment, when there is one.
+    if let Ok(python) = std::env::var("KPL_PYTHON")
+        && !python.is_empty()
+    {
+        let python = Path::new(&python);
+        match python.parent().and_then(Path::parent).filter(|venv| venv.join("pyvenv.cfg").exists()) {
+            Some(venv) => std::os::unix::fs::symlink(venv, dir.join(".venv")).unwrap(),
+            None => {
+                std::fs::create_dir_all(dir.join(".venv/bin")).unwrap();
+                std::os::unix::fs::symlink(python, dir.join(".venv/bin/python")).unwrap();
+            }
+        }
+    }
     dir
+}
+
+/// Examples that need the `.venv` of the oracles run only where there is one (KPL_PYTHON).
+fn runnable(dir: &Path, examples: &mut Vec<(String, Example)>) {
+    if dir.join(".venv").exists() {
+        return;
+    }
+    let needs = |e: &Example| e.command.contains(".venv/");
+    if std::env::var("KPL_REQUIRE_ORACLES").is_ok_and(|v| v == "1") && examples.iter().any(|(_, e)| needs(e))
+    {
+        panic!("KPL_REQUIRE_ORACLES=1 but KPL_PYTHON is not set (scripts/test sets both)");
+    }
+    examples.retain(|(origin, e)| {
+        if needs(e) {
+            eprintln!("skipped ({origin}): `{}` needs KPL_PYTHON's environment", e.command);
+        }
+        !needs(e)
+    });
 }
 
 fn copy_dir(from: &Path, to: &Path) {
@@ -238,6 +270,8 @@ fn every_command_of_the_readme_tour_runs_as_written() {
         .into_iter()
         .map(|command| ("README.md".to_string(), Example { command, ..Example::default() }))
         .collect();
+    let mut tour = tour;
+    runnable(&dir, &mut tour);
     let failures = check_all(&dir, &tour);
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     // What the tour promises is there: the picture, and the run's outputs straight under out/NAME.
@@ -266,6 +300,7 @@ fn every_example_of_every_help_runs_as_written() {
     // Examples shown in several helps (a group's and its subcommand's) run once.
     let mut seen = std::collections::BTreeSet::new();
     all.retain(|(_, example)| seen.insert(example.command.clone()));
+    runnable(&dir, &mut all);
     let failures = check_all(&dir, &all);
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }

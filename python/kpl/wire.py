@@ -206,9 +206,17 @@ def _double_buffer(v: Any) -> "memoryview | None":
 
 
 def _encode_floats(values: Any, out: bytearray) -> None:
-    numbers = array.array("d", values)
-    for x in numbers:
-        _float(x, "a list of floats")
+    view = _double_buffer(values)
+    if view is not None:
+        # A buffer of doubles (NumPy's float64 arrays: format `<d` or `=d`, which array.array does
+        # not take): its bytes in one copy.
+        numbers = array.array("d")
+        numbers.frombytes(view.tobytes())
+    else:
+        numbers = array.array("d", values)
+    if not all(map(math.isfinite, numbers)):
+        for x in numbers:
+            _float(x, "a list of floats")
     if not _LITTLE:
         numbers.byteswap()
     out += b"F" + _U32.pack(len(numbers))
@@ -218,10 +226,15 @@ def _encode_floats(values: Any, out: bytearray) -> None:
 # --- decoding ---------------------------------------------------------------------------------
 
 
-def decode(payload: Any) -> Message:
+def decode(payload: Any, floats: Any = None) -> Message:
     """One message: a :class:`Sample` or an :class:`End`. Raises :class:`WireError` on bytes that
-    are not a KPL message of a version this module reads."""
-    b = bytes(payload)
+    are not a KPL message of a version this module reads.
+
+    ``floats``, if given, makes the value of each packed list of floats (``list<float>`` as KPL
+    sends it) from the message's bytes: it is called with the bytes, the offset of the first
+    number and their count, and may keep a view of them instead of copying each number
+    (``numpy.frombuffer``; :mod:`kpl.unit` does). Without it such a list is a ``list``."""
+    b = payload if isinstance(payload, bytes) else bytes(payload)
     if len(b) < 5:
         raise WireError(f"{len(b)} bytes: too short for a KPL message")
     magic, version, kind = _HEADER.unpack_from(b)
@@ -238,7 +251,7 @@ def decode(payload: Any) -> Message:
     if len(b) < 22:
         raise WireError(f"{len(b)} bytes: too short for a sample")
     valid, available = _TIMES.unpack_from(b, 5)
-    value, end = _decode_value(b, 21, 0)
+    value, end = _decode_value(b, 21, 0, floats)
     if end != len(b):
         raise WireError(f"{len(b) - end} bytes after the value")
     return Sample(valid, available, value)
@@ -274,7 +287,7 @@ def _decode_text(b: bytes, at: int) -> "tuple[str, int]":
         raise WireError(f"a string that is not UTF-8 at byte {at}: {e}") from None
 
 
-def _decode_value(b: bytes, at: int, depth: int) -> "tuple[Any, int]":
+def _decode_value(b: bytes, at: int, depth: int, floats: Any = None) -> "tuple[Any, int]":
     if depth > MAX_DEPTH:
         raise WireError(f"the value nests deeper than {MAX_DEPTH}")
     _need(b, at, 1)
@@ -300,6 +313,8 @@ def _decode_value(b: bytes, at: int, depth: int) -> "tuple[Any, int]":
         _need(b, at, 4)
         (n,) = _U32.unpack_from(b, at)
         _need(b, at + 4, 8 * n)
+        if floats is not None:
+            return floats(b, at + 4, n), at + 4 + 8 * n
         numbers = array.array("d")
         numbers.frombytes(b[at + 4 : at + 4 + 8 * n])
         if not _LITTLE:
@@ -317,12 +332,12 @@ def _decode_value(b: bytes, at: int, depth: int) -> "tuple[Any, int]":
         if tag == b"l":
             items = []
             for _ in range(count):
-                item, at = _decode_value(b, at, depth + 1)
+                item, at = _decode_value(b, at, depth + 1, floats)
                 items.append(item)
             return items, at
         record = {}
         for _ in range(count):
             name, at = _decode_text(b, at)
-            record[name], at = _decode_value(b, at, depth + 1)
+            record[name], at = _decode_value(b, at, depth + 1, floats)
         return record, at
     raise WireError(f"unknown value tag {tag!r} at byte {at - 1}")

@@ -9,6 +9,7 @@
 //!   (`kpl bench runtime`).
 //! - [`situations`]: the situation monitors of `specs/traffic/sumo_situations.kpl` over N cars
 //!   (`kpl bench situations`).
+//! - [`python`]: a Python unit's call against a Rust unit's, in simulated time (`kpl bench python`).
 //! - [`mtl`]: the MTL engine on the Timescales properties ([`timescales`]), against R2U2 when
 //!   built with the `r2u2` feature, and DyKnow's link conditions (`kpl bench mtl`).
 //!
@@ -22,6 +23,7 @@
 pub mod anchor;
 pub mod clock;
 pub mod mtl;
+pub mod python;
 pub mod runtime;
 pub mod situations;
 pub mod timescales;

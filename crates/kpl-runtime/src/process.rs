@@ -44,6 +44,9 @@ pub enum ProcessError {
     /// Malformed input in a `--strict` run.
     #[error("malformed input at {location}: {error} (--strict stops the run)")]
     Strict { location: String, error: String },
+    /// A unit failed and its policy is to stop the run (a Python unit's `on_error: "stop"`).
+    #[error("{0} (the unit's policy stops the run)")]
+    Stop(String),
 }
 
 impl ProcessError {

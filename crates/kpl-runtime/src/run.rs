@@ -120,6 +120,8 @@ pub enum Ending {
     Interrupted,
     /// A malformed input in a `--strict` run.
     Strict,
+    /// A unit failed whose policy is to stop the run then ([`ProcessError::Stop`]).
+    UnitStopped,
 }
 
 /// The signal that interrupted a run.
@@ -318,7 +320,8 @@ pub async fn execute(
             .collect(),
     );
     spawn_processes(spec, tasks, config, &clock, &stats, &stop, end, &mut join);
-    let (mut failures, strict_failure) = join_processes(&mut join, &stop).await;
+    let (mut failures, stopping_failure) = join_processes(&mut join, &stop).await;
+    let strict_failure = stopping_failure == Some(Stopping::Strict);
     if let Some(why) = transport_watch.as_ref().and_then(TransportWatch::failure) {
         failures.push(format!("transport: {why}"));
     }
@@ -337,6 +340,8 @@ pub async fn execute(
     };
     let ending = if strict_failure {
         Ending::Strict
+    } else if stopping_failure == Some(Stopping::Unit) {
+        Ending::UnitStopped
     } else if signal.is_some() {
         Ending::Interrupted
     } else if duration_reached {
@@ -592,6 +597,7 @@ fn spawn_processes(
                         stats: process_stats,
                         run_stats,
                         strict,
+                        wall: (clock.kind() == ClockKind::Wall).then(|| clock.clone()),
                     };
                     run_unit(caller, task.inputs, clock).await
                 }
@@ -602,20 +608,35 @@ fn spawn_processes(
     }
 }
 
-/// Waits for every task; the failures, and whether a `--strict` run stopped at a malformed input.
+/// Why a process's failure stopped the run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stopping {
+    /// A malformed input in a `--strict` run.
+    Strict,
+    /// A unit whose policy is to stop on a failure.
+    Unit,
+}
+
+/// Waits for every task; the failures, and whether one of them stopped the run (a `--strict`
+/// run at a malformed input, a unit whose policy says so).
 async fn join_processes(
     join: &mut JoinSet<Result<(), (String, ProcessError)>>,
     stop: &StopSignal,
-) -> (Vec<String>, bool) {
+) -> (Vec<String>, Option<Stopping>) {
     let mut failures = Vec::new();
-    let mut strict_failure = false;
+    let mut stopping = None;
     while let Some(joined) = join.join_next().await {
         match joined {
             Ok(Ok(())) => {}
             Ok(Err((name, error))) => {
                 tracing::error!(process = %name, "{error}");
-                if matches!(error, ProcessError::Strict { .. }) {
-                    strict_failure = true;
+                let why = match error {
+                    ProcessError::Strict { .. } => Some(Stopping::Strict),
+                    ProcessError::Stop(_) => Some(Stopping::Unit),
+                    ProcessError::Failed(_) => None,
+                };
+                if let Some(why) = why {
+                    stopping = stopping.or(Some(why));
                     stop.interrupt();
                 }
                 failures.push(format!("{name}: {error}"));
@@ -623,7 +644,7 @@ async fn join_processes(
             Err(join_error) => failures.push(format!("a process task failed: {join_error}")),
         }
     }
-    (failures, strict_failure)
+    (failures, stopping)
 }
 
 /// Stops the run when the clock reaches `end` (`--for`); Ctrl-C and SIGTERM are watched by the
@@ -812,6 +833,9 @@ struct Caller {
     stats: Arc<ProcessStats>,
     run_stats: Arc<RunStats>,
     strict: bool,
+    /// The clock of a wall-clock run: what an asynchronous unit emits becomes available when
+    /// its call returns (its latency), not when the call began.
+    wall: Option<Clock>,
 }
 
 impl Caller {
@@ -829,10 +853,19 @@ impl Caller {
         emitter.begin(now, valid);
         let result = match self.unit.as_sync() {
             Some(unit) => unit.on_input(&input, emitter),
-            None => self.unit.on_input(&input, emitter).await,
+            None => {
+                let result = self.unit.on_input(&input, emitter).await;
+                if let Some(clock) = &self.wall {
+                    let returned = clock.now();
+                    for (_, sample) in &mut emitter.out {
+                        sample.available = sample.available.max(returned);
+                    }
+                }
+                result
+            }
         };
         if let Err(e) = result {
-            if self.strict {
+            if self.strict || matches!(e, ProcessError::Stop(_)) {
                 return Err(e);
             }
             self.stats.error(e.to_string());

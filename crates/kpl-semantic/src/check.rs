@@ -522,6 +522,21 @@ impl<'a> Checker<'a> {
             }
             seen.insert(&name.name, name.span);
             let Some(param) = entry.param_named(&name.name) else {
+                if entry.extra_params.is_some() {
+                    match literal_value(literal, &ParamType::Any) {
+                        Ok(value) => {
+                            params.insert(name.name.clone(), value);
+                        }
+                        Err(found) => self.diagnostics.push(diag::param_type(
+                            literal.span,
+                            &entry.name,
+                            &name.name,
+                            "any",
+                            &found,
+                        )),
+                    }
+                    continue;
+                }
                 let names: Vec<&str> = entry.params.iter().map(|p| p.name.as_str()).collect();
                 self.diagnostics.push(diag::unknown_param(name.span, &entry.name, &name.name, &names));
                 continue;

@@ -205,6 +205,11 @@ pub struct Entry {
     /// `kpl check` reports with the parameter's span (E0118).
     #[serde(skip)]
     pub check: Option<ParamCheck>,
+    /// Named parameters beyond `params` are accepted (any literal) and given to the
+    /// implementation as they are; this says what they are for (`python.unit`: the Python
+    /// function's own keyword arguments). `None`: an unknown name is an error.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extra_params: Option<String>,
 }
 
 /// What a parameter check sees of one call: its parameters (defaults filled in), the declared
@@ -285,7 +290,15 @@ impl Entry {
             provides: Vec::new(),
             computes: Computes::Unknown,
             check: None,
+            extra_params: None,
         }
+    }
+
+    /// Accepts named parameters beyond the declared ones and passes them on (a unit implemented
+    /// elsewhere, whose own parameters the registry does not know); `doc` says what they are for.
+    pub fn extra_params(mut self, doc: &str) -> Entry {
+        self.extra_params = Some(doc.into());
+        self
     }
 
     /// Checks the call's parameters with `check` when a spec is checked (E0118), so that what

@@ -10,6 +10,8 @@
 //!   docs/aapa.md.
 //! - [`anchor`]: hierarchical anchoring on the runtime (`kpl-anchor`'s engine): link processes,
 //!   `anchor.world_model`, `anchor.identify`; a user's link units and prediction models.
+//! - [`python`]: `python.unit`, computational units in Python (or any language that speaks the
+//!   process-unit protocol) run in worker processes kpl supervises, docs/python.md.
 //! - [`driver`]: a spec's simulated trackers fed straight into the anchoring engine, with their
 //!   ground truth (tests and `kpl bench anchor`, without the runtime).
 
@@ -17,6 +19,7 @@ mod aapa;
 pub mod anchor;
 mod camera;
 pub mod driver;
+pub mod python;
 pub mod registry;
 mod tracker;
 mod trackfiles;

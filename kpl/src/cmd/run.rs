@@ -88,6 +88,18 @@ pub struct Args {
     /// subscribe to every stream (so it misses nothing).
     #[arg(long, value_parser = parse_duration, requires = "foxglove")]
     pub foxglove_wait: Option<Time>,
+    /// The Python interpreter of the spec's Python units (`python.unit`), over the spec's
+    /// `python:` and the active virtual environment's (docs/python.md).
+    #[arg(long, value_name = "PATH")]
+    pub python: Option<PathBuf>,
+}
+
+/// Whether the spec has a Python unit (so that `--python` does something).
+fn uses_python(spec: &kpl_semantic::hir::Spec) -> bool {
+    spec.processes.iter().any(|p| match &p.kind {
+        kpl_semantic::hir::ProcessKind::Compute(call) => call.entry == kpl_std::python::ENTRY,
+        _ => false,
+    })
 }
 
 /// Whether a process of the spec is a ROS 2 topic (so that `--ros2-router` does something).
@@ -166,7 +178,12 @@ pub fn run(args: Args) -> ExitCode {
         );
     }
     kpl_zenoh::ros2::set_router(args.ros2_router.clone());
-    let registry = crate::registry::registry();
+    if args.python.is_some() && !uses_python(&spec) {
+        eprintln!("warning: --python has no effect: the spec has no Python unit (python.unit)");
+    }
+    let mut registry = crate::registry::registry();
+    *registry.extension_mut::<kpl_std::python::RunOptions>() =
+        kpl_std::python::RunOptions { python: args.python.clone(), spec_file: Some(args.spec.clone()) };
     if args.insecure {
         eprintln!(
             "warning: host `{}` runs without keys (--insecure): any program that reaches its port can send it \
@@ -225,7 +242,7 @@ fn exit_code(report: &RunReport) -> ExitCode {
     match report.ending {
         Ending::Interrupted if report.signal == Some(Signal::Terminate) => ExitCode::from(143),
         Ending::Interrupted => ExitCode::from(130),
-        Ending::Strict => ExitCode::from(1),
+        Ending::Strict | Ending::UnitStopped => ExitCode::from(1),
         _ if !report.failures.is_empty() => ExitCode::from(1),
         _ if !report.incomplete().is_empty() => ExitCode::from(3),
         _ => ExitCode::SUCCESS,
@@ -369,6 +386,7 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
             _ => "interrupted by Ctrl-C",
         },
         Ending::Strict => "stopped at a malformed input (--strict)",
+        Ending::UnitStopped => "stopped: a unit failed whose policy is to stop the run",
     };
     let kind = if clock == ClockKind::Sim { "simulated" } else { "clock" };
     let _ = writeln!(
