@@ -13,8 +13,10 @@
 //!   with no other standing vehicle in front within [`TruthParams::queue_gap_m`] on its lane;
 //! - `overtake` (a overtakes b): a behind b within [`TruthParams::overtake_close_m`] on one road,
 //!   then, staying within that distance, in front, within [`TruthParams::overtake_max`], on another
-//!   lane than b at some time in between; from the first time of that run to the first time in
-//!   front;
+//!   lane than b at some time in between, both moving at least
+//!   [`TruthParams::overtake_min_speed_mps`] when the run begins and when a is in front (a
+//!   passing at standstill or in a queue is no overtake); from the first time of that run to the
+//!   first time in front;
 //! - `tailgating` (a follows b): on b's lane, behind it, with a gap under
 //!   [`TruthParams::tailgating_gap_s`] seconds at a's speed, for at least
 //!   [`TruthParams::tailgating_min`];
@@ -91,6 +93,9 @@ pub struct TruthParams {
     pub queue_gap_m: f64,
     pub overtake_close_m: f64,
     pub overtake_max: Time,
+    /// Both vehicles of an overtake move at least this fast (m/s) when it begins and when it ends:
+    /// a passing at standstill or in a queue is no overtake.
+    pub overtake_min_speed_mps: f64,
     pub tailgating_gap_s: f64,
     pub tailgating_min: Time,
     pub wrong_way_speed_mps: f64,
@@ -110,6 +115,7 @@ impl Default for TruthParams {
             queue_gap_m: 15.0,
             overtake_close_m: 50.0,
             overtake_max: 60_000_000,
+            overtake_min_speed_mps: 3.0,
             tailgating_gap_s: 1.0,
             tailgating_min: 2_000_000,
             wrong_way_speed_mps: 2.0,
@@ -283,10 +289,12 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                 }
                 let key = (a.id.clone(), b.id.clone());
                 seen_pairs.push(key.clone());
+                let moving = a.speed >= params.overtake_min_speed_mps && b.speed >= params.overtake_min_speed_mps;
                 if ahead < -overlap {
-                    // In front: an overtake if a run was under way.
+                    // In front: an overtake if a run was under way and both still move.
                     if let Some(p) = passing.remove(&key)
                         && p.other_lane
+                        && moving
                         && step.time - p.start <= params.overtake_max
                     {
                         out.push(Situation {
@@ -301,7 +309,7 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                     let other_lane = a.lane != b.lane;
                     if let Some(p) = passing.get_mut(&key) {
                         p.other_lane |= other_lane;
-                    } else if ahead > overlap {
+                    } else if ahead > overlap && moving {
                         passing.insert(key, Passing { start: step.time, other_lane });
                     }
                 } else {
