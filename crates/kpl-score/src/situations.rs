@@ -576,6 +576,34 @@ mod tests {
         assert!(truth.iter().all(|s| s.kind != "tailgating"), "{truth:?}");
     }
 
+    /// Two cars in a queue on two lanes: the left one creeps past the right one at 1 m/s, the
+    /// right one at 0.4 m/s. Not an overtake (a passing at standstill or in a queue); the same pass
+    /// at 10 and 4 m/s is one.
+    #[test]
+    fn a_passing_in_a_queue_is_no_overtake() {
+        let queue = |speed: f64| -> Vec<TrueStep> {
+            (0..40)
+                .map(|k| {
+                    let t = k as f64 * 0.5;
+                    // The left car stops 30 m on; the right one moves at 0.4 times its speed.
+                    let moved = (speed * t).min(30.0);
+                    TrueStep {
+                        time: (t * 1e6) as Time,
+                        vehicles: vec![
+                            vehicle("left", "e_1", 500.0 + moved, if moved < 30.0 { speed } else { 0.0 }),
+                            vehicle("right", "e_0", 506.0 + 0.4 * speed * t, 0.4 * speed),
+                        ],
+                    }
+                })
+                .collect()
+        };
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let creeping = true_situations(&queue(1.0), &params).situations;
+        assert!(creeping.iter().all(|s| s.kind != "overtake"), "{creeping:?}");
+        let moving = true_situations(&queue(10.0), &params).situations;
+        assert_eq!(moving.iter().filter(|s| s.kind == "overtake").count(), 1, "{moving:?}");
+    }
+
     #[test]
     fn situations_as_vehicles_enter_are_left_out() {
         // The truck enters at 3 s: the pass ends at 7.5 s; the car is 10 m behind it at 6 s
