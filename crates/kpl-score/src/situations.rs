@@ -289,7 +289,8 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                 }
                 let key = (a.id.clone(), b.id.clone());
                 seen_pairs.push(key.clone());
-                let moving = a.speed >= params.overtake_min_speed_mps && b.speed >= params.overtake_min_speed_mps;
+                let moving =
+                    a.speed >= params.overtake_min_speed_mps && b.speed >= params.overtake_min_speed_mps;
                 if ahead < -overlap {
                     // In front: an overtake if a run was under way and both still move.
                     if let Some(p) = passing.remove(&key)
