@@ -42,6 +42,11 @@ Scenarios:
             wrong-way drivers on the left lane (20 and 15 m/s, from 30 s and 110 s). SUMO keeps
             vehicles to their lanes' direction, so it simulates them on a hidden edge over that
             lane going the other way; the shipped network does not have it (wrong_way's doc).
+  tls_grid  a 3 x 3 grid of 150 m blocks, two lanes each way at 50 km/h, traffic lights at every
+            crossing; random trips of cars with a wide spread of speed factors (queues side by
+            side at red lights, some cars over the limit): issue 24's traffic made elsewhere.
+  spider    a spider network (6 arms, 3 circles), one lane each way at 50 km/h; random trips of
+            which every second one ends inside the map (the vehicle leaves where its route ends).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
