@@ -42,6 +42,11 @@ Scenarios:
             wrong-way drivers on the left lane (20 and 15 m/s, from 30 s and 110 s). SUMO keeps
             vehicles to their lanes' direction, so it simulates them on a hidden edge over that
             lane going the other way; the shipped network does not have it (wrong_way's doc).
+  tls_grid  a 3 x 3 grid of 150 m blocks, two lanes each way at 50 km/h, traffic lights at every
+            crossing; random trips of cars with a wide spread of speed factors (queues side by
+            side at red lights, some cars over the limit): issue 24's traffic made elsewhere.
+  spider    a spider network (6 arms, 3 circles), one lane each way at 50 km/h; random trips of
+            which every second one ends inside the map (the vehicle leaves where its route ends).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -316,15 +321,76 @@ def occluders(folder, horizontal):
         f.write('{"occluders": [\n  %s\n]}\n' % ",\n  ".join(json.dumps(item) for item in items))
     return note
 
+# Cars of the situation scenarios made elsewhere (tls_grid, spider): SUMO's default car with a
+# wide spread of speed factors, so that some drive above the limit and some well above it.
+TOWN_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="normc(1.1,0.15,0.8,1.5)" lcSpeedGain="2"/>
+</additional>
+"""
+
+
+def use_vtype(routes, vtype):
+    """Gives every vehicle of a routes file the vehicle type `vtype` (defined in vtypes.xml)."""
+    with open(routes) as f:
+        text = f.read()
+    text = re.sub(r'<vehicle id="([^"]*)"', lambda m: '<vehicle id="%s" type="%s"' % (m.group(1), vtype), text)
+    with open(routes, "w") as f:
+        f.write(text)
+
+
+def tls_grid(s, duration):
+    s.netgenerate("net.net.xml", "--grid", "--grid.number", "3", "--grid.length", "150",
+                  "--grid.attach-length", "100", "--default.lanenumber", "2",
+                  "--default-junction-type", "traffic_light", "--tls.default-type", "static")
+    s.write("vtypes.xml", TOWN_VTYPES)
+    s.random_trips("net.net.xml", "routes.rou.xml", duration, "1.2", "--fringe-factor", "50",
+                   "--min-distance", "250")
+    use_vtype(os.path.join(s.work, "routes.rou.xml"), "car")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+def end_inside(routes):
+    """Cuts the route of every second vehicle to its first half (at least two edges): it ends on
+    an edge inside the map, where SUMO removes it at the edge's end (a parking exit, a route
+    end)."""
+    with open(routes) as f:
+        text = f.read()
+    count = [0]
+
+    def cut(match):
+        count[0] += 1
+        edges = match.group(1).split()
+        if count[0] % 2 == 0 and len(edges) >= 4:
+            edges = edges[:max(2, len(edges) // 2)]
+        return '<route edges="%s"' % " ".join(edges)
+    text = re.sub(r'<route edges="([^"]*)"', cut, text)
+    with open(routes, "w") as f:
+        f.write(text)
+
+
+def spider(s, duration):
+    s.netgenerate("net.net.xml", "--spider", "--spider.arm-number", "6", "--spider.circle-number", "3",
+                  "--spider.space-radius", "100", "--default.lanenumber", "1", "--default.speed", "13.89",
+                  "--no-turnarounds")
+    s.write("vtypes.xml", TOWN_VTYPES)
+    s.random_trips("net.net.xml", "routes.rou.xml", duration, "4", "--fringe-factor", "100",
+                   "--min-distance", "300")
+    use_vtype(os.path.join(s.work, "routes.rou.xml"), "car")
+    end_inside(os.path.join(s.work, "routes.rou.xml"))
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
 
 # The scenarios with occluders (and whether they get a horizontal bridge too).
 OCCLUDED = {"grid": True, "random": True, "highway": False}
 
 
 SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
-             "motorway": motorway, "wrong_way": wrong_way, "town400": town400}
+             "motorway": motorway, "wrong_way": wrong_way, "town400": town400,
+             "tls_grid": tls_grid, "spider": spider}
 DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
-              "wrong_way": 180, "town400": 0}
+              "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240}
 
 
 def main():

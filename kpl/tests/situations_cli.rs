@@ -3,8 +3,10 @@
 //! `sumo_situations_motorway.kpl` and `sumo_wrong_way.kpl` run under the noisy tracker with
 //! occluders, their situations are scored against the true ones computed from SUMO's own
 //! trajectories, and the targets hold (precision and recall >= 0.9 for overtakes and speeding, on
-//! two seeds of the first); both wrong-way drivers are found; every situation names cars and a
-//! time interval; bad input gets clear errors and exit codes.
+//! two seeds of the first); both wrong-way drivers are found; on traffic not made for the specs
+//! (the `tls_grid` and `spider` scenarios) no overtake at standstill and speeding a little over
+//! the threshold found (issue 24); every situation names cars and a time interval; bad input gets
+//! clear errors and exit codes.
 #![allow(clippy::unwrap_used, clippy::expect_used, reason = "tests")]
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -119,6 +121,70 @@ fn overtakes_and_speeding_on_three_lanes_with_another_traffic_mix() {
     assert_targets(&json, &["overtake", "speeding"], 10, "motorway scenario");
     // Three lanes: some overtakes pass two lanes over.
     assert!(kind(&json, "overtake").unwrap()["truth"].as_u64().unwrap() >= 100);
+}
+
+const TLS_GRID: &str = "specs/traffic/sumo/tls_grid";
+const SPIDER: &str = "specs/traffic/sumo/spider";
+
+/// The sums of `field` of the score of `kind_name` over runs of `spec` with `seeds`.
+fn summed(
+    spec: &str,
+    scenario: &str,
+    seeds: &[u32],
+    kind_name: &str,
+    extra: &[&str],
+) -> BTreeMap<&'static str, u64> {
+    let mut sums = BTreeMap::new();
+    for &seed in seeds {
+        let mut args = vec!["--format", "json"];
+        args.extend_from_slice(extra);
+        let out = score(spec, seed, scenario, &args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let s = kind(&json, kind_name).unwrap_or_else(|| panic!("{spec}, seed {seed}: no {kind_name}"));
+        for field in ["recognised", "correct", "truth", "found"] {
+            *sums.entry(field).or_insert(0) += s[field].as_u64().unwrap();
+        }
+    }
+    sums
+}
+
+/// Issue 24: on a grid with traffic lights (traffic not made for the spec), two cars standing side
+/// by side at a red light, or creeping in a queue, swap their measured order by the tracker's
+/// noise; that is no overtake. The monitor of main before the fix was right 2 to 3 times in 10
+/// here (the cars' measured order flickers); it must be right at least 8 times in 10 and still
+/// find most true overtakes.
+#[test]
+fn no_overtake_at_standstill_on_a_grid_with_traffic_lights() {
+    let sums = summed("sumo_situations_tls_grid", TLS_GRID, &[1, 2], "overtake", &[]);
+    let precision = sums["correct"] as f64 / sums["recognised"] as f64;
+    let recall = sums["found"] as f64 / sums["truth"] as f64;
+    assert!(sums["truth"] >= 10, "{sums:?}");
+    assert!(precision >= 0.8 && recall >= 0.6, "precision {precision}, recall {recall}: {sums:?}");
+}
+
+/// Issue 24: speeding on the spider network (traffic not made for the spec). With one frame's
+/// noisy speed over the threshold for the whole window, main found 68 to 76 % of the speeding
+/// episodes (53 of 75 over three tracker seeds); with the Kalman filter's speed the monitors find
+/// at least 85 % of them, every vehicle more than 0.5 m/s over for 5 s at least 90 % of the time,
+/// and precision stays at least 0.95.
+#[test]
+fn speeding_a_little_over_the_threshold_is_found() {
+    let seeds = [1, 2, 7];
+    let all = summed("sumo_situations_spider", SPIDER, &seeds, "speeding", &[]);
+    let precision = all["correct"] as f64 / all["recognised"] as f64;
+    let recall = all["found"] as f64 / all["truth"] as f64;
+    assert!(all["truth"] >= 30, "{all:?}");
+    assert!(precision >= 0.95 && recall >= 0.85, "precision {precision}, recall {recall}: {all:?}");
+    let clear = summed(
+        "sumo_situations_spider",
+        SPIDER,
+        &seeds,
+        "speeding",
+        &["--speeding-margin", "3.5", "--speeding-min", "5"],
+    );
+    let clear_recall = clear["found"] as f64 / clear["truth"] as f64;
+    assert!(clear["truth"] >= 20 && clear_recall >= 0.9, "recall {clear_recall}: {clear:?}");
 }
 
 #[test]

@@ -13,8 +13,10 @@
 //!   with no other standing vehicle in front within [`TruthParams::queue_gap_m`] on its lane;
 //! - `overtake` (a overtakes b): a behind b within [`TruthParams::overtake_close_m`] on one road,
 //!   then, staying within that distance, in front, within [`TruthParams::overtake_max`], on another
-//!   lane than b at some time in between; from the first time of that run to the first time in
-//!   front;
+//!   lane than b at some time in between, both moving at least
+//!   [`TruthParams::overtake_min_speed_mps`] when the run begins and when a is in front (a
+//!   passing at standstill or in a queue is no overtake); from the first time of that run to the
+//!   first time in front;
 //! - `tailgating` (a follows b): on b's lane, behind it, with a gap under
 //!   [`TruthParams::tailgating_gap_s`] seconds at a's speed, for at least
 //!   [`TruthParams::tailgating_min`];
@@ -91,6 +93,9 @@ pub struct TruthParams {
     pub queue_gap_m: f64,
     pub overtake_close_m: f64,
     pub overtake_max: Time,
+    /// Both vehicles of an overtake move at least this fast (m/s) when it begins and when it ends:
+    /// a passing at standstill or in a queue is no overtake.
+    pub overtake_min_speed_mps: f64,
     pub tailgating_gap_s: f64,
     pub tailgating_min: Time,
     pub wrong_way_speed_mps: f64,
@@ -110,6 +115,7 @@ impl Default for TruthParams {
             queue_gap_m: 15.0,
             overtake_close_m: 50.0,
             overtake_max: 60_000_000,
+            overtake_min_speed_mps: 3.0,
             tailgating_gap_s: 1.0,
             tailgating_min: 2_000_000,
             wrong_way_speed_mps: 2.0,
@@ -283,10 +289,13 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                 }
                 let key = (a.id.clone(), b.id.clone());
                 seen_pairs.push(key.clone());
+                let moving =
+                    a.speed >= params.overtake_min_speed_mps && b.speed >= params.overtake_min_speed_mps;
                 if ahead < -overlap {
-                    // In front: an overtake if a run was under way.
+                    // In front: an overtake if a run was under way and both still move.
                     if let Some(p) = passing.remove(&key)
                         && p.other_lane
+                        && moving
                         && step.time - p.start <= params.overtake_max
                     {
                         out.push(Situation {
@@ -301,7 +310,7 @@ fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situatio
                     let other_lane = a.lane != b.lane;
                     if let Some(p) = passing.get_mut(&key) {
                         p.other_lane |= other_lane;
-                    } else if ahead > overlap {
+                    } else if ahead > overlap && moving {
                         passing.insert(key, Passing { start: step.time, other_lane });
                     }
                 } else {
@@ -566,6 +575,34 @@ mod tests {
         // The car follows the truck closely only while it changes back in front: never behind
         // it on one lane within a second, so no tailgating.
         assert!(truth.iter().all(|s| s.kind != "tailgating"), "{truth:?}");
+    }
+
+    /// Two cars in a queue on two lanes: the left one creeps past the right one at 1 m/s, the
+    /// right one at 0.4 m/s. Not an overtake (a passing at standstill or in a queue); the same pass
+    /// at 10 and 4 m/s is one.
+    #[test]
+    fn a_passing_in_a_queue_is_no_overtake() {
+        let queue = |speed: f64| -> Vec<TrueStep> {
+            (0..40)
+                .map(|k| {
+                    let t = k as f64 * 0.5;
+                    // The left car stops 30 m on; the right one moves at 0.4 times its speed.
+                    let moved = (speed * t).min(30.0);
+                    TrueStep {
+                        time: (t * 1e6) as Time,
+                        vehicles: vec![
+                            vehicle("left", "e_1", 500.0 + moved, if moved < 30.0 { speed } else { 0.0 }),
+                            vehicle("right", "e_0", 506.0 + 0.4 * speed * t, 0.4 * speed),
+                        ],
+                    }
+                })
+                .collect()
+        };
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let creeping = true_situations(&queue(1.0), &params).situations;
+        assert!(creeping.iter().all(|s| s.kind != "overtake"), "{creeping:?}");
+        let moving = true_situations(&queue(10.0), &params).situations;
+        assert_eq!(moving.iter().filter(|s| s.kind == "overtake").count(), 1, "{moving:?}");
     }
 
     #[test]

@@ -60,6 +60,15 @@ pub struct Args {
     /// (0 to a day).
     #[arg(long, value_name = "SECONDS", default_value = "2", value_parser = parse_slack)]
     slack: kpl_core::Time,
+    /// The truth's speeding margin: a vehicle speeds when it is more than this over its lane's
+    /// limit, m/s (the shipped monitors' 3 m/s by default; `--speeding-margin 3.5
+    /// --speeding-min 5` asks how many of the vehicles clearly over a monitor's threshold it
+    /// finds).
+    #[arg(long, value_name = "MPS", default_value_t = TruthParams::default().speeding_margin_mps, value_parser = parse_margin)]
+    speeding_margin: f64,
+    /// The truth's shortest speeding episode, seconds (2 by default).
+    #[arg(long, value_name = "SECONDS", default_value = "2", value_parser = parse_slack)]
+    speeding_min: kpl_core::Time,
     /// How to print the scores.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
@@ -122,7 +131,11 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         );
     }
     let true_steps = true_steps(&steps, &network, &args.traffic)?;
-    let params = TruthParams::default();
+    let params = TruthParams {
+        speeding_margin_mps: args.speeding_margin,
+        speeding_min: args.speeding_min,
+        ..TruthParams::default()
+    };
     let true_situations = situations::true_situations(&true_steps, &params);
     let truth = &true_situations.situations;
 
@@ -195,6 +208,15 @@ fn parse_slack(text: &str) -> Result<kpl_core::Time, String> {
         return Err(format!("{text} s is out of range: the slack is 0 to {MAX_SLACK_S} s"));
     }
     Ok((seconds * 1e6).round() as kpl_core::Time)
+}
+
+/// A speeding margin, m/s: 0 to 100.
+fn parse_margin(text: &str) -> Result<f64, String> {
+    let mps: f64 = text.trim().parse().map_err(|_| format!("`{text}` is not a speed in m/s"))?;
+    if !(0.0..=100.0).contains(&mps) {
+        return Err(format!("{text} m/s is out of range: the speeding margin is 0 to 100 m/s"));
+    }
+    Ok(mps)
 }
 
 /// The traffic's vehicles on the network: road, lane, centre along the lane, the lane's limit
