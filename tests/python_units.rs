@@ -346,3 +346,83 @@ fn kpl_check_finds_the_module_the_function_and_its_parameters_without_running_py
     let missing = check("missing", "python.unit(ticks, module: \"units\")");
     assert!(missing.contains("function"), "{missing}");
 }
+
+/// A process unit written from docs/process-units.md alone, without the `kpl` package: it answers
+/// each call with its first input's sample message unchanged, and fails its `fail_call`-th call.
+const RAW_WORKER: &str = r#"#!/usr/bin/env python3
+import json, struct, sys
+
+inp, out = sys.stdin.buffer, sys.stdout.buffer
+
+def read():
+    head = inp.read(5)
+    if len(head) < 5:
+        return None, b""
+    length, kind = struct.unpack("<IB", head)
+    return bytes([kind]), inp.read(length - 1)
+
+def write(kind, body=b""):
+    out.write(struct.pack("<IB", len(body) + 1, kind[0]))
+    out.write(body)
+    out.flush()
+
+kind, body = read()
+hello = json.loads(body)
+fail = hello["params"].get("fail_call", 0)
+ready = {"protocol": hello["protocol"], "wire": hello["wire"], "kind": "function", "implementation": "raw"}
+write(b"R", json.dumps(ready).encode())
+calls = 0
+while True:
+    kind, body = read()
+    if kind is None or kind == b"Q":
+        break
+    calls += 1
+    valid, now, n = struct.unpack_from("<qqI", body)
+    (length,) = struct.unpack_from("<I", body, 20)
+    if calls == fail:
+        write(b"E", json.dumps({"error": f"call {calls} fails on purpose", "traceback": ""}).encode())
+    else:
+        write(b"O", b"" if length == 0xFFFFFFFF else body[24 : 24 + length])
+"#;
+
+#[test]
+fn a_unit_in_any_language_runs_as_a_process_that_speaks_the_documented_protocol() {
+    let Some(_python) = common::python("python3 on the PATH") else { return };
+    let dir = fresh_dir("pyunits", "process");
+    let worker = dir.join("echo_worker.py");
+    std::fs::write(&worker, RAW_WORKER).unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&worker, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let body = |unit: &str| {
+        format!(
+            "source ticks : int = timer(period: 100ms, count: 6)\n\
+             compute y : int = {unit}\n\
+             sink out = file.jsonl(ticks, y, path: \"y.jsonl\")\n"
+        )
+    };
+    let spec = dir.join("process.kpl");
+    std::fs::write(&spec, body("process.unit(ticks, command: [\"./echo_worker.py\"], fail_call: 4)"))
+        .unwrap();
+    let out = dir.join("out");
+    let output = kpl_command(&["run"])
+        .arg(&spec)
+        .arg("--out")
+        .arg(&out)
+        .args(["--format", "json", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let summary = summary(&output);
+    let y = process(&summary, "y");
+    assert_eq!((result(y, "calls"), result(y, "failed calls"), result(y, "worker restarts")), (6, 1, 0));
+    let example = y["error_examples"][0].as_str().unwrap();
+    assert!(example.contains("call 4 fails on purpose") && example.contains("./echo_worker.py"), "{example}");
+    assert_eq!(values(&out.join("y.jsonl")), [0.0, 1.0, 2.0, 4.0, 5.0]);
+
+    // `kpl check` finds a program path that is not there.
+    let missing = dir.join("missing.kpl");
+    std::fs::write(&missing, body("process.unit(ticks, command: [\"./no_such_worker\"])")).unwrap();
+    let output = kpl(&["check", missing.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&output.stderr).to_string() + &String::from_utf8_lossy(&output.stdout);
+    assert!(!output.status.success() && text.contains("E0118") && text.contains("no program"), "{text}");
+}

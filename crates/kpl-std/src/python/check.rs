@@ -100,6 +100,34 @@ pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     problems
 }
 
+/// The `process.unit` entry's parameter check (E0118): a command, whose program exists when
+/// it is a path (a bare name is the PATH's, found when the run starts).
+pub(super) fn check_process(call: &CallTypes<'_>) -> Vec<ParamProblem> {
+    let command: Vec<&str> = match call.params.get("command") {
+        Some(kpl_core::Value::List(items)) => items.iter().filter_map(|v| v.as_str()).collect(),
+        _ => Vec::new(),
+    };
+    let Some(program) = command.first() else {
+        return vec![problem(
+            "command",
+            "`command` is empty".to_string(),
+            "name the worker's program and its arguments: command: [\"./worker\", \"--fast\"]",
+        )];
+    };
+    let Some(dir) = call.dir else { return Vec::new() };
+    if program.contains('/') {
+        let path = super::program_path(program, dir);
+        if !path.is_file() {
+            return vec![problem(
+                "command",
+                format!("no program {} ({program} beside the spec)", path.display()),
+                "a path with a `/` is relative to the spec's folder; a bare name is looked up on the PATH",
+            )];
+        }
+    }
+    Vec::new()
+}
+
 fn problem(param: &str, message: String, hint: &str) -> ParamProblem {
     ParamProblem { param: param.into(), element: None, range: (0, 0), message, hint: Some(hint.into()) }
 }

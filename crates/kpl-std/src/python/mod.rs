@@ -34,6 +34,13 @@ use worker::{Answer, Launch, StartError, Worker};
 /// The entry's name in specs.
 pub const ENTRY: &str = "python.unit";
 
+/// A unit in any language: a program that speaks the process-unit protocol (docs/process-units.md).
+pub const PROCESS_ENTRY: &str = "process.unit";
+
+/// The parameters of `process.unit` itself; every other named parameter is the unit's own.
+pub const PROCESS_RESERVED: &[&str] =
+    &["command", "timeout", "start_timeout", "on_error", "restarts", "synchronized"];
+
 /// The parameters of `python.unit` itself; every other named parameter is the unit's own.
 pub const RESERVED: &[&str] = &[
     "module",
@@ -58,11 +65,19 @@ pub struct RunOptions {
 
 /// Adds `python.unit`.
 pub fn register(registry: &mut Registry) {
-    registry.add_unit(entry(), build);
+    registry.add_unit(entry(), |ctx| build(ctx, Kind::Python));
+    registry.add_unit(process_entry(), |ctx| build(ctx, Kind::Process));
+}
+
+/// Which of the two entries a unit is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Python,
+    Process,
 }
 
 fn entry() -> Entry {
-    Entry::new(
+    let entry = Entry::new(
         EntryKind::Compute,
         ENTRY,
         "A unit written in Python: kpl runs `module.function` in a worker process it supervises (docs/python.md).",
@@ -80,6 +95,37 @@ fn entry() -> Entry {
         Value::str(""),
         "the interpreter (empty: `kpl run --python`, else the active virtual environment's, else python3)",
     ))
+    .param(Param::optional(
+        "arrays",
+        ParamType::Choice(vec!["numpy".into(), "list".into()]),
+        Value::str("numpy"),
+        "how a list<float> input arrives: a NumPy array over the message's bytes, or a Python list",
+    ));
+    supervision(entry)
+        .extra_params("the unit's own parameters, given to the function (or the class) as keyword arguments")
+        .checked_by(check::check)
+}
+
+fn process_entry() -> Entry {
+    let entry = Entry::new(
+        EntryKind::Compute,
+        PROCESS_ENTRY,
+        "A unit in any language: kpl runs `command`, a program that speaks the process-unit protocol, as a worker process it supervises (docs/process-units.md).",
+    )
+    .variadic(0, "inputs", TypeReq::Any, "the unit's inputs, in the order of the calls' inputs")
+    .param(Param::required(
+        "command",
+        ParamType::List(Box::new(ParamType::Str)),
+        "the program and its arguments; a program path with a `/` is relative to the spec, a bare name is looked up on the PATH",
+    ));
+    supervision(entry)
+        .extra_params("the unit's own parameters, given to the worker in its hello (`params`)")
+        .checked_by(check::check_process)
+}
+
+/// The parameters both entries share: how the worker is supervised.
+fn supervision(entry: Entry) -> Entry {
+    entry
     .param(Param::optional(
         "timeout",
         ParamType::Duration,
@@ -105,19 +151,11 @@ fn entry() -> Entry {
         "how many times a worker that died or hung is started again before the unit gives up",
     ))
     .param(Param::optional(
-        "arrays",
-        ParamType::Choice(vec!["numpy".into(), "list".into()]),
-        Value::str("numpy"),
-        "how a list<float> input arrives: a NumPy array over the message's bytes, or a Python list",
-    ))
-    .param(Param::optional(
         "synchronized",
         ParamType::Bool,
         Value::Bool(true),
         "call once per valid time with every input's sample at that time (false: once per sample, with the latest of the others)",
     ))
-    .extra_params("the unit's own parameters, given to the function (or the class) as keyword arguments")
-    .checked_by(check::check)
 }
 
 /// The unit's settings, from its call in the spec.
@@ -136,7 +174,7 @@ struct Config {
     lockstep: bool,
 }
 
-fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
+fn build(ctx: &mut BuildContext<'_>, kind: Kind) -> Result<Box<dyn AsyncUnit>, BuildError> {
     let string = |name: &str| ctx.param(name).and_then(Value::as_str).unwrap_or_default().to_string();
     let duration = |name: &str, default: Time| match ctx.param(name) {
         Some(Value::Duration(us)) => Duration::from_micros(u64::try_from(*us).unwrap_or(0)),
@@ -144,11 +182,31 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
     };
     let (module, function) = (string("module"), string("function"));
     let options = ctx.registry.extension::<RunOptions>().cloned().unwrap_or_default();
-    let interpreter = interpreter(&string("python"), options.python.as_deref(), ctx.spec_dir);
+    let spec_dir = if ctx.spec_dir.as_os_str().is_empty() { Path::new(".") } else { ctx.spec_dir };
+    let (program, args, what, reserved) = match kind {
+        Kind::Python => (
+            interpreter(&string("python"), options.python.as_deref(), ctx.spec_dir),
+            vec!["-m".to_string(), "kpl.unit".to_string()],
+            format!("{module}.{function}"),
+            RESERVED,
+        ),
+        Kind::Process => {
+            let command: Vec<String> = match ctx.param("command") {
+                Some(Value::List(items)) => {
+                    items.iter().filter_map(|v| v.as_str().map(str::to_string)).collect()
+                }
+                _ => Vec::new(),
+            };
+            let Some((program, args)) = command.split_first() else {
+                return Err(ctx.error("`command` is empty: name the worker's program"));
+            };
+            (program_path(program, spec_dir), args.to_vec(), program.clone(), PROCESS_RESERVED)
+        }
+    };
     let mut params = serde_json::Map::new();
-    let Some(call) = ctx.call() else { return Err(ctx.error("a Python unit is a computational unit")) };
+    let Some(call) = ctx.call() else { return Err(ctx.error("a process unit is a computational unit")) };
     for (name, value) in &call.params {
-        if !RESERVED.contains(&name.as_str()) {
+        if !reserved.contains(&name.as_str()) {
             params.insert(name.clone(), value.to_json());
         }
     }
@@ -156,10 +214,9 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
     let position =
         options.spec_file.as_deref().and_then(|file| position(file, ctx.process.span.start as usize));
     let name = match position {
-        Some(at) => format!("`{}` ({module}.{function}, {at})", ctx.process.name),
-        None => format!("`{}` ({module}.{function})", ctx.process.name),
+        Some(at) => format!("`{}` ({what}, {at})", ctx.process.name),
+        None => format!("`{}` ({what})", ctx.process.name),
     };
-    let spec_dir = if ctx.spec_dir.as_os_str().is_empty() { Path::new(".") } else { ctx.spec_dir };
     let hello = Hello {
         protocol: protocol::PROTOCOL,
         wire: 2,
@@ -170,13 +227,13 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> {
         inputs: ctx.process.inputs.iter().map(|i| i.stream.name.clone()).collect(),
         output: output.to_string(),
         params,
-        arrays: string("arrays"),
+        arrays: if kind == Kind::Python { string("arrays") } else { "list".to_string() },
     };
     let config = Config {
         name,
         launch: Launch {
-            interpreter,
-            args: vec!["-m".into(), "kpl.unit".into()],
+            interpreter: program,
+            args,
             hello,
             start_timeout: duration("start_timeout", 60_000_000),
         },
@@ -211,6 +268,13 @@ fn interpreter(in_spec: &str, on_command_line: Option<&Path>, spec_dir: &Path) -
         }
     }
     PathBuf::from("python3")
+}
+
+/// A process unit's program: a path with a `/` relative to the spec, a bare name as it is (the
+/// PATH finds it).
+pub(crate) fn program_path(program: &str, spec_dir: &Path) -> PathBuf {
+    let path = Path::new(program);
+    if program.contains('/') && path.is_relative() { spec_dir.join(path) } else { path.into() }
 }
 
 /// `file:line:column` of a byte offset in the spec file.
