@@ -149,6 +149,7 @@ fn workspace(name: &str) -> PathBuf {
 }
 
 /// Examples that need the `.venv` of the oracles run only where there is one (KPL_PYTHON).
+#[allow(clippy::print_stderr, reason = "a skipped example says so")]
 fn runnable(dir: &Path, examples: &mut Vec<(String, Example)>) {
     if dir.join(".venv").exists() {
         return;
