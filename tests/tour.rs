@@ -267,11 +267,10 @@ fn check_all(dir: &Path, examples: &[(String, Example)]) -> Vec<String> {
 #[test]
 fn every_command_of_the_readme_tour_runs_as_written() {
     let dir = workspace("readme");
-    let tour: Vec<(String, Example)> = readme_tour()
+    let mut tour: Vec<(String, Example)> = readme_tour()
         .into_iter()
         .map(|command| ("README.md".to_string(), Example { command, ..Example::default() }))
         .collect();
-    let mut tour = tour;
     runnable(&dir, &mut tour);
     let failures = check_all(&dir, &tour);
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));

@@ -94,19 +94,13 @@ pub struct Args {
     pub python: Option<PathBuf>,
 }
 
-/// Whether the spec has a Python unit (so that `--python` does something).
-fn uses_python(spec: &kpl_semantic::hir::Spec) -> bool {
+/// Whether a source, unit or sink of the spec calls an entry that `wanted` names (so that an
+/// option for those entries, `--python` or `--ros2-router`, does something).
+fn calls(spec: &kpl_semantic::hir::Spec, wanted: impl Fn(&str) -> bool) -> bool {
+    use kpl_semantic::hir::ProcessKind;
     spec.processes.iter().any(|p| match &p.kind {
-        kpl_semantic::hir::ProcessKind::Compute(call) => call.entry == kpl_std::python::ENTRY,
-        _ => false,
-    })
-}
-
-/// Whether a process of the spec is a ROS 2 topic (so that `--ros2-router` does something).
-fn uses_ros2(spec: &kpl_semantic::hir::Spec) -> bool {
-    spec.processes.iter().any(|p| match &p.kind {
-        kpl_semantic::hir::ProcessKind::Source(call) | kpl_semantic::hir::ProcessKind::Sink(call) => {
-            call.entry.starts_with("ros2.")
+        ProcessKind::Source(call) | ProcessKind::Compute(call) | ProcessKind::Sink(call) => {
+            wanted(&call.entry)
         }
         _ => false,
     })
@@ -172,13 +166,13 @@ pub fn run(args: Args) -> ExitCode {
         );
         return ExitCode::from(2);
     }
-    if args.ros2_router.is_some() && !uses_ros2(&spec) {
+    if args.ros2_router.is_some() && !calls(&spec, |entry| entry.starts_with("ros2.")) {
         eprintln!(
             "warning: --ros2-router has no effect: the spec has no ROS 2 topic (ros2.subscribe, ros2.publish)"
         );
     }
     kpl_zenoh::ros2::set_router(args.ros2_router.clone());
-    if args.python.is_some() && !uses_python(&spec) {
+    if args.python.is_some() && !calls(&spec, |entry| entry == kpl_std::python::ENTRY) {
         eprintln!("warning: --python has no effect: the spec has no Python unit (python.unit)");
     }
     let mut registry = crate::registry::registry();

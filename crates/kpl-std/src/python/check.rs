@@ -8,8 +8,6 @@ use std::path::{Path, PathBuf};
 
 use kpl_semantic::registry::{CallTypes, ParamProblem};
 
-use super::RESERVED;
-
 /// The `python.unit` entry's parameter check (E0118).
 pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let text = |name: &str| call.params.get(name).and_then(|v| v.as_str()).unwrap_or_default().to_string();
@@ -69,7 +67,7 @@ pub(super) fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
         return problems;
     };
     let Some(params) = &definition.params else { return problems };
-    let own: Vec<&String> = call.params.keys().filter(|k| !RESERVED.contains(&k.as_str())).collect();
+    let own: Vec<&String> = super::own_params(&super::entry(), call.params).map(|(name, _)| name).collect();
     for name in own {
         if !params.keywords.contains(name) && !params.any_keyword {
             let known: Vec<&str> = params.keywords.iter().map(String::as_str).collect();

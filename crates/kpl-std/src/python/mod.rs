@@ -37,22 +37,14 @@ pub const ENTRY: &str = "python.unit";
 /// A unit in any language: a program that speaks the process-unit protocol (docs/process-units.md).
 pub const PROCESS_ENTRY: &str = "process.unit";
 
-/// The parameters of `process.unit` itself; every other named parameter is the unit's own.
-pub const PROCESS_RESERVED: &[&str] =
-    &["command", "timeout", "start_timeout", "on_error", "restarts", "synchronized"];
-
-/// The parameters of `python.unit` itself; every other named parameter is the unit's own.
-pub const RESERVED: &[&str] = &[
-    "module",
-    "function",
-    "python",
-    "timeout",
-    "start_timeout",
-    "on_error",
-    "restarts",
-    "arrays",
-    "synchronized",
-];
+/// The unit's own parameters among a call's: every one its entry does not declare.
+fn own_params<'a>(
+    entry: &Entry,
+    params: &'a std::collections::BTreeMap<String, Value>,
+) -> impl Iterator<Item = (&'a String, &'a Value)> {
+    let declared: Vec<String> = entry.params.iter().map(|p| p.name.clone()).collect();
+    params.iter().filter(move |(name, _)| !declared.contains(name))
+}
 
 /// What `kpl run` knows that a spec does not: the interpreter named on its command line
 /// (`--python`) and the spec's file (for positions in errors). Kept in the registry
@@ -183,12 +175,12 @@ fn build(ctx: &mut BuildContext<'_>, kind: Kind) -> Result<Box<dyn AsyncUnit>, B
     let (module, function) = (string("module"), string("function"));
     let options = ctx.registry.extension::<RunOptions>().cloned().unwrap_or_default();
     let spec_dir = if ctx.spec_dir.as_os_str().is_empty() { Path::new(".") } else { ctx.spec_dir };
-    let (program, args, what, reserved) = match kind {
+    let (program, args, what, entry) = match kind {
         Kind::Python => (
-            interpreter(&string("python"), options.python.as_deref(), ctx.spec_dir),
+            interpreter(&string("python"), options.python.as_deref(), spec_dir),
             vec!["-m".to_string(), "kpl.unit".to_string()],
             format!("{module}.{function}"),
-            RESERVED,
+            entry(),
         ),
         Kind::Process => {
             let command: Vec<String> = match ctx.param("command") {
@@ -200,15 +192,13 @@ fn build(ctx: &mut BuildContext<'_>, kind: Kind) -> Result<Box<dyn AsyncUnit>, B
             let Some((program, args)) = command.split_first() else {
                 return Err(ctx.error("`command` is empty: name the worker's program"));
             };
-            (program_path(program, spec_dir), args.to_vec(), program.clone(), PROCESS_RESERVED)
+            (program_path(program, spec_dir), args.to_vec(), program.clone(), process_entry())
         }
     };
     let mut params = serde_json::Map::new();
     let Some(call) = ctx.call() else { return Err(ctx.error("a process unit is a computational unit")) };
-    for (name, value) in &call.params {
-        if !reserved.contains(&name.as_str()) {
-            params.insert(name.clone(), value.to_json());
-        }
+    for (name, value) in own_params(&entry, &call.params) {
+        params.insert(name.clone(), value.to_json());
     }
     let output = ctx.process.output.clone().unwrap_or(ValueType::Any);
     let position =
@@ -247,19 +237,14 @@ fn build(ctx: &mut BuildContext<'_>, kind: Kind) -> Result<Box<dyn AsyncUnit>, B
     Ok(Box::new(PythonUnit::new(Arc::new(config), ctx.stats.clone())))
 }
 
-/// The interpreter: the spec's, else `kpl run --python`, else the active virtual environment's,
+/// The interpreter: `kpl run --python`, else the spec's, else the active virtual environment's,
 /// else `python3` from the PATH. A relative path in the spec is relative to the spec.
 fn interpreter(in_spec: &str, on_command_line: Option<&Path>, spec_dir: &Path) -> PathBuf {
     if let Some(path) = on_command_line {
         return path.to_path_buf();
     }
     if !in_spec.is_empty() {
-        let path = Path::new(in_spec);
-        return if path.components().count() > 1 && path.is_relative() {
-            spec_dir.join(path)
-        } else {
-            path.into()
-        };
+        return program_path(in_spec, spec_dir);
     }
     if let Some(env) = std::env::var_os("VIRTUAL_ENV") {
         let python = Path::new(&env).join("bin").join("python");

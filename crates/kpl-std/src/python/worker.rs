@@ -88,8 +88,7 @@ struct Watch {
 
 #[derive(Default)]
 struct Watched {
-    /// A call (or the start) is under way until `deadline`.
-    busy: bool,
+    /// The deadline of the call (or the start) under way; `None` between calls.
     deadline: Option<Instant>,
     /// How long the watchdog sleeps while no call is under way (it then looks again).
     idle: Duration,
@@ -106,7 +105,6 @@ impl Watch {
     #[allow(clippy::disallowed_methods)]
     fn arm(&self, timeout: Duration) {
         let Ok(mut s) = self.state.lock() else { return };
-        s.busy = true;
         s.fired = false;
         s.deadline = Instant::now().checked_add(timeout);
         s.idle = s.idle.min(timeout).max(MIN_IDLE);
@@ -124,7 +122,7 @@ impl Watch {
     fn disarm(&self) -> bool {
         match self.state.lock() {
             Ok(mut s) => {
-                s.busy = false;
+                s.deadline = None;
                 s.fired
             }
             Err(_) => false,
@@ -150,16 +148,16 @@ fn watchdog(watch: Arc<Watch>, child: Arc<Mutex<Child>>) {
         }
         let now = Instant::now();
         let wait = match s.deadline {
-            Some(deadline) if s.busy && now >= deadline => {
+            Some(deadline) if now >= deadline => {
                 s.fired = true;
-                s.busy = false;
+                s.deadline = None;
                 if let Ok(mut child) = child.lock() {
                     let _ = child.kill();
                 }
                 s.idle
             }
-            Some(deadline) if s.busy => deadline - now,
-            _ => s.idle,
+            Some(deadline) => deadline - now,
+            None => s.idle,
         };
         s.wakes_at = now.checked_add(wait);
         s = match watch.wake.wait_timeout(s, wait) {
