@@ -71,6 +71,7 @@ pub enum Item {
     Forget(ForgetDecl),
     Identify(IdentifyDecl),
     Monitor(MonitorDecl),
+    Chronicle(ChronicleDecl),
     Deploy(DeployDecl),
 }
 
@@ -85,6 +86,7 @@ impl Item {
             Item::Forget(d) => d.span,
             Item::Identify(d) => d.span,
             Item::Monitor(d) => d.span,
+            Item::Chronicle(d) => d.span,
             Item::Deploy(d) => d.span,
         }
     }
@@ -400,6 +402,127 @@ pub struct IdentifyDecl {
 pub struct MonitorDecl {
     pub name: Ident,
     pub formula: Expr,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// `chronicle reckless_overtake(a: Car, b: Car) { event pass = beside(a, b) becomes true ... }`:
+/// a parameterised class of complex events, a simple temporal network whose nodes are event
+/// occurrences and whose edges are metric constraints between their times.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChronicleDecl {
+    pub name: Ident,
+    pub params: Vec<ChronicleParam>,
+    /// The clauses in the order written (`fmt` keeps it).
+    pub clauses: Vec<ChronicleClause>,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+impl ChronicleDecl {
+    pub fn events(&self) -> impl Iterator<Item = &ChronicleEvent> {
+        self.clauses.iter().filter_map(|c| match c {
+            ChronicleClause::Event(e) => Some(e),
+            _ => None,
+        })
+    }
+    pub fn constraints(&self) -> impl Iterator<Item = &TimeConstraint> {
+        self.clauses.iter().filter_map(|c| match c {
+            ChronicleClause::Constraint(c) => Some(c),
+            _ => None,
+        })
+    }
+}
+
+/// `a: Car`: an object the chronicle is about.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChronicleParam {
+    pub name: Ident,
+    pub ty: Ident,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum ChronicleClause {
+    Event(ChronicleEvent),
+    Constraint(TimeConstraint),
+    Hold(HoldCondition),
+    Never(NeverCondition),
+}
+
+impl ChronicleClause {
+    pub fn span(&self) -> Span {
+        match self {
+            ChronicleClause::Event(c) => c.span,
+            ChronicleClause::Constraint(c) => c.span,
+            ChronicleClause::Hold(c) => c.span,
+            ChronicleClause::Never(c) => c.span,
+        }
+    }
+}
+
+/// `event pass = beside(a, b) becomes true`: a node of the network, named for the constraints.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChronicleEvent {
+    pub name: Ident,
+    pub pattern: EventPattern,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// What an event is an occurrence of.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EventPattern {
+    pub kind: EventPatternKind,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum EventPatternKind {
+    /// `close(a, b) becomes false`: a predicate over the parameters changes its value.
+    Change { predicate: Expr, becomes: bool },
+    /// `monitor speeding(a) becomes false`: a monitor's verdict for a tuple of objects changes.
+    Monitor { monitor: Ident, args: Vec<Ident>, becomes: bool },
+    /// `recognised overtake(a, b)`: another chronicle is recognised for a tuple of objects.
+    Recognised { chronicle: Ident, args: Vec<Ident> },
+}
+
+/// `cut_in - pass in [500ms, 8s]`: `lo <= time(later) - time(earlier) <= hi`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TimeConstraint {
+    pub later: Ident,
+    pub earlier: Ident,
+    pub lo: StnBound,
+    pub hi: StnBound,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// A bound of a metric constraint: a signed duration or an infinite end.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub enum StnBound {
+    Duration { negative: bool, value: DurationLit },
+    Inf { negative: bool },
+}
+
+/// `hold on_road(a) from start to cut_in`: the predicate is true throughout the two events' times.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HoldCondition {
+    pub formula: Expr,
+    pub from: Ident,
+    pub to: Ident,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// `never same_lane(a, b) becomes true from start to cut_in`: no such event strictly between.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NeverCondition {
+    pub pattern: EventPattern,
+    pub from: Ident,
+    pub to: Ident,
     #[serde(skip)]
     pub span: Span,
 }

@@ -183,8 +183,54 @@ impl Formatter<'_> {
                 expr(&mut self.out, &decl.formula, 0);
                 self.end_line(decl.span.end);
             }
+            ast::Item::Chronicle(decl) => self.chronicle_decl(decl),
             ast::Item::Deploy(decl) => self.deploy_decl(decl),
         }
+    }
+
+    fn chronicle_decl(&mut self, decl: &ast::ChronicleDecl) {
+        self.begin_line(decl.span, "", true);
+        let params: Vec<String> =
+            decl.params.iter().map(|p| format!("{}: {}", p.name.name, p.ty.name)).collect();
+        let _ = write!(self.out, "chronicle {}({}) {{", decl.name.name, params.join(", "));
+        // The head ends at the body's `{` (a comment after it stays on the head's line).
+        let after_name = decl.name.span.end as usize;
+        let head_end = self
+            .source
+            .get(after_name..decl.span.end as usize)
+            .and_then(|rest| rest.find('{'))
+            .map_or(decl.name.span.end, |i| (after_name + i + 1) as u32);
+        self.end_line(head_end);
+        for clause in &decl.clauses {
+            self.begin_line(clause.span(), INDENT, false);
+            match clause {
+                ast::ChronicleClause::Event(event) => {
+                    let _ = write!(self.out, "event {} = ", event.name.name);
+                    event_pattern(&mut self.out, &event.pattern);
+                }
+                ast::ChronicleClause::Constraint(c) => {
+                    let _ = write!(self.out, "{} - {} in [", c.later.name, c.earlier.name);
+                    stn_bound(&mut self.out, &c.lo);
+                    self.out.push_str(", ");
+                    stn_bound(&mut self.out, &c.hi);
+                    self.out.push(']');
+                }
+                ast::ChronicleClause::Hold(c) => {
+                    self.out.push_str("hold ");
+                    expr(&mut self.out, &c.formula, 0);
+                    let _ = write!(self.out, " from {} to {}", c.from.name, c.to.name);
+                }
+                ast::ChronicleClause::Never(c) => {
+                    self.out.push_str("never ");
+                    event_pattern(&mut self.out, &c.pattern);
+                    let _ = write!(self.out, " from {} to {}", c.from.name, c.to.name);
+                }
+            }
+            self.end_line(clause.span().end);
+        }
+        self.leading_comments(decl.span.end, INDENT);
+        self.out.push('}');
+        self.end_line(decl.span.end);
     }
 
     fn type_decl(&mut self, decl: &ast::TypeDecl) {
@@ -463,6 +509,34 @@ fn string(out: &mut String, s: &str) {
         }
     }
     out.push('"');
+}
+
+fn event_pattern(out: &mut String, pattern: &ast::EventPattern) {
+    let names = |args: &[ast::Ident]| args.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", ");
+    match &pattern.kind {
+        ast::EventPatternKind::Change { predicate, becomes } => {
+            expr(out, predicate, 0);
+            let _ = write!(out, " becomes {becomes}");
+        }
+        ast::EventPatternKind::Monitor { monitor, args, becomes } => {
+            let _ = write!(out, "monitor {}({}) becomes {becomes}", monitor.name, names(args));
+        }
+        ast::EventPatternKind::Recognised { chronicle, args } => {
+            let _ = write!(out, "recognised {}({})", chronicle.name, names(args));
+        }
+    }
+}
+
+fn stn_bound(out: &mut String, bound: &ast::StnBound) {
+    match bound {
+        ast::StnBound::Duration { negative, value } => {
+            if *negative {
+                out.push('-');
+            }
+            duration(out, value);
+        }
+        ast::StnBound::Inf { negative } => out.push_str(if *negative { "-inf" } else { "inf" }),
+    }
 }
 
 fn interval(out: &mut String, interval: &Option<ast::Interval>) {

@@ -8,8 +8,18 @@ use crate::ast::Span;
 pub const MAX_NESTING: usize = 64;
 
 /// Words that start a top-level item.
-pub const ITEM_KEYWORDS: [&str; 11] = [
-    "type", "source", "compute", "sink", "stream", "link", "predict", "forget", "identify", "monitor",
+pub const ITEM_KEYWORDS: [&str; 12] = [
+    "type",
+    "source",
+    "compute",
+    "sink",
+    "stream",
+    "link",
+    "predict",
+    "forget",
+    "identify",
+    "monitor",
+    "chronicle",
     "deploy",
 ];
 

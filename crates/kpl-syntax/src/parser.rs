@@ -304,7 +304,7 @@ fn hint_for(positives: &[Rule], expected: &[String], source: &str, pos: usize) -
         return Some("a `(` is not closed before the next item".into());
     }
     if positives.contains(&Rule::EOI) && positives.len() <= 2 {
-        return Some("a file is a sequence of items: type, source, compute, sink, stream, link, predict, forget, identify, monitor, deploy".into());
+        return Some("a file is a sequence of items: type, source, compute, sink, stream, link, predict, forget, identify, monitor, chronicle, deploy".into());
     }
     None
 }
@@ -315,7 +315,7 @@ fn rule_name(rule: Rule) -> &'static str {
     match rule {
         Rule::EOI => "end of file",
         Rule::item => {
-            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor or deploy)"
+            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor, chronicle or deploy)"
         }
         Rule::digits | Rule::exponent => "a number",
         Rule::arg => "an input stream or a parameter `name: value`",
@@ -324,7 +324,7 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::infix => "an operator",
         Rule::WHITESPACE | Rule::COMMENT => "a comment",
         Rule::file => {
-            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor or deploy)"
+            "an item (type, source, compute, sink, stream, link, predict, forget, identify, monitor, chronicle or deploy)"
         }
         Rule::formula_input => "a formula",
         Rule::ident_char | Rule::ident | Rule::keyword => "a name",
@@ -426,6 +426,30 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::predict_decl => "a prediction model",
         Rule::forget_decl => "a forget declaration",
         Rule::monitor_decl => "a monitor",
+        Rule::kw_chronicle => "`chronicle`",
+        Rule::chronicle_decl => "a chronicle `chronicle NAME(x: Type, ...) { ... }`",
+        Rule::chronicle_params => "the chronicle's parameters `(x: Type, ...)`",
+        Rule::chronicle_param => "a parameter `name: Type`",
+        Rule::chronicle_clause => "`event`, `hold`, `never` or a constraint `e2 - e1 in [lo, hi]`",
+        Rule::chronicle_event => "an event `event NAME = ...`",
+        Rule::event_pattern => {
+            "an event (`PREDICATE becomes true`, `monitor NAME(x, ...) becomes false`, `recognised NAME(x, ...)`)"
+        }
+        Rule::event_monitor => "a monitor's verdict `monitor NAME(x, ...) becomes true|false`",
+        Rule::event_recognised => "a recognition `recognised NAME(x, ...)`",
+        Rule::event_change => "a change `PREDICATE becomes true|false`",
+        Rule::event_args => "the objects `(x, ...)`",
+        Rule::chronicle_hold => "a condition `hold FORMULA from e1 to e2`",
+        Rule::chronicle_never => "a condition `never EVENT from e1 to e2`",
+        Rule::chronicle_constraint => "a constraint `e2 - e1 in [lo, hi]`",
+        Rule::stn_bound => "a bound (a duration, `-` and a duration, `inf` or `-inf`)",
+        Rule::stn_negative => "`-`",
+        Rule::w_event => "`event`",
+        Rule::w_becomes => "`becomes`",
+        Rule::w_recognised => "`recognised`",
+        Rule::w_hold => "`hold`",
+        Rule::w_never => "`never`",
+        Rule::w_in => "`in`",
         Rule::deploy_decl => "a deploy section",
         Rule::deploy_name => "the deployment's name",
         Rule::host_decl => "a host `host NAME { ... }`",
@@ -586,6 +610,7 @@ impl<'d> Converter<'d> {
                 Rule::forget_decl => ast::Item::Forget(self.forget_decl(pair)),
                 Rule::identify_decl => ast::Item::Identify(self.identify_decl(pair)),
                 Rule::monitor_decl => ast::Item::Monitor(self.monitor_decl(pair)),
+                Rule::chronicle_decl => ast::Item::Chronicle(self.chronicle_decl(pair)),
                 Rule::deploy_decl => ast::Item::Deploy(self.deploy_decl(pair)),
                 _ => continue, // EOI
             };
@@ -958,6 +983,138 @@ impl<'d> Converter<'d> {
         ast::MonitorDecl { name, formula, span }
     }
 
+    fn chronicle_decl(&mut self, pair: Pair<'_, Rule>) -> ast::ChronicleDecl {
+        let span = self.span(&pair);
+        let mut decl =
+            ast::ChronicleDecl { name: placeholder_ident(span), params: vec![], clauses: vec![], span };
+        for p in pair.into_inner() {
+            match p.as_rule() {
+                Rule::ident => decl.name = self.ident(p),
+                Rule::chronicle_params => {
+                    for param in p.into_inner() {
+                        let span = self.span(&param);
+                        let mut idents = param.into_inner().map(|i| self.ident(i));
+                        let name = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                        let ty = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                        decl.params.push(ast::ChronicleParam { name, ty, span });
+                    }
+                }
+                Rule::chronicle_event => {
+                    let span = self.span(&p);
+                    let mut name = placeholder_ident(span);
+                    let mut pattern = None;
+                    for e in p.into_inner() {
+                        match e.as_rule() {
+                            Rule::ident => name = self.ident(e),
+                            Rule::event_pattern => pattern = Some(self.event_pattern(e)),
+                            _ => {}
+                        }
+                    }
+                    let pattern = pattern.unwrap_or_else(|| placeholder_pattern(span));
+                    decl.clauses.push(ast::ChronicleClause::Event(ast::ChronicleEvent {
+                        name,
+                        pattern,
+                        span,
+                    }));
+                }
+                Rule::chronicle_constraint => {
+                    let span = self.span(&p);
+                    let mut idents = Vec::new();
+                    let mut bounds = Vec::new();
+                    for c in p.into_inner() {
+                        match c.as_rule() {
+                            Rule::ident => idents.push(self.ident(c)),
+                            Rule::stn_bound => bounds.push(self.stn_bound(c)),
+                            _ => {}
+                        }
+                    }
+                    let mut idents = idents.into_iter();
+                    let later = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                    let earlier = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                    let mut bounds = bounds.into_iter();
+                    let lo = bounds.next().unwrap_or(ast::StnBound::Inf { negative: true });
+                    let hi = bounds.next().unwrap_or(ast::StnBound::Inf { negative: false });
+                    decl.clauses.push(ast::ChronicleClause::Constraint(ast::TimeConstraint {
+                        later,
+                        earlier,
+                        lo,
+                        hi,
+                        span,
+                    }));
+                }
+                Rule::chronicle_hold | Rule::chronicle_never => {
+                    let span = self.span(&p);
+                    let hold = p.as_rule() == Rule::chronicle_hold;
+                    let mut idents = Vec::new();
+                    let mut formula = None;
+                    let mut pattern = None;
+                    for c in p.into_inner() {
+                        match c.as_rule() {
+                            Rule::ident => idents.push(self.ident(c)),
+                            Rule::expr => formula = Some(self.expr(c)),
+                            Rule::event_pattern => pattern = Some(self.event_pattern(c)),
+                            _ => {}
+                        }
+                    }
+                    let mut idents = idents.into_iter();
+                    let from = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                    let to = idents.next().unwrap_or_else(|| placeholder_ident(span));
+                    decl.clauses.push(if hold {
+                        let formula = formula.unwrap_or(ast::Expr { kind: ast::ExprKind::Bool(true), span });
+                        ast::ChronicleClause::Hold(ast::HoldCondition { formula, from, to, span })
+                    } else {
+                        let pattern = pattern.unwrap_or_else(|| placeholder_pattern(span));
+                        ast::ChronicleClause::Never(ast::NeverCondition { pattern, from, to, span })
+                    });
+                }
+                _ => {}
+            }
+        }
+        decl
+    }
+
+    fn event_pattern(&mut self, pair: Pair<'_, Rule>) -> ast::EventPattern {
+        let span = self.span(&pair);
+        let Some(inner) = pair.into_inner().next() else { return placeholder_pattern(span) };
+        let rule = inner.as_rule();
+        let mut predicate = None;
+        let mut name = None;
+        let mut args = Vec::new();
+        let mut becomes = true;
+        for p in inner.into_inner() {
+            match p.as_rule() {
+                Rule::expr => predicate = Some(self.expr(p)),
+                Rule::ident => name = Some(self.ident(p)),
+                Rule::event_args => args = p.into_inner().map(|a| self.ident(a)).collect(),
+                Rule::boolean => becomes = p.as_str() == "true",
+                _ => {}
+            }
+        }
+        let name = name.unwrap_or_else(|| placeholder_ident(span));
+        let kind = match rule {
+            Rule::event_monitor => ast::EventPatternKind::Monitor { monitor: name, args, becomes },
+            Rule::event_recognised => ast::EventPatternKind::Recognised { chronicle: name, args },
+            _ => ast::EventPatternKind::Change {
+                predicate: predicate.unwrap_or(ast::Expr { kind: ast::ExprKind::Bool(true), span }),
+                becomes,
+            },
+        };
+        ast::EventPattern { kind, span }
+    }
+
+    fn stn_bound(&mut self, pair: Pair<'_, Rule>) -> ast::StnBound {
+        let mut negative = false;
+        let mut bound = ast::StnBound::Inf { negative: false };
+        for p in pair.into_inner() {
+            match p.as_rule() {
+                Rule::stn_negative => negative = true,
+                Rule::duration => bound = ast::StnBound::Duration { negative, value: self.duration(p) },
+                _ => bound = ast::StnBound::Inf { negative },
+            }
+        }
+        bound
+    }
+
     fn deploy_decl(&mut self, pair: Pair<'_, Rule>) -> ast::DeployDecl {
         let span = self.span(&pair);
         let mut hosts = Vec::new();
@@ -1282,6 +1439,11 @@ fn infix_rule(rule: Rule) -> bool {
 
 fn placeholder_ident(span: Span) -> ast::Ident {
     ast::Ident { name: String::new(), span }
+}
+
+fn placeholder_pattern(span: Span) -> ast::EventPattern {
+    let predicate = ast::Expr { kind: ast::ExprKind::Bool(true), span };
+    ast::EventPattern { kind: ast::EventPatternKind::Change { predicate, becomes: true }, span }
 }
 
 fn placeholder_path(span: Span) -> ast::Path {

@@ -201,6 +201,7 @@ fn item() -> BoxedStrategy<String> {
             None => format!("forget after {d}"),
         }),
         (name(), formula()).prop_map(|(n, f)| format!("monitor {n} = {f}")),
+        chronicle(),
         (name(), type_name(), formula()).prop_map(|(n, t, f)| format!("identify {n} : {t} where {f}")),
         (
             proptest::collection::vec((name(), proptest::collection::vec(name(), 0..3), any::<bool>()), 0..3),
@@ -222,6 +223,40 @@ fn item() -> BoxedStrategy<String> {
             }),
     ]
     .boxed()
+}
+
+fn stn_bound() -> impl Strategy<Value = String> {
+    prop_oneof![
+        duration(),
+        duration().prop_map(|d| format!("-{d}")),
+        Just("inf".to_string()),
+        Just("-inf".to_string()),
+    ]
+}
+
+fn event_pattern() -> impl Strategy<Value = String> {
+    prop_oneof![
+        (formula(), any::<bool>()).prop_map(|(f, b)| format!("{f} becomes {b}")),
+        (name(), proptest::collection::vec(name(), 0..3), any::<bool>())
+            .prop_map(|(m, args, b)| format!("monitor {m}({}) becomes {b}", args.join(", "))),
+        (name(), proptest::collection::vec(name(), 0..3))
+            .prop_map(|(c, args)| format!("recognised {c}({})", args.join(",")))
+    ]
+}
+
+fn chronicle() -> impl Strategy<Value = String> {
+    let clause = prop_oneof![
+        (name(), sep(), event_pattern()).prop_map(|(n, s, p)| format!("event {n}{s}={s}{p}")),
+        (name(), name(), stn_bound(), stn_bound())
+            .prop_map(|(a, b, lo, hi)| format!("{a}-{b} in [{lo},{hi}]")),
+        (formula(), name(), name()).prop_map(|(f, a, b)| format!("hold {f} from {a} to {b} // why")),
+        (event_pattern(), name(), name()).prop_map(|(p, a, b)| format!("never {p} from {a} to {b}")),
+    ];
+    (name(), proptest::collection::vec((name(), type_name()), 0..3), proptest::collection::vec(clause, 0..5))
+        .prop_map(|(n, params, clauses)| {
+            let params: Vec<String> = params.iter().map(|(p, t)| format!("{p}:{t}")).collect();
+            format!("chronicle {n}({}) {{ // head\n{}\n}}", params.join(", "), clauses.join("\n"))
+        })
 }
 
 fn spec() -> impl Strategy<Value = String> {
