@@ -53,6 +53,7 @@ fn engines_know_nothing_of_the_runtime_tokio_or_zenoh() {
         "kpl-camera",
         "kpl-sim",
         "kpl-aapa",
+        "kpl-chronicle",
         "kpl-anchor",
         "kpl-cater",
         "kpl-score",
@@ -75,7 +76,8 @@ fn engines_know_nothing_of_the_runtime_tokio_or_zenoh() {
     };
     only("kpl-core", &[]);
     only("kpl-syntax", &["kpl-core"]);
-    only("kpl-semantic", &["kpl-core", "kpl-syntax"]);
+    only("kpl-chronicle", &["kpl-core"]);
+    only("kpl-semantic", &["kpl-core", "kpl-syntax", "kpl-chronicle"]);
     only("kpl-mtl", &["kpl-core", "kpl-syntax"]);
     only("kpl-roads", &["kpl-core"]);
     only("kpl-anchor", &["kpl-core", "kpl-syntax", "kpl-semantic", "kpl-mtl", "kpl-roads"]);

@@ -1,0 +1,364 @@
+//! The incremental recogniser: one [`Recogniser::step`] per instant with the events that occurred
+//! at it, in their order. Time is an argument; nothing here reads a clock.
+//!
+//! Each chronicle keeps partial instances: a binding of some parameters and an occurrence (and its
+//! time) for some nodes. An event matching a node extends every partial instance it is consistent
+//! with (binding, and the minimal network's bounds against every node already matched), keeping
+//! the instance it extends, and starts a new one. An instance is dropped as soon as its deadline
+//! passes (the latest time its earliest-due open node may still occur), so an instance never lives
+//! longer than the chronicle's window. A complete instance is checked against its `hold` and
+//! `never` conditions when its step is done (so every event at that instant is known), and each
+//! one that passes is a [`Recognition`] whose valid time is the step's time. Recognitions are
+//! events of the chronicle's own source for chronicles that use them, at the same step (chronicles
+//! run in the order of that use; a cycle is refused).
+//!
+//! Memory is bounded: at most [`Config::max_instances`] partial instances per chronicle (an event
+//! that would exceed it starts or extends none, and [`Stats::refused`] counts it), each of size
+//! `O(params + nodes)`; plus, for the sources that conditions read, the events of the last
+//! `window` (the longest window of any chronicle) and one bit per fluent that is true before it.
+//!
+//! Semantics, which `tests/agree.rs` checks against a brute-force matcher over whole sequences: a
+//! recognition is an injective assignment of event occurrences to the nodes (distinct nodes,
+//! distinct occurrences) with one binding of all parameters, such that every constraint holds and
+//! every condition holds.
+
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::hash::Hash;
+
+use kpl_core::Time;
+use thiserror::Error;
+
+use crate::model::{Compiled, Event, Pattern, SourceId};
+
+/// Limits of a recogniser.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Config {
+    /// Partial instances kept per chronicle.
+    pub max_instances: usize,
+}
+
+impl Default for Config {
+    fn default() -> Config {
+        Config { max_instances: 10_000 }
+    }
+}
+
+/// A chronicle recognised: its index among the recogniser's chronicles, the objects bound to its
+/// parameters, the time of each node's event and the valid time (the last of them).
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Recognition<O> {
+    pub chronicle: usize,
+    pub binding: Vec<O>,
+    pub times: Vec<Time>,
+    pub valid_time: Time,
+}
+
+/// What the recogniser did, for the run's summary.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Partial instances alive now, and at most so far.
+    pub instances: usize,
+    pub peak_instances: usize,
+    /// Partial instances dropped because their deadline passed.
+    pub expired: u64,
+    /// Instances not started or extended because a chronicle had `max_instances` already.
+    pub refused: u64,
+    /// Complete instances whose `hold` or `never` condition failed.
+    pub failed_conditions: u64,
+    pub recognitions: u64,
+    /// Steps refused because their time was before the previous step's.
+    pub late_steps: u64,
+}
+
+/// A step before the previous one: events must come in time order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[error("events at {time} us arrived after the recogniser reached {now} us")]
+pub struct Late {
+    pub time: Time,
+    pub now: Time,
+}
+
+/// A cycle of chronicles recognising each other.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("chronicles {0:?} use each other's recognitions in a cycle")]
+pub struct DependencyCycle(pub Vec<String>);
+
+#[derive(Debug, Clone)]
+struct Partial<O> {
+    binding: Vec<Option<O>>,
+    times: Vec<Option<Time>>,
+    occurrences: Vec<Option<u64>>,
+    open: usize,
+    deadline: Time,
+}
+
+/// The events of one fluent (or point source) on one tuple of objects within the window.
+#[derive(Debug, Default)]
+struct History {
+    /// The value before the first entry.
+    base: bool,
+    entries: VecDeque<(Time, bool)>,
+}
+
+#[derive(Debug)]
+pub struct Recogniser<O> {
+    chronicles: Vec<Compiled>,
+    /// Chronicle indices, each after the chronicles whose recognitions it uses.
+    order: Vec<usize>,
+    partial: Vec<Vec<Partial<O>>>,
+    logged: HashSet<SourceId>,
+    log: HashMap<(SourceId, Vec<O>), History>,
+    window: Time,
+    now: Option<Time>,
+    next_occurrence: u64,
+    config: Config,
+    stats: Stats,
+}
+
+impl<O: Clone + Eq + Hash> Recogniser<O> {
+    pub fn new(chronicles: Vec<Compiled>, config: Config) -> Result<Recogniser<O>, DependencyCycle> {
+        let order = dependency_order(&chronicles)?;
+        let mut logged = HashSet::new();
+        for c in &chronicles {
+            logged.extend(c.chronicle.holds.iter().map(|h| h.source));
+            logged.extend(c.chronicle.nevers.iter().map(|n| n.pattern.source));
+        }
+        let window = chronicles.iter().map(|c| c.window).max().unwrap_or(0);
+        let partial = chronicles.iter().map(|_| Vec::new()).collect();
+        Ok(Recogniser {
+            chronicles,
+            order,
+            partial,
+            logged,
+            log: HashMap::new(),
+            window,
+            now: None,
+            next_occurrence: 0,
+            config,
+            stats: Stats::default(),
+        })
+    }
+
+    pub fn chronicles(&self) -> &[Compiled] {
+        &self.chronicles
+    }
+
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// Processes the events that occurred at `time`, in their order (an event's `time` field is
+    /// ignored: they are all at `time`), and returns the chronicles recognised at `time`. A step
+    /// with no events only lets deadlines pass.
+    pub fn step(&mut self, time: Time, events: Vec<Event<O>>) -> Result<Vec<Recognition<O>>, Late> {
+        if let Some(now) = self.now
+            && time < now
+        {
+            self.stats.late_steps += 1;
+            return Err(Late { time, now });
+        }
+        self.now = Some(time);
+        self.prune_log(time);
+        let mut batch: Vec<(Event<O>, u64)> = Vec::with_capacity(events.len());
+        for mut event in events {
+            event.time = time;
+            self.push_occurrence(&mut batch, event);
+        }
+        let mut recognitions = Vec::new();
+        for position in 0..self.order.len() {
+            let c = self.order[position];
+            let done = self.step_chronicle(c, time, &batch);
+            for instance in done {
+                if !self.conditions_hold(c, &instance) {
+                    self.stats.failed_conditions += 1;
+                    continue;
+                }
+                let binding: Vec<O> = instance.binding.into_iter().flatten().collect();
+                let times: Vec<Time> = instance.times.into_iter().map(|t| t.unwrap_or(time)).collect();
+                let source = self.chronicles[c].chronicle.source;
+                self.push_occurrence(&mut batch, Event { source, args: binding.clone(), value: true, time });
+                self.stats.recognitions += 1;
+                recognitions.push(Recognition { chronicle: c, binding, times, valid_time: time });
+            }
+        }
+        self.stats.instances = self.partial.iter().map(Vec::len).sum();
+        self.stats.peak_instances = self.stats.peak_instances.max(self.stats.instances);
+        Ok(recognitions)
+    }
+
+    fn push_occurrence(&mut self, batch: &mut Vec<(Event<O>, u64)>, event: Event<O>) {
+        if self.logged.contains(&event.source) {
+            let history = self.log.entry((event.source, event.args.clone())).or_default();
+            history.entries.push_back((event.time, event.value));
+        }
+        batch.push((event, self.next_occurrence));
+        self.next_occurrence += 1;
+    }
+
+    /// Forgets logged events older than the longest window; the value they leave is the base.
+    fn prune_log(&mut self, time: Time) {
+        let cutoff = time.saturating_sub(self.window);
+        self.log.retain(|_, history| {
+            while let Some(&(t, value)) = history.entries.front() {
+                if t >= cutoff {
+                    break;
+                }
+                history.base = value;
+                history.entries.pop_front();
+            }
+            history.base || !history.entries.is_empty()
+        });
+    }
+
+    /// Expires, extends and starts chronicle `c`'s partial instances with the batch; returns the
+    /// instances it completed.
+    fn step_chronicle(&mut self, c: usize, time: Time, batch: &[(Event<O>, u64)]) -> Vec<Partial<O>> {
+        let compiled = &self.chronicles[c];
+        let partial = &mut self.partial[c];
+        let before = partial.len();
+        partial.retain(|p| p.deadline >= time);
+        self.stats.expired += (before - partial.len()) as u64;
+        for (event, occurrence) in batch {
+            for (node, pattern) in compiled.chronicle.events.iter().enumerate() {
+                if pattern.source != event.source
+                    || pattern.value != event.value
+                    || pattern.args.len() != event.args.len()
+                {
+                    continue;
+                }
+                let existing = partial.len();
+                for i in 0..existing {
+                    if let Some(extended) = extend(compiled, &partial[i], node, event, *occurrence) {
+                        if partial.len() >= self.config.max_instances {
+                            self.stats.refused += 1;
+                            continue;
+                        }
+                        partial.push(extended);
+                    }
+                }
+                let fresh = Partial {
+                    binding: vec![None; compiled.chronicle.params],
+                    times: vec![None; compiled.chronicle.events.len()],
+                    occurrences: vec![None; compiled.chronicle.events.len()],
+                    open: compiled.chronicle.events.len(),
+                    deadline: Time::MAX,
+                };
+                if let Some(started) = extend(compiled, &fresh, node, event, *occurrence) {
+                    if partial.len() >= self.config.max_instances {
+                        self.stats.refused += 1;
+                    } else {
+                        partial.push(started);
+                    }
+                }
+            }
+        }
+        let mut done = Vec::new();
+        let mut i = 0;
+        while i < partial.len() {
+            if partial[i].open == 0 { done.push(partial.swap_remove(i)) } else { i += 1 }
+        }
+        done
+    }
+
+    fn conditions_hold(&self, c: usize, instance: &Partial<O>) -> bool {
+        let chronicle = &self.chronicles[c].chronicle;
+        let time = |node: usize| instance.times[node].unwrap_or(Time::MIN);
+        let objects =
+            |args: &[usize]| -> Vec<O> { args.iter().filter_map(|&a| instance.binding[a].clone()).collect() };
+        for hold in &chronicle.holds {
+            let (t1, t2) = (time(hold.from), time(hold.to));
+            let Some(history) = self.log.get(&(hold.source, objects(&hold.args))) else { return false };
+            let at_start =
+                history.entries.iter().take_while(|(t, _)| *t <= t1).last().map_or(history.base, |e| e.1);
+            let falls = history.entries.iter().any(|&(t, value)| t > t1 && t <= t2 && !value);
+            if !at_start || falls {
+                return false;
+            }
+        }
+        for never in &chronicle.nevers {
+            let (t1, t2) = (time(never.from), time(never.to));
+            let key = (never.pattern.source, objects(&never.pattern.args));
+            if let Some(history) = self.log.get(&key)
+                && history.entries.iter().any(|&(t, value)| t > t1 && t < t2 && value == never.pattern.value)
+            {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// `instance` with `node` matched by `event`, if the binding and the network allow it.
+fn extend<O: Clone + Eq>(
+    compiled: &Compiled,
+    instance: &Partial<O>,
+    node: usize,
+    event: &Event<O>,
+    occurrence: u64,
+) -> Option<Partial<O>> {
+    if instance.times[node].is_some() || instance.occurrences.contains(&Some(occurrence)) {
+        return None;
+    }
+    let pattern: &Pattern = &compiled.chronicle.events[node];
+    let mut binding = instance.binding.clone();
+    for (param, object) in pattern.args.iter().zip(&event.args) {
+        match &binding[*param] {
+            Some(bound) if bound != object => return None,
+            Some(_) => {}
+            None => binding[*param] = Some(object.clone()),
+        }
+    }
+    let consistent = instance
+        .times
+        .iter()
+        .enumerate()
+        .all(|(m, t)| t.is_none_or(|t| compiled.minimal.allows(m, node, event.time.saturating_sub(t))));
+    if !consistent {
+        return None;
+    }
+    let mut times = instance.times.clone();
+    times[node] = Some(event.time);
+    let mut occurrences = instance.occurrences.clone();
+    occurrences[node] = Some(occurrence);
+    let deadline = deadline(compiled, &times);
+    Some(Partial { binding, times, occurrences, open: instance.open - 1, deadline })
+}
+
+/// The latest time at which every open node can still occur: past it the instance is dead.
+fn deadline(compiled: &Compiled, times: &[Option<Time>]) -> Time {
+    let mut deadline = Time::MAX;
+    for (open, _) in times.iter().enumerate().filter(|(_, t)| t.is_none()) {
+        for (m, t) in times.iter().enumerate() {
+            if let (Some(t), Some(upper)) = (t, compiled.minimal.upper(m, open)) {
+                deadline = deadline.min(t.saturating_add(upper));
+            }
+        }
+    }
+    deadline
+}
+
+/// Chronicle indices such that every chronicle comes after those whose recognitions it uses.
+fn dependency_order(chronicles: &[Compiled]) -> Result<Vec<usize>, DependencyCycle> {
+    let by_source: HashMap<SourceId, usize> =
+        chronicles.iter().enumerate().map(|(i, c)| (c.chronicle.source, i)).collect();
+    let uses = |c: &Compiled| -> Vec<usize> {
+        let patterns = c.chronicle.events.iter().chain(c.chronicle.nevers.iter().map(|n| &n.pattern));
+        patterns.filter_map(|p| by_source.get(&p.source).copied()).collect()
+    };
+    let mut order = Vec::with_capacity(chronicles.len());
+    let mut placed = vec![false; chronicles.len()];
+    while order.len() < chronicles.len() {
+        let ready: Vec<usize> = (0..chronicles.len())
+            .filter(|&i| !placed[i] && uses(&chronicles[i]).iter().all(|&d| placed[d] && d != i))
+            .collect();
+        if ready.is_empty() {
+            let stuck = (0..chronicles.len()).filter(|&i| !placed[i]);
+            return Err(DependencyCycle(stuck.map(|i| chronicles[i].chronicle.name.clone()).collect()));
+        }
+        for i in ready {
+            placed[i] = true;
+            order.push(i);
+        }
+    }
+    Ok(order)
+}
