@@ -5,6 +5,8 @@
 //! process's output type; declared streams and their policies; each process's inputs,
 //! parameters and formulas; prediction and forgetting; deployment; the graph and its cycles.
 
+mod chronicle;
+
 use std::collections::BTreeMap;
 
 use kpl_core::{Value, ValueType};
@@ -243,6 +245,7 @@ impl<'a> Checker<'a> {
 
         let (predictions, forget) = self.anchoring(spec);
         let identifications = self.identifications(spec, &drafts);
+        let chronicles = self.chronicles(spec, &drafts);
         let deploy = self.deploy(spec, &drafts, &stream_decls);
         let graph = self.graph(&processes);
 
@@ -259,6 +262,7 @@ impl<'a> Checker<'a> {
             predictions,
             forget,
             identifications,
+            chronicles,
             deploy,
             graph,
         }

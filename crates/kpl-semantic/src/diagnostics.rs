@@ -46,10 +46,18 @@ pub const RESERVED_ATTRIBUTE: &str = "E0155";
 pub const LINK_INPUT_FEEDBACK: &str = "E0156";
 pub const BAD_INTERVAL: &str = "E0160";
 pub const BAD_BOUND: &str = "E0161";
+pub const CHRONICLE_ARGS: &str = "E0170";
+pub const CHRONICLE_INCONSISTENT: &str = "E0171";
+pub const CHRONICLE_UNBOUNDED: &str = "E0172";
+pub const CHRONICLE_UNBOUND_PARAM: &str = "E0173";
+pub const CHRONICLE_CONDITION_ORDER: &str = "E0174";
+pub const CHRONICLE_CYCLE: &str = "E0175";
+pub const CHRONICLE_EMPTY: &str = "E0176";
 pub const UNUSED_STREAM: &str = "W0201";
 pub const UNUSED_OUTPUT: &str = "W0202";
 pub const BARE_BOUND: &str = "W0203";
 pub const UNSET_ATTRIBUTE: &str = "W0204";
+pub const CHRONICLE_NOT_RUN: &str = "W0205";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
@@ -421,4 +429,113 @@ pub fn sink_with_output(span: Span) -> Diagnostic {
     Diagnostic::error(TYPE_MISMATCH, span, "a sink has no output type")
         .with_label("remove this")
         .with_hint("sinks consume streams; write `sink NAME = entry(inputs...)`")
+}
+
+pub fn chronicle_arg_not_param(span: Span, name: &str, params: &[&str]) -> Diagnostic {
+    Diagnostic::error(CHRONICLE_ARGS, span, format!("`{name}` is not a parameter of this chronicle"))
+        .with_label("not a parameter")
+        .with_hint(did_you_mean(name, params).unwrap_or_else(|| {
+            format!("an event's objects are the chronicle's parameters: {}", params.join(", "))
+        }))
+}
+
+pub fn chronicle_arg_count(span: Span, what: &str, name: &str, expected: usize, found: usize) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_ARGS,
+        span,
+        format!("{what} `{name}` takes {expected} object(s), {found} given"),
+    )
+    .with_label("wrong number of objects")
+    .with_hint(format!("give one parameter for each of the {what}'s {expected} object(s), in order"))
+}
+
+pub fn chronicle_arg_type(span: Span, name: &str, found: &str, expected: &str) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_ARGS,
+        span,
+        format!("parameter `{name}` is a `{found}`, but `{expected}` is needed here"),
+    )
+    .with_label("wrong object type")
+    .with_hint(format!("declare `{name}` as a `{expected}` (or a subtype)"))
+}
+
+pub fn chronicle_not_a_monitor(span: Span, name: &str, monitors: &[&str]) -> Diagnostic {
+    Diagnostic::error(UNKNOWN_NAME, span, format!("unknown monitor `{name}`"))
+        .with_label("no monitor is called so")
+        .with_hint(
+            did_you_mean(name, monitors)
+                .unwrap_or_else(|| "declare it with `monitor NAME = forall x: T . ...`".into()),
+        )
+}
+
+/// The constraints on a negative cycle of the distance graph, each labelled.
+pub fn chronicle_inconsistent(span: Span, chronicle: &str, cycle: &[(Span, String)]) -> Diagnostic {
+    let written: Vec<&str> = cycle.iter().map(|(_, text)| text.as_str()).collect();
+    let mut d = Diagnostic::error(
+        CHRONICLE_INCONSISTENT,
+        span,
+        format!("the time constraints of chronicle `{chronicle}` cannot all hold"),
+    )
+    .with_label("never recognised");
+    for (at, _) in cycle {
+        d = d.with_secondary(*at, "on the cycle");
+    }
+    d.with_hint(format!(
+        "these constraints contradict each other (a negative cycle of the distance graph): {}; widen one of them",
+        written.join("; ")
+    ))
+}
+
+pub fn chronicle_unbounded(span: Span, chronicle: &str, first: &str, second: &str) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_UNBOUNDED,
+        span,
+        format!("chronicle `{chronicle}` puts no upper bound on the time between `{first}` and `{second}`"),
+    )
+    .with_label("unbounded")
+    .with_hint(format!(
+        "add a constraint such as `{second} - {first} in [0s, 30s]`: a partial instance waits at most as long as the constraints allow"
+    ))
+}
+
+pub fn chronicle_unbound_param(span: Span, param: &str) -> Diagnostic {
+    Diagnostic::error(CHRONICLE_UNBOUND_PARAM, span, format!("parameter `{param}` appears in no event"))
+        .with_label("never bound")
+        .with_hint("every parameter must be an object of some event, so that a recognition names it")
+}
+
+pub fn chronicle_condition_order(span: Span, from: &str, to: &str) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_CONDITION_ORDER,
+        span,
+        format!("`{to}` may happen before `{from}`, so `from {from} to {to}` is not an interval"),
+    )
+    .with_label("not ordered")
+    .with_hint(format!("add a constraint `{to} - {from} in [0s, ...]`"))
+}
+
+pub fn chronicle_cycle(span: Span, cycle: &[String]) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_CYCLE,
+        span,
+        format!("chronicles recognise each other in a cycle: {}", cycle.join(" -> ")),
+    )
+    .with_label("part of the cycle")
+    .with_hint("a chronicle can use the recognitions of another only if that one does not depend on it")
+}
+
+pub fn chronicle_empty(span: Span, chronicle: &str) -> Diagnostic {
+    Diagnostic::error(CHRONICLE_EMPTY, span, format!("chronicle `{chronicle}` has no events"))
+        .with_label("no `event`")
+        .with_hint("add events such as `event pass = beside(a, b) becomes true`")
+}
+
+pub fn chronicle_not_run(span: Span, chronicle: &str) -> Diagnostic {
+    Diagnostic::warning(
+        CHRONICLE_NOT_RUN,
+        span,
+        format!("chronicle `{chronicle}` is checked, but `kpl run` does not recognise chronicles yet"),
+    )
+    .with_label("checked only")
+    .with_hint("the recognition engine is the kpl-chronicle crate; its runtime adapter is not written yet")
 }

@@ -21,6 +21,8 @@ pub(crate) enum Context {
     Monitor,
     /// A top-down identification: `this` is the sought object.
     Identify,
+    /// A chronicle's predicate or condition: its parameters are objects.
+    Chronicle,
 }
 
 /// Resolves a stream or process name to the type of its samples (monitors only). A monitor names
@@ -284,6 +286,9 @@ impl<'a> FormulaChecker<'a> {
                     "an establish condition talks about `from` (e.g. `from.pos`)"
                 }
                 Context::Monitor => "monitors name streams and quantified variables",
+                Context::Chronicle => {
+                    "a chronicle's predicates talk about its parameters (e.g. `a.speed > 30.0`, `close(a, b)`)"
+                }
                 Context::Identify => {
                     "an identification describes `this`, the object sought (e.g. `this.pos`)"
                 }

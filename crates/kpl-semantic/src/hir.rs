@@ -25,6 +25,8 @@ pub struct Spec {
     pub forget: Forget,
     /// Objects asked for by description (top-down identification).
     pub identifications: Vec<Identification>,
+    /// The checked chronicles, in the order written.
+    pub chronicles: Vec<Chronicle>,
     pub deploy: Option<Deploy>,
     pub graph: ProcessGraph,
 }
@@ -419,4 +421,59 @@ pub struct Edge {
     /// The consumer's input port.
     pub input: String,
     pub policy: Policy,
+}
+
+/// A checked chronicle: parameters with their types, event nodes over event sources, metric
+/// constraints between node indices (microseconds) and conditions. Its network is consistent and
+/// bounded: `window` is the longest time between two of its events.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Chronicle {
+    pub name: String,
+    pub span: Span,
+    /// `(name, object type)`.
+    pub params: Vec<(String, String)>,
+    pub events: Vec<ChronicleEvent>,
+    pub constraints: Vec<kpl_chronicle::stn::Constraint>,
+    pub holds: Vec<ChronicleHold>,
+    pub nevers: Vec<ChronicleNever>,
+    pub window: Time,
+}
+
+/// What a chronicle's event is an occurrence of.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EventSource {
+    /// A predicate over the parameters `args` (those it mentions, in parameter order).
+    Predicate(ast::Expr),
+    /// The verdict of the named monitor for the objects bound to its `forall`s.
+    Monitor(String),
+    /// The recognitions of the named chronicle.
+    Chronicle(String),
+}
+
+/// A node: `source` on the parameters `args` (indices) becomes `value` (recognitions: `true`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChronicleEvent {
+    pub name: String,
+    pub source: EventSource,
+    pub args: Vec<usize>,
+    pub value: bool,
+}
+
+/// `hold FORMULA from e1 to e2`: the predicate over `args` is true from node `from` to node `to`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChronicleHold {
+    pub formula: ast::Expr,
+    pub args: Vec<usize>,
+    pub from: usize,
+    pub to: usize,
+}
+
+/// `never EVENT from e1 to e2`: no such event strictly between nodes `from` and `to`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChronicleNever {
+    pub source: EventSource,
+    pub args: Vec<usize>,
+    pub value: bool,
+    pub from: usize,
+    pub to: usize,
 }
