@@ -26,12 +26,19 @@ pub const FROM: SlotId = 0;
 pub const TO: SlotId = 1;
 pub const THIS: SlotId = 2;
 
+/// The first slot of the streams a condition names (`in_view(cam, to.pos)`): slot `ENV + i` is
+/// the i-th of the engine's stream names ([`link_context`]).
+pub const ENV: SlotId = 3;
+
 /// What a link condition reads at one time stamp.
 #[derive(Debug, Clone, Copy)]
 pub struct LinkState<'a> {
     pub from: &'a Value,
     pub to: Option<&'a Value>,
     pub this: Option<&'a Value>,
+    /// The current values of the streams conditions name, by slot from [`ENV`] (`None`: no
+    /// sample at this state).
+    pub env: &'a [Option<Value>],
 }
 
 impl State for LinkState<'_> {
@@ -40,7 +47,7 @@ impl State for LinkState<'_> {
             FROM => Some(self.from),
             TO => self.to,
             THIS => self.this,
-            _ => None,
+            _ => self.env.get(slot.checked_sub(ENV)? as usize)?.as_ref(),
         }
     }
 }
@@ -115,12 +122,16 @@ fn messages(errors: Vec<CompileError>) -> Vec<String> {
     errors.into_iter().map(|e| e.message).collect()
 }
 
-/// A context with `from`, `to` and `this` (slots 0, 1, 2), time stamps in microseconds and bare
-/// bounds in milliseconds, and the unit's functions.
-pub fn link_context(functions: Vec<Function>) -> Context {
+/// A context with `from`, `to` and `this` (slots 0, 1, 2), the streams conditions name (`env`,
+/// slots from [`ENV`]), time stamps in microseconds and bare bounds in milliseconds, and the
+/// unit's and the host's functions.
+pub fn link_context(functions: Vec<Function>, env: &[Arc<str>]) -> Context {
     let mut context = Context::new(TimeUnit::Us, SPEC_TICK);
     let slots = [context.declare_value("from"), context.declare_value("to"), context.declare_value("this")];
     debug_assert_eq!(slots, [FROM, TO, THIS]);
+    for name in env {
+        context.declare_value(name);
+    }
     for function in functions {
         context.register_function(function);
     }
@@ -143,8 +154,12 @@ fn compile_one(
 }
 
 impl LinkConditions {
-    pub fn compile(link: &hir::Link, functions: Vec<Function>) -> Result<LinkConditions, ConditionError> {
-        let mut context = link_context(functions);
+    pub fn compile(
+        link: &hir::Link,
+        functions: Vec<Function>,
+        env: &[Arc<str>],
+    ) -> Result<LinkConditions, ConditionError> {
+        let mut context = link_context(functions, env);
         let (_, establish) = compile_one(&link.establish, &mut context, "establish")?;
         let (reestablish_mtl, reestablish) = compile_one(&link.reestablish, &mut context, "reestablish")?;
         let (_, maintain) = compile_one(&link.maintain, &mut context, "maintain")?;
@@ -165,7 +180,17 @@ impl LinkConditions {
 /// The description of an identification alone (`this` is an existing object of the type; the
 /// built-in functions only).
 pub fn description_formula(description: &ast::Expr) -> Result<Arc<Formula>, Vec<String>> {
-    lower_and_compile(description, &mut link_context(Vec::new())).map(|(_, formula)| formula)
+    lower_and_compile(description, &mut link_context(Vec::new(), &[])).map(|(_, formula)| formula)
+}
+
+/// The condition of `forget ... after T when C`: `this` is the object, the streams it names are
+/// `env`, and the host's functions are available.
+pub fn forget_formula(
+    condition: &ast::Expr,
+    functions: Vec<Function>,
+    env: &[Arc<str>],
+) -> Result<Arc<Formula>, Vec<String>> {
+    lower_and_compile(condition, &mut link_context(functions, env)).map(|(_, formula)| formula)
 }
 
 /// The gate of a reestablish condition over `from` and `to`: the distance they must be within
@@ -181,7 +206,7 @@ mod tests {
 
     fn gate(text: &str) -> Option<f64> {
         let mut context =
-            link_context(vec![Function::new("on_road", (1, Some(1)), |_| Ok(Value::Bool(true)))]);
+            link_context(vec![Function::new("on_road", (1, Some(1)), |_| Ok(Value::Bool(true)))], &[]);
         let expr = kpl_syntax::parse_formula(text).unwrap();
         let mtl = kpl_mtl::lower(&expr, &mut context).unwrap();
         distance_gate(&mtl, &context)
@@ -216,10 +241,13 @@ mod tests {
     fn link_state_reads_its_slots() {
         let a = Value::Int(1);
         let b = Value::Int(2);
-        let s = LinkState { from: &a, to: Some(&b), this: None };
+        let env = [None, Some(Value::Int(3))];
+        let s = LinkState { from: &a, to: Some(&b), this: None, env: &env };
         assert_eq!(s.value(FROM), Some(&a));
         assert_eq!(s.value(TO), Some(&b));
         assert_eq!(s.value(THIS), None);
+        assert_eq!(s.value(ENV), None);
+        assert_eq!(s.value(ENV + 1), Some(&Value::Int(3)));
         assert_eq!(s.value(9), None);
     }
 }

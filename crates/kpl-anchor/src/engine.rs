@@ -40,7 +40,7 @@ use kpl_syntax::ast;
 
 use crate::branches;
 use crate::change::{Cause, Change, ChangeKind};
-use crate::conditions::{LinkConditions, LinkState, description_formula};
+use crate::conditions::{LinkConditions, LinkState, description_formula, forget_formula};
 use crate::error::{BuildError, IdentifyError, StepError};
 use crate::implementations::Implementations;
 use crate::link::{Condition, LinkIdentification, LinkProcess};
@@ -56,6 +56,9 @@ pub struct AnchorConfig {
     pub implementations: Implementations,
     /// Road networks for link units and models; pre-filled entries are used instead of loading.
     pub networks: Networks,
+    /// The host's functions that conditions may call besides the built-ins and their unit's
+    /// predicates (the runtime's registry: `in_view`, `pixel`, `footprint`).
+    pub functions: Vec<kpl_mtl::Function>,
 }
 
 /// A problem with one object or condition during a step; the step went on without it.
@@ -109,9 +112,19 @@ pub(crate) struct TypeInfo {
     pub links_into: Vec<LinkId>,
     pub model: Option<Arc<dyn PredictionModel>>,
     pub forget: Option<Time>,
+    /// `forget ... after T when C`: the shorter time and the condition on the object's state.
+    pub sooner: Option<Sooner>,
     /// Links of the spec lead into the type, but none of this engine's (they run on another
     /// host): its objects come from snapshots that say whether they were measured.
     pub made_elsewhere: bool,
+}
+
+/// The shorter forget time of a type and its condition (`this` is the object), evaluated on the
+/// object's state at each step (one state of its group per evaluation).
+#[derive(Debug)]
+pub(crate) struct Sooner {
+    pub after: Time,
+    pub group: ProgressorGroup,
 }
 
 /// A pending or completed identification.
@@ -151,6 +164,8 @@ pub(crate) struct StepCtx<'a> {
     pub types: &'a [TypeInfo],
     pub identifications: &'a mut [Identification],
     pub out: &'a mut StepOutput,
+    /// The current values of the streams conditions name (slots from `conditions::ENV`).
+    pub env: &'a [Option<Value>],
 }
 
 /// The anchoring of one spec.
@@ -177,6 +192,9 @@ pub struct Anchoring {
     notes: Vec<String>,
     keys: Vec<ObjectKey>,
     hypotheses: Vec<Record>,
+    /// The streams conditions name, in slot order, and their values at the current step.
+    env_names: Vec<Arc<str>>,
+    env: Vec<Option<Value>>,
 }
 
 impl Anchoring {
@@ -194,7 +212,19 @@ impl Anchoring {
         config: AnchorConfig,
         only: Option<&[String]>,
     ) -> Result<Anchoring, BuildError> {
-        let AnchorConfig { implementations, mut networks } = config;
+        let AnchorConfig { implementations, mut networks, functions } = config;
+        // The streams the conditions name (the links' `env` inputs and the forget conditions'),
+        // one slot each, the same in every condition.
+        let mut env_names: Vec<Arc<str>> = spec
+            .processes
+            .iter()
+            .flat_map(|p| {
+                p.inputs.iter().filter(|i| i.port == "env").map(|i| Arc::from(i.stream.name.as_str()))
+            })
+            .chain(spec.forget.sooner.values().flat_map(|s| s.streams.iter().map(|n| Arc::from(n.as_str()))))
+            .collect();
+        env_names.sort();
+        env_names.dedup();
         let mut types: Vec<TypeInfo> = spec
             .types
             .iter()
@@ -204,6 +234,7 @@ impl Anchoring {
                 links_into: Vec::new(),
                 model: None,
                 forget: spec.forget.after(&record.name),
+                sooner: None,
                 made_elsewhere: false,
             })
             .collect();
@@ -232,12 +263,15 @@ impl Anchoring {
                 })?;
             let unit = factory(&link.via.params, &mut networks)
                 .map_err(|message| BuildError::Implementation { entry: link.via.entry.clone(), message })?;
-            let conditions =
-                LinkConditions::compile(link, unit.functions()).map_err(|e| BuildError::Condition {
+            let mut condition_functions = functions.clone();
+            condition_functions.extend(unit.functions());
+            let conditions = LinkConditions::compile(link, condition_functions, &env_names).map_err(|e| {
+                BuildError::Condition {
                     link: process.name.clone(),
                     condition: e.condition,
                     messages: e.messages,
-                })?;
+                }
+            })?;
             let id = links.len() as LinkId;
             types[to_ty as usize].links_into.push(id);
             let mut link_process = LinkProcess::new(
@@ -316,6 +350,19 @@ impl Anchoring {
         for ty in &mut types {
             if ty.links_into.is_empty() {
                 ty.forget = spec.forget.per_type.get(&*ty.name).copied();
+                continue;
+            }
+            // `forget ... after T when C` for the derived objects of the type.
+            if let Some(sooner) = spec.forget.sooner(&ty.name) {
+                let formula =
+                    forget_formula(&sooner.condition, functions.clone(), &env_names).map_err(|messages| {
+                        BuildError::Condition {
+                            link: format!("forget {}", ty.name),
+                            condition: "when",
+                            messages,
+                        }
+                    })?;
+                ty.sooner = Some(Sooner { after: sooner.after, group: ProgressorGroup::new(formula) });
             }
         }
 
@@ -347,6 +394,8 @@ impl Anchoring {
             notes,
             keys: Vec::new(),
             hypotheses: Vec::new(),
+            env: vec![None; env_names.len()],
+            env_names,
         };
         for ident in &spec.identifications {
             if engine.type_id(&ident.ty).is_some_and(|t| engine.types[t as usize].links_into.is_empty()) {
@@ -575,6 +624,30 @@ impl Anchoring {
     /// type are matched; grounding and forgetting follow. Each link steps in strictly increasing
     /// time; links step independently (a link downstream may lag behind). On error nothing
     /// changes.
+    pub fn step_link_env(
+        &mut self,
+        link: &str,
+        time: Time,
+        from: &[FromSnapshot<'_>],
+        extra: &[Option<Value>],
+        env: &[(&str, &Value)],
+    ) -> Result<StepOutput, StepError> {
+        for (slot, name) in self.env.iter_mut().zip(&self.env_names) {
+            *slot = env.iter().find(|(n, _)| *n == &**name).map(|(_, v)| (*v).clone());
+        }
+        let output = self.step_link(link, time, from, extra);
+        self.env.iter_mut().for_each(|v| *v = None);
+        output
+    }
+
+    /// The names of the streams the spec's conditions read (a link's `env` inputs and forget
+    /// conditions'): what [`Anchoring::step_link_env`] takes.
+    pub fn env_names(&self) -> &[Arc<str>] {
+        &self.env_names
+    }
+
+    /// One step of one link process (see [`Anchoring::step_link_env`] for conditions that name
+    /// streams: here they have no value).
     pub fn step_link(
         &mut self,
         link: &str,
@@ -700,6 +773,7 @@ impl Anchoring {
             types: &self.types,
             identifications: &mut self.identifications,
             out,
+            env: &self.env,
         };
         self.links[l as usize].run(l, &mut cx, from, extra);
         let pruned = std::mem::take(&mut cx.pruned);
@@ -922,7 +996,6 @@ impl Anchoring {
     /// roots of structures nothing feeds), with their structures; ends the prediction of those
     /// fed again. An object due to be forgotten at this step is left alone.
     fn predict(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
-        let forget = self.types[ty as usize].forget;
         let mut keys = std::mem::take(&mut self.keys);
         keys.clear();
         keys.extend(self.store.objects_of(ty));
@@ -949,8 +1022,7 @@ impl Anchoring {
                 }
                 continue;
             }
-            let doomed = !object.anchored
-                && forget.is_some_and(|after| time.saturating_sub(object.last_anchored) >= after);
+            let doomed = !object.anchored && self.forget_due(root, time, out);
             if !doomed {
                 self.predict_structure(root, time, out);
             }
@@ -1190,7 +1262,7 @@ impl Anchoring {
                 let condition =
                     ident.existing.entry(key).or_insert_with(|| Condition::start(&mut ident.description));
                 let Condition::Pending(_) = condition else { continue };
-                let state = LinkState { from: &object.value, to: None, this: Some(&object.value) };
+                let state = LinkState { from: &object.value, to: None, this: Some(&object.value), env: &[] };
                 match condition.step(&mut ident.description, time, &state) {
                     Ok(Some(verdict)) => {
                         if verdict && found.is_none() {
@@ -1255,18 +1327,56 @@ impl Anchoring {
     /// Removes the objects of `ty` not anchored for its forget time.
     /// Also removes those whose prediction ended with a model that forgets them at once.
     fn forget(&mut self, ty: TypeId, time: Time, out: &mut StepOutput) {
-        let after = self.types[ty as usize].forget;
         let mut doomed = Vec::new();
-        for key in self.store.objects_of(ty) {
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.clear();
+        keys.extend(self.store.objects_of(ty));
+        for &key in &keys {
             let Some(object) = self.store.get(key) else { continue };
-            let due =
-                object.forget_now || after.is_some_and(|a| time.saturating_sub(object.last_anchored) >= a);
-            if object.origin == Origin::Derived && !object.anchored && due {
+            if object.origin == Origin::Derived && !object.anchored && self.forget_due(key, time, out) {
                 doomed.push(key);
             }
         }
+        self.keys = keys;
         for key in doomed {
             self.remove_object(key, Cause::Forgotten, time, out);
+        }
+    }
+}
+
+impl Anchoring {
+    /// Whether a derived object that is not anchored is due to be forgotten at `time`: its
+    /// structure's prediction ended with a model that forgets at once, it has not been anchored
+    /// for its type's forget time, or for the shorter time of `forget ... after T when C` and
+    /// its state now satisfies `C` (a condition that cannot be evaluated does not hold, and
+    /// says why in a warning).
+    fn forget_due(&mut self, key: ObjectKey, time: Time, out: &mut StepOutput) -> bool {
+        let Some(object) = self.store.get(key) else { return false };
+        let unanchored_for = time.saturating_sub(object.last_anchored);
+        let info = &mut self.types[object.ty as usize];
+        if object.forget_now || info.forget.is_some_and(|after| unanchored_for >= after) {
+            return true;
+        }
+        let Some(sooner) = info.sooner.as_mut() else { return false };
+        if unanchored_for < sooner.after {
+            return false;
+        }
+        let state = LinkState { from: &object.value, to: None, this: Some(&object.value), env: &self.env };
+        let mut condition = Condition::start(&mut sooner.group);
+        let verdict = condition.step(&mut sooner.group, time, &state);
+        condition.release(&mut sooner.group);
+        match verdict {
+            Ok(verdict) => verdict == Some(true),
+            Err(e) => {
+                out.warn(
+                    time,
+                    format!(
+                        "forget condition of {} on {}: {e}; not forgotten sooner",
+                        info.name, object.symbol
+                    ),
+                );
+                false
+            }
         }
     }
 }

@@ -445,7 +445,7 @@ impl LinkProcess {
             };
             if let Condition::Pending(_) = u.establish {
                 self.stats.condition_steps += 1;
-                let state = LinkState { from: &p_value, to: None, this: None };
+                let state = LinkState { from: &p_value, to: None, this: None, env: cx.env };
                 match u.establish.step(&mut self.groups.by_kind[ESTABLISH], cx.time, &state) {
                     Ok(Some(verdict)) => {
                         if verdict {
@@ -489,7 +489,7 @@ impl LinkProcess {
                 let (hypothesis, to_value, distance) = closest(&o.value, &o.hypotheses, &p_value);
                 self.stats.condition_steps += 1;
                 self.stats.candidate_steps += 1;
-                let state = LinkState { from: &p_value, to: Some(to_value), this: None };
+                let state = LinkState { from: &p_value, to: Some(to_value), this: None, env: cx.env };
                 match candidate.condition.step(reestablish, cx.time, &state) {
                     Ok(Some(verdict)) => {
                         if verdict {
@@ -558,7 +558,7 @@ impl LinkProcess {
                     }
                 };
                 self.stats.condition_steps += 1;
-                let state = LinkState { from: &p_value, to: Some(&made), this: Some(&made) };
+                let state = LinkState { from: &p_value, to: Some(&made), this: Some(&made), env: cx.env };
                 match u.identifications[position].1.step(&mut link_ident.group, cx.time, &state) {
                     Ok(Some(verdict)) => {
                         if verdict {
@@ -585,7 +585,7 @@ impl LinkProcess {
             };
             let Condition::Pending(_) = maintain else { continue };
             self.stats.condition_steps += 1;
-            let state = LinkState { from: &p_value, to: Some(&o_value), this: None };
+            let state = LinkState { from: &p_value, to: Some(&o_value), this: None, env: cx.env };
             match maintain.step(&mut self.groups.by_kind[MAINTAIN], cx.time, &state) {
                 Ok(Some(verdict)) => {
                     if !verdict {

@@ -237,13 +237,22 @@ impl<'a> Checker<'a> {
                 inputs,
             });
         }
+        let (predictions, mut forget) = self.anchoring(spec);
+        Resolver {
+            checker: self,
+            drafts: &drafts,
+            streams: &streams,
+            used: &mut used_streams,
+            producers: &producers,
+            declared_over: &declared_over,
+        }
+        .forget_conditions(spec, &mut forget, &mut processes);
         for (decl, used) in stream_decls.iter().zip(&used_streams) {
             if !used {
                 self.diagnostics.push(diag::unused_stream(decl.name.span, &decl.name.name));
             }
         }
 
-        let (predictions, forget) = self.anchoring(spec);
         let identifications = self.identifications(spec, &drafts);
         let chronicles = self.chronicles(spec, &drafts);
         let deploy = self.deploy(spec, &drafts, &stream_decls);
@@ -1120,7 +1129,13 @@ impl Resolver<'_, '_, '_> {
             if to_bound {
                 vars.push(("to".to_string(), to.clone().unwrap_or(ValueType::Any)));
             }
-            self.formula(&c.formula, Context::Link { to_bound }, vars, provided);
+            // Names other than `from` and `to` are streams, as in monitors (a camera's
+            // `in_view(cam, to.pos)`): they become inputs of the link process (port `env`).
+            for stream in self.scoped_formula(&c.formula, Context::Link { to_bound }, vars, provided) {
+                if !inputs.iter().any(|i| i.port == "env" && i.stream.name == stream.name) {
+                    inputs.push(hir::Input { port: "env".into(), stream });
+                }
+            }
         }
         let mut formula = |kind: ast::ConditionKind| -> ast::Expr {
             match conditions.get(kind.keyword()) {
@@ -1190,17 +1205,93 @@ impl Resolver<'_, '_, '_> {
         (hir::ProcessKind::Monitor(monitor), inputs)
     }
 
-    fn formula(
+    /// Checks a formula whose names besides `vars` are streams (as a monitor's are), and gives
+    /// the streams it reads, in the order it names them.
+    fn scoped_formula(
         &mut self,
         expr: &ast::Expr,
         context: Context,
         vars: Vec<(String, ValueType)>,
         local_functions: &[Function],
-    ) {
-        let Checker { registry, types, diagnostics, .. } = &mut *self.checker;
-        let mut checker = FormulaChecker::new(registry, types, context, vars, diagnostics);
-        checker.local_functions = local_functions;
+    ) -> Vec<hir::StreamRef> {
+        let Checker { registry, types, diagnostics, names, .. } = &mut *self.checker;
+        let mut scope = MonitorScope {
+            refs: BTreeMap::new(),
+            names,
+            drafts: self.drafts,
+            streams: self.streams,
+            used: self.used,
+        };
+        let mut checker = FormulaChecker {
+            streams: Some(&mut scope),
+            local_functions,
+            ..FormulaChecker::new(registry, types, context, vars, diagnostics)
+        };
         checker.check_formula(expr);
+        let used_streams = std::mem::take(&mut checker.used_streams);
+        drop(checker);
+        used_streams.iter().filter_map(|name| scope.refs.get(name).cloned()).collect()
+    }
+
+    /// The conditions of `forget ... after T when C` (`this` is an object of the declaration's
+    /// type, or of any type): checked, their streams recorded, and those streams made inputs
+    /// (port `env`) of the links into the types each condition applies to.
+    fn forget_conditions(
+        &mut self,
+        spec: &ast::Spec,
+        forget: &mut hir::Forget,
+        processes: &mut [hir::Process],
+    ) {
+        for item in &spec.items {
+            let ast::Item::Forget(f) = item else { continue };
+            let Some(sooner) = &f.sooner else { continue };
+            let key = f.ty.as_ref().map(|t| t.name.clone());
+            let this = key
+                .as_deref()
+                .and_then(|ty| self.checker.types.get(ty))
+                .map_or(ValueType::Any, |r| ValueType::Record(r.clone()));
+            let refs = self.scoped_formula(
+                &sooner.condition,
+                Context::Forget,
+                vec![("this".to_string(), this)],
+                &[],
+            );
+            let (Some(after), Some(shorter)) = (f.after.micros(), sooner.after.micros()) else { continue };
+            if shorter >= after {
+                self.checker.diagnostics.push(diag::forget_not_sooner(
+                    sooner.after.span,
+                    &duration_text(&sooner.after),
+                    &duration_text(&f.after),
+                ));
+            }
+            // Only the declaration checked first counts (a second one is reported as a duplicate).
+            if forget.sooner.contains_key(&key) {
+                continue;
+            }
+            forget.sooner.insert(
+                key.clone(),
+                hir::Sooner {
+                    after: shorter,
+                    condition: sooner.condition.clone(),
+                    streams: refs.iter().map(|r| r.name.clone()).collect(),
+                },
+            );
+            for process in processes.iter_mut() {
+                let hir::ProcessKind::Link(link) = &process.kind else { continue };
+                let applies = match &key {
+                    Some(ty) => link.to_type == *ty,
+                    None => !forget.per_type.contains_key(&link.to_type),
+                };
+                if !applies {
+                    continue;
+                }
+                for stream in &refs {
+                    if !process.inputs.iter().any(|i| i.port == "env" && i.stream.name == stream.name) {
+                        process.inputs.push(hir::Input { port: "env".into(), stream: stream.clone() });
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -1255,6 +1346,14 @@ impl StreamScope for MonitorScope<'_, '_> {
             .into_iter()
             .map(str::to_string)
             .collect()
+    }
+}
+
+/// `500ms`, `1.5s`: a duration as written.
+fn duration_text(d: &ast::DurationLit) -> String {
+    match d.value {
+        ast::Number::Int(i) => format!("{i}{}", d.unit.suffix()),
+        ast::Number::Float(x) => format!("{x}{}", d.unit.suffix()),
     }
 }
 

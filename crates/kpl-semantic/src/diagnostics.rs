@@ -44,6 +44,8 @@ pub const TO_IN_ESTABLISH: &str = "E0153";
 pub const LINK_INPUT_TYPE: &str = "E0154";
 pub const RESERVED_ATTRIBUTE: &str = "E0155";
 pub const LINK_INPUT_FEEDBACK: &str = "E0156";
+pub const TEMPORAL_IN_FORGET: &str = "E0158";
+pub const FORGET_NOT_SOONER: &str = "E0159";
 pub const BAD_INTERVAL: &str = "E0160";
 pub const BAD_BOUND: &str = "E0161";
 pub const CHRONICLE_ARGS: &str = "E0170";
@@ -358,6 +360,24 @@ pub fn link_input_feedback(span: Span, link: &str) -> Diagnostic {
     )
     .with_label("a link steps at the states of its inputs, and a `feedback` input starts none")
     .with_hint("give the link an input without `feedback` (drop `feedback` from this stream's policy)")
+}
+
+pub fn temporal_in_forget(span: Span) -> Diagnostic {
+    Diagnostic::error(TEMPORAL_IN_FORGET, span, "a forget condition cannot use a temporal operator")
+        .with_label("the condition is evaluated on the object's state at each step")
+        .with_hint(
+            "describe the state (`in_view(cam, this.pos)`); the time since the object was last anchored is the `after` duration",
+        )
+}
+
+pub fn forget_not_sooner(span: Span, sooner: &str, after: &str) -> Diagnostic {
+    Diagnostic::error(
+        FORGET_NOT_SOONER,
+        span,
+        format!("`after {sooner} when ...` is not shorter than the forget time {after}"),
+    )
+    .with_label("this condition would never make a difference")
+    .with_hint("give the condition a shorter time than the declaration's first `after`")
 }
 
 pub fn bad_interval(span: Span, lo: &str, hi: &str) -> Diagnostic {

@@ -23,6 +23,9 @@ pub(crate) enum Context {
     Identify,
     /// A chronicle's predicate or condition: its parameters are objects.
     Chronicle,
+    /// The condition of `forget ... after T when C`: `this` is the object, evaluated on its state
+    /// at one step (no temporal operators); names are streams, as in monitors.
+    Forget,
 }
 
 /// Resolves a stream or process name to the type of its samples (monitors only). A monitor names
@@ -100,6 +103,34 @@ impl<'a> FormulaChecker<'a> {
         self.expect_bool(expr, &ty);
     }
 
+    /// A forget condition is about the object's state at one step: a temporal operator there is
+    /// an error.
+    fn state_only(&mut self, expr: &ast::Expr) {
+        if self.context == Context::Forget {
+            self.diagnostics.push(diag::temporal_in_forget(expr.span));
+        }
+    }
+
+    /// What the names of a formula in this context are, for an unknown one.
+    fn context_hint(&self) -> &'static str {
+        match self.context {
+            Context::Link { to_bound: true } => {
+                "link conditions talk about `from` and `to` (e.g. `from.pos`)"
+            }
+            Context::Link { to_bound: false } => {
+                "an establish condition talks about `from` (e.g. `from.pos`)"
+            }
+            Context::Monitor => "monitors name streams and quantified variables",
+            Context::Identify => "an identification describes `this`, the object sought (e.g. `this.pos`)",
+            Context::Chronicle => {
+                "a chronicle's predicates talk about its parameters (e.g. `a.speed > 30.0`, `close(a, b)`)"
+            }
+            Context::Forget => {
+                "a forget condition talks about `this`, the object (e.g. `this.pos`), and streams"
+            }
+        }
+    }
+
     fn expect_bool(&mut self, expr: &ast::Expr, ty: &ValueType) {
         if !matches!(ty, ValueType::Bool | ValueType::Any) {
             let hint = match ty {
@@ -146,12 +177,14 @@ impl<'a> FormulaChecker<'a> {
                 ValueType::Bool
             }
             ExprKind::Temporal { interval, body, .. } => {
+                self.state_only(expr);
                 self.interval(interval.as_ref());
                 let t = self.expr(body);
                 self.expect_bool(body, &t);
                 ValueType::Bool
             }
             ExprKind::Until { interval, lhs, rhs } => {
+                self.state_only(expr);
                 self.interval(interval.as_ref());
                 for side in [lhs, rhs] {
                     let t = self.expr(side);
@@ -268,8 +301,16 @@ impl<'a> FormulaChecker<'a> {
                 None => {
                     let mut names = scope.stream_names();
                     names.extend(self.vars.iter().map(|(n, _)| n.clone()));
+                    if matches!(self.context, Context::Link { .. }) {
+                        names.extend(["from".to_string(), "to".to_string()]);
+                    }
                     let names: Vec<&str> = names.iter().map(String::as_str).collect();
-                    self.diagnostics.push(diag::unknown_name(first.span, "stream", &first.name, &names));
+                    let what = if self.context == Context::Monitor { "stream" } else { "name" };
+                    let mut d = diag::unknown_name(first.span, what, &first.name, &names);
+                    if d.hint.is_none() && self.context != Context::Monitor {
+                        d = d.with_hint(self.context_hint());
+                    }
+                    self.diagnostics.push(d);
                     return ValueType::Any;
                 }
             }
@@ -278,21 +319,7 @@ impl<'a> FormulaChecker<'a> {
             if matches!(self.context, Context::Link { .. }) {
                 names.extend(["from", "to"]);
             }
-            let context_hint = match self.context {
-                Context::Link { to_bound: true } => {
-                    "link conditions talk about `from` and `to` (e.g. `from.pos`)"
-                }
-                Context::Link { to_bound: false } => {
-                    "an establish condition talks about `from` (e.g. `from.pos`)"
-                }
-                Context::Monitor => "monitors name streams and quantified variables",
-                Context::Chronicle => {
-                    "a chronicle's predicates talk about its parameters (e.g. `a.speed > 30.0`, `close(a, b)`)"
-                }
-                Context::Identify => {
-                    "an identification describes `this`, the object sought (e.g. `this.pos`)"
-                }
-            };
+            let context_hint = self.context_hint();
             let mut d = diag::unknown_name(first.span, "name", &first.name, &names);
             if d.hint.is_none() {
                 d = d.with_hint(context_hint);

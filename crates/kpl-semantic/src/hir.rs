@@ -382,12 +382,37 @@ pub struct Identification {
 pub struct Forget {
     pub default: Option<Time>,
     pub per_type: BTreeMap<String, Time>,
+    /// The shorter times with their conditions (`forget after 5s, after 1s when C`), by the
+    /// declaration they belong to: `None` the default one, else the type's own.
+    pub sooner: BTreeMap<Option<String>, Sooner>,
+}
+
+/// `after T when C` of a forget declaration: an object that has not been anchored for `T` and
+/// whose state at a step satisfies `C` is forgotten at that step.
+#[derive(Debug, Clone)]
+pub struct Sooner {
+    pub after: Time,
+    /// A formula about `this` (the object, as a record of its type) and the streams it names.
+    pub condition: ast::Expr,
+    /// The stream names the condition reads: inputs (port `env`) of every link into the types
+    /// it applies to.
+    pub streams: Vec<String>,
 }
 
 impl Forget {
     /// The forget time of a type: its own, else the default.
     pub fn after(&self, ty: &str) -> Option<Time> {
         self.per_type.get(ty).copied().or(self.default)
+    }
+
+    /// The shorter time and condition of a type: those of its own declaration when it has one,
+    /// else the default declaration's.
+    pub fn sooner(&self, ty: &str) -> Option<&Sooner> {
+        if self.per_type.contains_key(ty) {
+            self.sooner.get(&Some(ty.to_string()))
+        } else {
+            self.sooner.get(&None)
+        }
     }
 }
 

@@ -233,6 +233,12 @@ impl UavTrackerSim {
         self.period_us
     }
 
+    /// The tracker's footprint in world coordinates at a frame's valid time `time` (`None`: it
+    /// sees the whole network).
+    pub fn footprint_at(&self, time: Time) -> Option<Vec<kpl_roads::geom::Point>> {
+        self.camera.footprint_at(time.saturating_sub(self.start))
+    }
+
     /// The valid time of the frame [`UavTrackerSim::next_frame`] will return.
     pub fn next_frame_time(&self) -> Time {
         self.start.saturating_add(self.elapsed(self.next_index))

@@ -108,6 +108,8 @@ struct Shared {
     spec_dir: std::path::PathBuf,
     /// The link units and prediction models of the registry the run was built from.
     implementations: Implementations,
+    /// The registry's formula functions (the camera's `in_view`, ...) for conditions.
+    functions: Vec<kpl_mtl::Function>,
     /// The links built for this run.
     links: Vec<String>,
     engine: Option<Anchoring>,
@@ -120,12 +122,14 @@ impl SharedHandle {
     fn get(ctx: &mut BuildContext<'_>) -> SharedHandle {
         let (spec, spec_dir) = (ctx.spec, ctx.spec_dir);
         let implementations = ctx.registry.extension::<Implementations>().cloned().unwrap_or_default();
+        let functions = ctx.registry.functions().to_vec();
         ctx.shared
             .get_or_insert_with(|| {
                 SharedHandle(Arc::new(Mutex::new(Shared {
                     spec: spec.clone(),
                     spec_dir: spec_dir.to_path_buf(),
                     implementations,
+                    functions,
                     links: Vec::new(),
                     engine: None,
                 })))
@@ -144,6 +148,7 @@ impl Shared {
             let config = AnchorConfig {
                 implementations: self.implementations.clone(),
                 networks: Networks::default().with_base_dir(&self.spec_dir),
+                functions: self.functions.clone(),
             };
             let engine = Anchoring::from_spec_links(&self.spec, config, Some(&self.links))
                 .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
@@ -187,6 +192,8 @@ enum Port {
     From(Arc<str>),
     /// The link unit's extra input of this index.
     Extra(usize),
+    /// A stream its conditions or the forget conditions of its type name, by that name.
+    Env(Arc<str>),
 }
 
 /// A link process of the runtime: a synchronized unit over its input streams.
@@ -229,6 +236,7 @@ impl Unit for RuntimeLinkProcess {
         let Trigger::State = input.trigger else { return Ok(()) };
         let mut from = Vec::new();
         let mut extra = vec![None; self.n_extra];
+        let mut env = Vec::new();
         for (port, sample) in self.ports.iter().zip(input.values) {
             let Some(sample) = sample else { continue };
             match port {
@@ -236,12 +244,13 @@ impl Unit for RuntimeLinkProcess {
                     from.push(FromSnapshot { stream, valid: sample.valid, objects: &sample.value })
                 }
                 Port::Extra(i) => extra[*i] = Some(sample.value.clone()),
+                Port::Env(name) => env.push((&**name, &sample.value)),
             }
         }
         let mut shared = self.shared.lock()?;
         let engine = shared.engine()?;
         let output = engine
-            .step_link(&self.name, input.valid, &from, &extra)
+            .step_link_env(&self.name, input.valid, &from, &extra, &env)
             .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
         let objects = engine
             .link_to_type(&self.name)
@@ -281,6 +290,8 @@ fn build_link(ctx: &mut BuildContext<'_>) -> Result<Box<dyn kpl_runtime::process
         .map(|i| {
             if i.port == "from" {
                 Port::From(Arc::from(i.stream.name.as_str()))
+            } else if i.port == "env" {
+                Port::Env(Arc::from(i.stream.name.as_str()))
             } else {
                 n_extra += 1;
                 Port::Extra(n_extra - 1)

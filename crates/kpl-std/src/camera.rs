@@ -619,6 +619,9 @@ impl Source for UavCamera {
             )
             .map_err(|e| ProcessError::failed(e.to_string()))?;
             let prefix = self.params.percept_prefix.clone();
+            // The occluders as `sim.uav_tracker`'s `view` gives them (the image's own footprint
+            // is the `camera`'s, `in_view`): for `visible(view, this)` in forget conditions.
+            let view = crate::tracker::view_value(None, &crate::tracker::occluders_value(sim.occluders()));
             while !sim.finished() {
                 if !ctx.wait_until(sim.next_frame_time()).await {
                     break;
@@ -632,6 +635,7 @@ impl Source for UavCamera {
                     ctx.emit_port(1, frame.time, pose_record(&image.reported_pose)).await;
                 }
                 ctx.emit_port(2, frame.time, camera_truth(&frame, &prefix)).await;
+                ctx.emit_port(3, frame.time, view.clone()).await;
                 if ctx.unconsumed() {
                     break;
                 }
@@ -664,7 +668,8 @@ fn uav_camera_entry() -> Entry {
     )
     .output(TypeReq::Objects(vec![("box".into(), ValueType::List(Box::new(ValueType::Float))), ("pos".into(), ValueType::Vec2)]))
     .port("pose", TypeReq::Any, "the pose the UAV reports at each frame (with GPS and attitude noise): `position` [x, y, z] metres, `attitude` [roll, pitch, yaw] and `gimbal` [pan, tilt] degrees")
-    .port("truth", TypeReq::Any, "ground truth per frame: every vehicle (as `sim.uav_tracker`'s), `visible`, `in_view` (in the image), `seen_as` and, in view, its true `box`");
+    .port("truth", TypeReq::Any, "ground truth per frame: every vehicle (as `sim.uav_tracker`'s), `visible`, `in_view` (in the image), `seen_as` and, in view, its true `box`")
+    .port("view", TypeReq::Any, "the occluders per frame (`footprint` empty: the image's is the camera's), as `sim.uav_tracker`'s `view`, for `visible(view, pos)`");
     for info in kpl_sim::Params::describe().into_iter().filter(|i| !WORLD_ONLY.contains(&i.name)) {
         entry = entry.param(crate::tracker::param_from_info(&info));
     }

@@ -1,7 +1,9 @@
 //! `source NAME : TYPE = sim.uav_tracker(...)`: one snapshot per tracker frame of the percepts it
 //! currently sees, as records `{id: "vp3", pos, vel, size}`; the `truth` output carries the
 //! ground truth of the same frame (every vehicle, whether the camera could see it, and which
-//! percept sees it; docs/simulator.md, "Ground truth records").
+//! percept sees it; docs/simulator.md, "Ground truth records"); the `view` output what it could
+//! see in that frame (its footprint and occluders), which the function `visible(view, pos)` reads
+//! (`forget after 5s, after 1s when visible(view, this)`: docs/anchoring.md, "Forgetting").
 //!
 //! The simulation's seed is mixed with the run's `--seed`, so a run with a fixed seed is
 //! reproducible and different seeds give different traffic. With recorded traffic
@@ -40,6 +42,8 @@ impl Source for Tracker {
                 .map_err(|e| ProcessError::failed(e.to_string()))?,
             };
             let mut sim = sim;
+            // The occluders do not change during a run: one value, shared by every frame's view.
+            let occluders = occluders_value(sim.occluders());
             loop {
                 if sim.finished() {
                     break;
@@ -60,6 +64,7 @@ impl Source for Tracker {
                     .collect();
                 ctx.emit(frame.time, Value::List(percepts.into())).await;
                 ctx.emit_port(1, frame.time, truth(&frame, prefix)).await;
+                ctx.emit_port(2, frame.time, view_value(sim.footprint_at(frame.time), &occluders)).await;
                 if ctx.unconsumed() {
                     break;
                 }
@@ -73,6 +78,92 @@ impl Source for Tracker {
     fn ends_by_itself(&self) -> bool {
         self.params.traffic_file.is_some()
     }
+}
+
+/// The occluders as a list of records `{area: list<vec2>, roads: list<int>}` (`roads` empty:
+/// it hides everything under it; else only what is on those roads).
+pub(crate) fn occluders_value(occluders: &kpl_roads::Occluders) -> Value {
+    let list: Vec<Value> = occluders
+        .list()
+        .iter()
+        .map(|o| {
+            let area: Vec<Value> = o.area.iter().map(|p| Value::vec2(p[0], p[1])).collect();
+            let roads: Vec<Value> = o.roads.iter().map(|r| Value::Int(i64::from(r.0))).collect();
+            Value::Record(Arc::new(kpl_core::Record {
+                id: None,
+                fields: vec![
+                    ("area".into(), Value::List(area.into())),
+                    ("roads".into(), Value::List(roads.into())),
+                ],
+            }))
+        })
+        .collect();
+    Value::List(list.into())
+}
+
+/// What the tracker could see in a frame: `{footprint: list<vec2>, occluders}` (an empty
+/// footprint: the whole network).
+pub(crate) fn view_value(footprint: Option<Vec<kpl_roads::geom::Point>>, occluders: &Value) -> Value {
+    let corners: Vec<Value> = footprint.unwrap_or_default().iter().map(|p| Value::vec2(p[0], p[1])).collect();
+    Value::Record(Arc::new(kpl_core::Record {
+        id: None,
+        fields: vec![
+            ("footprint".into(), Value::List(corners.into())),
+            ("occluders".into(), occluders.clone()),
+        ],
+    }))
+}
+
+/// `visible(view, pos)`: whether a tracker's `view` sample shows a position: inside the footprint
+/// (an empty one is everything) and under no occluder. `pos` is a vec2, or an object with `pos`;
+/// an occluder that hides only some roads (a bridge hides the road below it) hides an object on
+/// one of them, and one whose road is not known (no `road`, or -1): negative information is only
+/// taken where the object should surely be visible.
+fn visible(args: &[Value]) -> Result<Value, String> {
+    let Value::Record(view) = &args[0] else {
+        return Err(format!("visible needs a tracker's `view` sample, found {}", args[0].kind()));
+    };
+    let (pos, road) = match &args[1] {
+        Value::Vec2(p) => (*p, None),
+        Value::Record(r) => match r.get("pos") {
+            Some(Value::Vec2(p)) => (*p, r.get("road").and_then(Value::as_i64).filter(|r| *r >= 0)),
+            _ => return Err("visible needs a position (vec2) or an object with `pos`".into()),
+        },
+        other => return Err(format!("visible needs a position (vec2), found {}", other.kind())),
+    };
+    let points = |v: Option<&Value>| -> Result<Vec<[f64; 2]>, String> {
+        match v {
+            Some(Value::List(items)) => items
+                .iter()
+                .map(|p| match p {
+                    Value::Vec2(p) => Ok(*p),
+                    _ => Err("visible: a view's polygons are lists of vec2".to_string()),
+                })
+                .collect(),
+            _ => Err("visible: the view lacks `footprint` or an occluder's `area`".into()),
+        }
+    };
+    let footprint = points(view.get("footprint"))?;
+    if footprint.len() >= 3 && !kpl_roads::geom::point_in_polygon(pos, &footprint) {
+        return Ok(Value::Bool(false));
+    }
+    let Some(Value::List(occluders)) = view.get("occluders") else {
+        return Err("visible: the view lacks `occluders`".into());
+    };
+    for occluder in occluders.iter() {
+        let Value::Record(o) = occluder else { continue };
+        let area = points(o.get("area"))?;
+        let hides_this = match o.get("roads") {
+            Some(Value::List(roads)) if !roads.is_empty() => {
+                road.is_none_or(|r| roads.iter().any(|x| x.as_i64() == Some(r)))
+            }
+            _ => true,
+        };
+        if hides_this && kpl_roads::geom::point_in_polygon(pos, &area) {
+            return Ok(Value::Bool(false));
+        }
+    }
+    Ok(Value::Bool(true))
 }
 
 /// The ground truth of a frame: every vehicle's record (`CarState::to_record`) with `visible`
@@ -191,6 +282,20 @@ pub(crate) fn register(registry: &mut kpl_runtime::Registry) {
         "truth",
         TypeReq::Any,
         "ground truth per frame: every vehicle (id, pos, vel, heading, speed, road, lane, node, length, width), `visible`, and `seen_as` the percept that sees it",
+    )
+    .port(
+        "view",
+        TypeReq::Any,
+        "what the tracker could see per frame: `footprint` (list<vec2>, empty: everything) and `occluders` (`area`, `roads`); read with `visible(view, pos)`",
+    );
+    registry.add_function(
+        kpl_semantic::registry::Function::new(
+            "visible",
+            vec![ValueType::Any, ValueType::Any],
+            ValueType::Bool,
+            "whether a simulated tracker's `view` sample shows a position (or an object's `pos`, on its `road`): in the footprint and under no occluder",
+        ),
+        kpl_mtl::Function::new("visible", (2, Some(2)), visible),
     );
     for info in Params::describe() {
         entry = entry.param(param_from_info(&info));

@@ -376,11 +376,24 @@ pub struct PredictDecl {
     pub span: Span,
 }
 
-/// `forget after 30s` (all types) or `forget WorldObject after 10s`.
+/// `forget after 30s` (all types) or `forget WorldObject after 10s`, optionally with a shorter
+/// time while a condition about the object holds (`forget after 5s, after 1s when C`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ForgetDecl {
     pub ty: Option<Ident>,
     pub after: DurationLit,
+    /// `after T when C`: an object whose state satisfies `C` (a formula about `this`, the object,
+    /// and named streams) is forgotten once it has not been anchored for `T`.
+    pub sooner: Option<ForgetSooner>,
+    #[serde(skip)]
+    pub span: Span,
+}
+
+/// The `after T when C` part of a forget declaration.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ForgetSooner {
+    pub after: DurationLit,
+    pub condition: Expr,
     #[serde(skip)]
     pub span: Span,
 }

@@ -169,6 +169,12 @@ impl Formatter<'_> {
                 }
                 self.out.push_str("after ");
                 duration(&mut self.out, &decl.after);
+                if let Some(sooner) = &decl.sooner {
+                    self.out.push_str(", after ");
+                    duration(&mut self.out, &sooner.after);
+                    self.out.push_str(" when ");
+                    expr(&mut self.out, &sooner.condition, 0);
+                }
                 self.end_line(decl.span.end);
             }
             ast::Item::Identify(decl) => {

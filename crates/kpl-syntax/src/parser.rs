@@ -418,6 +418,7 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::w_block => "`block`",
         Rule::w_drop => "`drop`",
         Rule::w_oldest => "`oldest`",
+        Rule::w_when => "`when`",
         Rule::w_feedback => "`feedback`",
         Rule::link_decl => "a link specification",
         Rule::link_input => "`input` and a stream",
@@ -425,6 +426,7 @@ fn rule_name(rule: Rule) -> &'static str {
         Rule::condition_kind => "`establish`, `reestablish` or `maintain`",
         Rule::predict_decl => "a prediction model",
         Rule::forget_decl => "a forget declaration",
+        Rule::forget_sooner => "`, after DURATION when CONDITION`",
         Rule::monitor_decl => "a monitor",
         Rule::kw_chronicle => "`chronicle`",
         Rule::chronicle_decl => "a chronicle `chronicle NAME(x: Type, ...) { ... }`",
@@ -940,16 +942,35 @@ impl<'d> Converter<'d> {
         let mut decl = ast::ForgetDecl {
             ty: None,
             after: ast::DurationLit { value: ast::Number::Int(0), unit: kpl_core::TimeUnit::S, span },
+            sooner: None,
             span,
         };
         for p in pair.into_inner() {
             match p.as_rule() {
                 Rule::ident => decl.ty = Some(self.ident(p)),
                 Rule::duration => decl.after = self.duration(p),
+                Rule::forget_sooner => decl.sooner = Some(self.forget_sooner(p)),
                 _ => {}
             }
         }
         decl
+    }
+
+    fn forget_sooner(&mut self, pair: Pair<'_, Rule>) -> ast::ForgetSooner {
+        let span = self.span(&pair);
+        let mut sooner = ast::ForgetSooner {
+            after: ast::DurationLit { value: ast::Number::Int(0), unit: kpl_core::TimeUnit::S, span },
+            condition: ast::Expr { kind: ast::ExprKind::Bool(true), span },
+            span,
+        };
+        for p in pair.into_inner() {
+            match p.as_rule() {
+                Rule::duration => sooner.after = self.duration(p),
+                Rule::expr => sooner.condition = self.expr(p),
+                _ => {}
+            }
+        }
+        sooner
     }
 
     fn identify_decl(&mut self, pair: Pair<'_, Rule>) -> ast::IdentifyDecl {
