@@ -318,6 +318,7 @@ source markers : list<VisionPercept> = ros2.replay(
   identity: "id",
   map: ["pos = pose.position", "size = scale.x"],
 )
+sink tracks = file.jsonl(markers, path: "tracks.jsonl")
 "#,
     )
     .unwrap();

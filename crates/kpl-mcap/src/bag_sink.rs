@@ -10,7 +10,8 @@
 //!   map: ["ns = symbol", "id = number", "pose.position = pos", "scale.x = size"])
 //! ```
 //!
-//! The bag is written as samples arrive (uncompressed MCAP chunks, as rosbag2 writes them); at
+//! The bag is written as samples arrive (uncompressed MCAP chunks, as rosbag2 writes them,
+//! closed every second of log time, so a killed run leaves the chunks before its last); at
 //! the end of the run, Ctrl-C and SIGTERM included, its last chunk, summary and `metadata.yaml`
 //! are written when the last of its sinks ends. Works in simulated time too: nothing is
 //! published.
