@@ -348,16 +348,16 @@ sink tracks = file.jsonl(markers, path: "tracks.jsonl")
             .unwrap()
             .iter()
             .find(|p| p["process"] == "markers")
-            .unwrap()
-            .clone();
+            .cloned()
+            .unwrap_or_default(); // left out of the summary when it has nothing to report
         let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
         if flip {
-            assert_eq!((replayed, process["malformed"].as_u64()), (0, Some(61)), "{process}");
+            assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (0, 61), "{process}");
             let example = process["malformed_examples"][0]["error"].as_str().unwrap();
             assert!(example.contains(&recorded) && example.contains(&hashes[0]), "{example}");
             assert!(said.contains(&recorded) && said.contains(&hashes[0]), "{said}");
         } else {
-            assert_eq!((replayed, process["malformed"].as_u64()), (61, Some(0)), "{process}");
+            assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (61, 0), "{process}");
             // The bag's stamps are dates: 30 s of simulated time from the first one.
             assert!(
                 said.contains(
