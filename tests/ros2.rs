@@ -206,7 +206,7 @@ fn rosbag2_of_rosbags_converts_to_json_lines() {
 /// percept at its `header.stamp`, and the cars come out. The run's recording then goes into a
 /// rosbag2 bag through markers.kpl's ros2.publish sinks (`kpl convert`), which rosbags and
 /// mcap-ros2-support read: a MarkerArray and a Detection3DArray per sample of the cars, equal to
-/// them.
+/// them; and so is the bag the run wrote as it went (replay.kpl's `ros2.bag` sinks).
 #[test]
 fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     let Some(python) = python("rosbags, mcap-ros2-support") else { return };
@@ -278,4 +278,117 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
         String::from_utf8_lossy(&read.stdout),
         String::from_utf8_lossy(&read.stderr)
     );
+
+    // The bag the run wrote itself (`ros2.bag` sinks of replay.kpl, the same mappings), read the
+    // same way.
+    assert!(out.join("cars/metadata.yaml").is_file() && out.join("cars/cars_0.mcap").is_file());
+    let read = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("read")
+        .arg(out.join("cars"))
+        .arg(out.join("tracks.jsonl"))
+        .output()
+        .unwrap();
+    assert!(
+        read.status.success(),
+        "the run's own bag: {}{}",
+        String::from_utf8_lossy(&read.stdout),
+        String::from_utf8_lossy(&read.stderr)
+    );
+}
+
+/// The type hash a bag records for a topic (`topic_type_hash` in its MCAP channel, as `ros2 bag
+/// record` writes it from Jazzy on) is compared with the declared type's: the bag of rosbags
+/// with the hash rosbags computes for MarkerArray replays whole, the same bag with a hash one
+/// digit off has every message counted as malformed, the error naming both hashes. The run's
+/// summary counts simulated time from the bag's first stamp, a date.
+#[test]
+fn a_bag_recorded_with_another_type_hash_is_refused_message_by_message() {
+    let Some(python) = python("rosbags, mcap") else { return };
+    let dir = common::fresh_dir("ros2", "type-hash");
+    let spec = dir.join("replay.kpl");
+    std::fs::write(
+        &spec,
+        r#"type VisionPercept symbol vp { pos: vec2, size: float }
+source markers : list<VisionPercept> = ros2.replay(
+  path: "bag.mcap",
+  topic: "/tracker/markers",
+  type: "visualization_msgs/msg/MarkerArray",
+  each: "markers",
+  identity: "id",
+  map: ["pos = pose.position", "size = scale.x"],
+)
+sink tracks = file.jsonl(markers, path: "tracks.jsonl")
+"#,
+    )
+    .unwrap();
+    let script = root().join("tests/rosbag2_oracle.py");
+    let mut hashes = Vec::new();
+    for (case, flip) in [("same", false), ("flipped", true)] {
+        let made = std::process::Command::new(&python)
+            .arg(&script)
+            .arg("hash")
+            .arg(root().join("specs/ros2/tracker/tracker.mcap"))
+            .arg(dir.join("bag.mcap"))
+            .args(flip.then_some("--flip"))
+            .output()
+            .unwrap();
+        assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+        let made: Value = serde_json::from_slice(&made.stdout).unwrap();
+        let recorded = made["/tracker/markers"].as_str().unwrap().to_string();
+        hashes.push(recorded.clone());
+        let out = dir.join(case);
+        let run = common::kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let said = String::from_utf8_lossy(&run.stderr).to_string();
+        assert!(run.status.success(), "{said}");
+        let summary: Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        let process = summary["summary"]["processes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["process"] == "markers")
+            .cloned()
+            .unwrap_or_default(); // left out of the summary when it has nothing to report
+        let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
+        if flip {
+            assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (0, 61), "{process}");
+            let example = process["malformed_examples"][0]["error"].as_str().unwrap();
+            assert!(example.contains(&recorded) && example.contains(&hashes[0]), "{example}");
+            assert!(said.contains(&recorded) && said.contains(&hashes[0]), "{said}");
+        } else {
+            assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (61, 0), "{process}");
+            // The bag's stamps are dates: 30 s of simulated time from the first one.
+            assert!(
+                said.contains(
+                    "after 30.000 s simulated time from 2023-11-14T22:13:20.000Z (the first sample)"
+                ),
+                "{said}"
+            );
+        }
+    }
+}
+
+/// `kpl bench ros2 --quick` (two processes on loopback: kpl's ROS 2 path against bare zenoh
+/// with the same CDR bytes) completes and every message of every throughput run arrives, for
+/// the PoseStamped and the 100-marker MarkerArray; no timing is asserted.
+#[test]
+fn the_ros2_benchmark_runs_and_every_message_arrives() {
+    let run = common::kpl(&["bench", "ros2", "--quick", "--format", "json"]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let reports: Value = serde_json::from_slice(&run.stdout).unwrap();
+    let reports = reports.as_array().unwrap();
+    let payloads: Vec<&str> = reports.iter().map(|r| r["payload"].as_str().unwrap()).collect();
+    assert_eq!(payloads, ["pose_stamped", "marker_array"]);
+    for report in reports {
+        let cases = report["cases"].as_array().unwrap();
+        let codes: Vec<&str> = cases.iter().map(|c| c["implementation"].as_str().unwrap()).collect();
+        assert_eq!(codes, ["bare", "kpl"], "{report:#}");
+        for case in cases {
+            assert_eq!(case["lost"], 0, "every message arrives: {case}");
+            assert!(case["samples_per_s"].as_f64().unwrap() > 0.0, "{case}");
+            assert!(case["round_trip_p50_us"].as_f64().unwrap() > 0.0, "{case}");
+        }
+        assert!(report["ratios"][0]["throughput"]["median"].as_f64().unwrap().is_finite(), "{report:#}");
+    }
 }

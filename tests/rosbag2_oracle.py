@@ -4,6 +4,7 @@
     python tests/rosbag2_oracle.py check EXPECTED.jsonl KPL.jsonl
     python tests/rosbag2_oracle.py read KPL_BAG_DIR TRACKS.jsonl
     python tests/rosbag2_oracle.py markers BAG_DIR --fcd FCD --start 100 --seconds 30
+    python tests/rosbag2_oracle.py hash IN.mcap OUT.mcap [--flip]
 
 `write` records a rosbag2 bag in MCAP (rosbags' writer: CDR messages, `ros2msg` schemas,
 metadata.yaml) with random geometry_msgs/msg/PoseStamped messages on /robot/pose and random
@@ -24,6 +25,11 @@ contract of specs/ros2/markers.kpl) for the vehicles of a SUMO recording (FCD): 
 time step, a marker per vehicle (`id` its track id, `pose.position` x and y, `scale.x` 5 m,
 `header.stamp` the step's time from 2023-11-14T22:13:20Z), chunks compressed with zstd. It is
 how specs/ros2/tracker/ was made; it prints the number of messages and markers as JSON.
+`hash` copies an MCAP file of a bag (with the `mcap` package's reader and writer, records as
+they are) and gives each CDR channel the type hash that `ros2 bag record` (Jazzy on) records in
+its channel metadata, `topic_type_hash`: rosbags' RIHS01 hash of the channel's type, or with
+`--flip` that hash with its last hex digit changed (a bag recorded with another definition of
+the type). It prints the hashes by topic as JSON.
 """
 
 import json
@@ -275,7 +281,40 @@ def read(bag, tracks):
     print(f'{len(samples)} samples, {2 * len(samples)} messages equal in rosbags and mcap-ros2-support')
 
 
+def rehash(src, dst, flip):
+    from mcap.reader import make_reader
+    from mcap.writer import Writer as McapWriter
+
+    hashes = {}
+    with open(src, 'rb') as f, open(dst, 'wb') as out:
+        reader = make_reader(f)
+        writer = McapWriter(out)
+        header = reader.get_header()
+        writer.start(profile=header.profile, library='rosbag2_oracle.py')
+        schemas, channels = {}, {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                metadata = dict(channel.metadata)
+                if channel.message_encoding == 'cdr':
+                    digest = TS.hash_rihs01(schema.name)
+                    if flip:
+                        digest = digest[:-1] + ('0' if digest[-1] != '0' else '1')
+                    metadata['topic_type_hash'] = digest
+                    hashes[channel.topic] = digest
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id], metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer.finish()
+    print(json.dumps(hashes))
+
+
 if __name__ == '__main__':
+    if sys.argv[1] == 'hash':
+        rehash(sys.argv[2], sys.argv[3], '--flip' in sys.argv[4:])
+        sys.exit(0)
     if sys.argv[1] == 'read':
         read(sys.argv[2], sys.argv[3])
     elif sys.argv[1] == 'markers':

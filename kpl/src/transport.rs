@@ -113,6 +113,7 @@ pub fn bench(args: BenchArgs) -> ExitCode {
         match report.payload {
             Payload::String => "a string of SIZE bytes",
             Payload::Floats => "a list of SIZE/8 floats",
+            Payload::PoseStamped | Payload::MarkerArray => "a ROS 2 message (kpl bench ros2)",
         },
         report.messages,
         report.round_trips,
@@ -173,4 +174,127 @@ fn peer(task: &str) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+#[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Two processes on 127.0.0.1: this one and a copy of it it starts. For a geometry_msgs/msg/PoseStamped\nand a visualization_msgs/msg/MarkerArray of 100 markers, bare zenoh sends the message's CDR bytes and\nkpl sends KPL values through its ROS 2 path (ros2.publish and ros2.subscribe: mapping, CDR, rmw_zenoh's\nkeys, attachment and liveliness tokens), interleaved; figures are medians over --repeat runs.\nThroughput: messages/s at the receiver. Latency: ping-pong round trips (the other process decodes the\nmessage into a KPL value and publishes it back), p50 and p99.\n\nExample:\n  cargo run --release -p kpl -- bench ros2\n  cargo run --release -p kpl -- bench ros2 --quick"
+)]
+pub struct Ros2BenchArgs {
+    /// Messages per throughput run of a PoseStamped (the MarkerArray sends proportionally fewer
+    /// by size, at least an eighth as many).
+    #[arg(long, default_value_t = 100_000)]
+    messages: usize,
+    /// Round trips per latency run (after a tenth as many to warm up).
+    #[arg(long, default_value_t = 2_000)]
+    round_trips: usize,
+    /// Runs of each case; the figures are medians.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// A short run (1,000 messages, 100 round trips, one run): that everything arrives, not a
+    /// measurement.
+    #[arg(long)]
+    quick: bool,
+    /// Output format: a table, or the reports as JSON.
+    #[arg(long, value_enum, default_value = "text")]
+    format: crate::report::OutputFormat,
+    /// Run as the other process of the benchmark (a task in JSON; started by `kpl bench ros2`).
+    #[arg(long, hide = true)]
+    peer: Option<String>,
+}
+
+/// `kpl bench ros2`: the targets are a throughput of at least 0.8 of bare zenoh's and a
+/// round-trip p50 of at most 1.2 times.
+pub fn bench_ros2(args: Ros2BenchArgs) -> ExitCode {
+    if let Some(task) = &args.peer {
+        return peer(task);
+    }
+    let exe = match std::env::current_exe() {
+        Ok(exe) => exe,
+        Err(err) => {
+            eprintln!("error: cannot find the kpl executable to start the other process: {err}");
+            return ExitCode::from(2);
+        }
+    };
+    let make_peer = |task: &str| {
+        let mut command = std::process::Command::new(&exe);
+        command.args(["bench", "ros2", "--peer", task]);
+        command
+    };
+    let (messages, round_trips, repeat) = if args.quick {
+        (1_000, 100, 1)
+    } else {
+        (args.messages.max(2), args.round_trips.max(1), args.repeat.max(1))
+    };
+    let mut reports = Vec::new();
+    for payload in [Payload::PoseStamped, Payload::MarkerArray] {
+        let size = match payload.size(0) {
+            Ok(size) => size,
+            Err(err) => {
+                eprintln!("error: {err}");
+                return ExitCode::from(1);
+            }
+        };
+        let options = BenchOptions { sizes: vec![size], messages, round_trips, repeat, payload };
+        match bench::run(&options, &make_peer) {
+            Ok(report) => reports.push(report),
+            Err(err) => {
+                eprintln!("error: {err}");
+                return ExitCode::from(1);
+            }
+        }
+    }
+    if args.format == crate::report::OutputFormat::Json {
+        match serde_json::to_string_pretty(&reports) {
+            Ok(json) => println!("{json}"),
+            Err(err) => eprintln!("error: {err}"),
+        }
+        return ExitCode::SUCCESS;
+    }
+    println!(
+        "ROS 2 over zenoh, two processes on 127.0.0.1: kpl's ROS 2 path against bare zenoh sending the same CDR bytes; {messages} PoseStamped per throughput run, {round_trips} round trips, median of {repeat} run(s)"
+    );
+    println!(
+        "{:<13} {:>8}  {:<5} {:>10} {:>10} {:>16} {:>16} {:>9} {:>6}",
+        "message", "CDR", "code", "messages", "msg/s", "round trip p50", "round trip p99", "received", "lost"
+    );
+    for report in &reports {
+        let name = match report.payload {
+            Payload::MarkerArray => "MarkerArray",
+            _ => "PoseStamped",
+        };
+        for case in &report.cases {
+            let code = match case.implementation {
+                Implementation::Bare => "bare",
+                Implementation::Kpl => "kpl",
+            };
+            let sent = bench::messages_for(report.messages, case.size) * report.repeat;
+            println!(
+                "{name:<13} {:>6} B  {code:<5} {sent:>10} {:>10.0} {:>13.1} us {:>13.1} us {:>9} {:>6}",
+                case.size,
+                case.samples_per_s,
+                case.round_trip_p50_us,
+                case.round_trip_p99_us,
+                sent - case.lost.min(sent),
+                case.lost
+            );
+        }
+    }
+    println!("kpl / bare, median [min - max] over the runs:");
+    for report in &reports {
+        let name = match report.payload {
+            Payload::MarkerArray => "MarkerArray",
+            _ => "PoseStamped",
+        };
+        for r in &report.ratios {
+            let spread = |s: &bench::Spread| format!("{:.2} [{:.2} - {:.2}]", s.median, s.min, s.max);
+            println!(
+                "{name:<13} throughput {} (target >= 0.8)   round trip p50 {} (target <= 1.2)   p99 {}",
+                spread(&r.throughput),
+                spread(&r.round_trip_p50),
+                spread(&r.round_trip_p99)
+            );
+        }
+    }
+    ExitCode::SUCCESS
 }

@@ -112,9 +112,10 @@ impl Unit for Record {
     }
 }
 
-/// Registers `file.mcap` (source and sink) and `ros2.replay`.
+/// Registers `file.mcap` (source and sink), `ros2.replay` and `ros2.bag`.
 pub fn register(registry: &mut Registry) {
     crate::replay_ros2::register(registry);
+    crate::bag_sink::register(registry);
     registry.add_source(
         replay_entry(
             "file.mcap",

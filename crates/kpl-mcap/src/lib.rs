@@ -12,6 +12,7 @@
 //!   percepts as points, verdicts as logs, the [`scene`]'s roads, occluders and camera), written
 //!   beside each stream's own channel so Foxglove's 3D panel draws a recording as it is.
 //! - [`recover`]: what a file cut short by a killed run still holds.
+//! - [`bag_sink`]: the `ros2.bag` sink: a stream recorded as a topic of a rosbag2 bag while the run goes.
 //! - [`replay_ros2`]: the `ros2.replay` source: a bag's topic through a `ros2.subscribe` mapping.
 //! - [`rosbag2`]: rosbag2 bags (a folder with `metadata.yaml` and the MCAP file) of the topics a
 //!   spec's `ros2.publish` sinks declare.
@@ -46,6 +47,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod bag_sink;
 pub mod builtins;
 pub mod foxglove;
 pub mod read;

@@ -59,6 +59,8 @@ enum Encoding {
 struct Channel {
     topic: Arc<str>,
     encoding: Encoding,
+    /// The RIHS01 type hash a rosbag2 channel records (`topic_type_hash`), if it has one.
+    type_hash: Option<String>,
 }
 
 /// A message as JSON, before its value is typed.
@@ -102,6 +104,18 @@ struct Records {
     ros2: Option<kpl_ros2::Definitions>,
     /// Messages read so far (kept or not), for locations.
     messages: u64,
+}
+
+/// The channel metadata in which rosbag2 (Jazzy on: `ros2 bag record` with its MCAP storage)
+/// records a topic's RIHS01 type hash, as `type_description_hash` in `metadata.yaml`.
+pub const TYPE_HASH_KEY: &str = "topic_type_hash";
+
+impl Reader {
+    /// The type hash that the channels of `topic` read so far record (rosbag2's
+    /// `topic_type_hash`; `None` when none does, as in bags of older recorders).
+    pub fn type_hash(&self, topic: &str) -> Option<&str> {
+        self.records.channels.values().filter(|c| &*c.topic == topic).find_map(|c| c.type_hash.as_deref())
+    }
 }
 
 impl std::fmt::Debug for Reader {
@@ -275,7 +289,9 @@ impl Records {
                     } else {
                         Encoding::Other(channel.message_encoding.clone())
                     };
-                    self.channels.insert(channel.id, Channel { topic: channel.topic.into(), encoding });
+                    let type_hash = channel.metadata.get(TYPE_HASH_KEY).filter(|h| !h.is_empty()).cloned();
+                    self.channels
+                        .insert(channel.id, Channel { topic: channel.topic.into(), encoding, type_hash });
                     None
                 }
                 Ok(_) | Err(_) => Some(RawEvent::Malformed {

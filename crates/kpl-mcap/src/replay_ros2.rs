@@ -37,6 +37,9 @@ struct Replay {
     files: Vec<PathBuf>,
     topic: String,
     schema: Arc<Schema>,
+    /// The declared type's RIHS01 hash, and whether the type is the spec's own (`msgs`).
+    hash: String,
+    user_msgs: bool,
     map: InMap,
     clock: ClockKind,
 }
@@ -62,6 +65,19 @@ impl Source for Replay {
                 while let Some(event) = reader.next_raw(&mut filter) {
                     let (valid, available, json, location) = match event {
                         RawEvent::Message { valid, available, value, location, .. } => {
+                            if let Some(recorded) = reader.type_hash(&self.topic)
+                                && recorded != self.hash
+                            {
+                                let error = format!(
+                                    "the bag records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
+                                    self.topic,
+                                    self.schema.name(),
+                                    if self.user_msgs { " from `msgs`" } else { ", shipped" },
+                                    self.hash
+                                );
+                                ctx.malformed(&location, error)?;
+                                continue;
+                            }
                             (valid, available, value, location)
                         }
                         RawEvent::Malformed { location, error } => {
@@ -144,7 +160,9 @@ pub fn register(registry: &mut Registry) {
             let files = bag_files(&path).map_err(|e| ctx.error(format!("cannot read the bag {}: {e}", path.display())))?;
             let name = topic::text(params, "topic");
             kpl_ros2::wire::check_topic(name).map_err(|e| ctx.error(format!("`topic`: {e}")))?;
-            Ok(Box::new(Replay { display: path.display().to_string(), files, topic: name.to_string(), schema, map, clock: ctx.clock }))
+            let user_msgs = !topic::text(params, "msgs").is_empty();
+            let hash = schema.type_hash();
+            Ok(Box::new(Replay { display: path.display().to_string(), files, topic: name.to_string(), schema, hash, user_msgs, map, clock: ctx.clock }))
         },
     );
 }

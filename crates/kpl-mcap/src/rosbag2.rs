@@ -44,6 +44,9 @@ pub struct BagWriter {
     topics: Vec<Topic>,
     start: Option<u64>,
     end: u64,
+    /// The log time of the open chunk's first message: the chunk is closed and flushed once it
+    /// spans [`crate::write::CHUNK_WINDOW`], so a killed run leaves the chunks before it.
+    chunk_start: Option<u64>,
 }
 
 impl std::fmt::Debug for BagWriter {
@@ -72,7 +75,15 @@ impl BagWriter {
         let writer = options
             .create(BufWriter::new(out))
             .map_err(|error| WriteError::Mcap { path: display(), error })?;
-        Ok(BagWriter { dir: dir.to_path_buf(), file, writer, topics: Vec::new(), start: None, end: 0 })
+        Ok(BagWriter {
+            dir: dir.to_path_buf(),
+            file,
+            writer,
+            topics: Vec::new(),
+            start: None,
+            end: 0,
+            chunk_start: None,
+        })
     }
 
     fn mcap_error(&self, error: mcap::McapError) -> WriteError {
@@ -109,7 +120,13 @@ impl BagWriter {
             MessageHeader { channel_id: t.channel, sequence: t.sequence, log_time: ns, publish_time: ns };
         self.start = Some(self.start.map_or(ns, |s| s.min(ns)));
         self.end = self.end.max(ns);
-        self.writer.write_to_known_channel(&header, cdr).map_err(|e| self.mcap_error(e))
+        self.writer.write_to_known_channel(&header, cdr).map_err(|e| self.mcap_error(e))?;
+        let chunk_start = *self.chunk_start.get_or_insert(ns);
+        if ns.saturating_sub(chunk_start) >= crate::write::CHUNK_WINDOW.unsigned_abs() * 1000 {
+            self.chunk_start = None;
+            self.writer.flush().map_err(|e| self.mcap_error(e))?;
+        }
+        Ok(())
     }
 
     /// Writes the rest of the MCAP file (with the `rosbag2` metadata record) and `metadata.yaml`;

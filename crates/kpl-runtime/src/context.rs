@@ -204,15 +204,13 @@ impl SourceContext {
     /// order of the registry entry's ports), valid at `valid`, available now.
     pub async fn emit_port(&mut self, port: usize, valid: Time, value: Value) {
         let now = self.clock.now();
-        self.run_stats.observe_time(now);
-        self.run_stats.count_samples(1);
+        self.run_stats.source_sample(now);
         self.outputs.send(port, Sample::new(valid, now, value)).await;
     }
 
     /// Emits a sample on the default output as it is (replay keeps recorded times).
     pub async fn emit_sample(&mut self, sample: Sample) {
-        self.run_stats.observe_time(sample.available);
-        self.run_stats.count_samples(1);
+        self.run_stats.source_sample(sample.available);
         self.outputs.send(0, sample).await;
     }
 

@@ -166,8 +166,12 @@ pub struct RunReport {
     pub ending: Ending,
     /// The signal that interrupted the run (with [`Ending::Interrupted`]).
     pub signal: Option<Signal>,
-    /// Clock time elapsed (simulated or wall), microseconds.
+    /// Clock time elapsed (simulated or wall), microseconds, from the run's start (0 in
+    /// simulated time).
     pub clock_elapsed: Time,
+    /// The clock time of the first sample a source produced (simulated time jumps there: a
+    /// replayed bag's first stamp, a date), if any.
+    pub first_sample: Option<Time>,
     /// Wall time the run took, microseconds.
     pub wall_elapsed: Time,
     /// Processes that stopped with an error.
@@ -353,6 +357,7 @@ pub async fn execute(
         ending,
         signal,
         clock_elapsed: clock.elapsed(),
+        first_sample: stats.first_sample.get().copied(),
         wall_elapsed: clock.wall_elapsed(),
         failures,
         summary: stats.summary(),
@@ -674,8 +679,7 @@ async fn feed_remote(
         };
         match received {
             Some(Remote::Sample(sample)) => {
-                run_stats.count_samples(1);
-                run_stats.observe_time(sample.available);
+                run_stats.source_sample(sample.available);
                 for sender in &senders {
                     let _ = sender.send(sample.clone()).await;
                 }

@@ -154,6 +154,10 @@ fn count<T>(counter: &AtomicU64, examples: &Mutex<Vec<T>>, example: T) {
     }
 }
 
+/// Times from a year after the UNIX epoch on are dates (a recording's `header.stamp`), not
+/// simulated time from 0.
+pub const DATES: Time = 365 * 24 * 3600 * 1_000_000;
+
 /// Everything counted in a run.
 #[derive(Debug, Default)]
 pub struct RunStats {
@@ -165,6 +169,9 @@ pub struct RunStats {
     pub start: AtomicI64,
     /// The latest clock time any process reported (for the progress line).
     pub now: AtomicI64,
+    /// The clock time of the first sample a source emitted (or another host sent): where a
+    /// replay's simulated time begins when its stamps are dates.
+    pub first_sample: std::sync::OnceLock<Time>,
     /// Samples produced on every stream of this host: by sources, units, links and monitors,
     /// and received from other hosts. Each sample counts once, however many consume it.
     pub samples: AtomicU64,
@@ -203,6 +210,24 @@ impl RunStats {
 
     pub fn observe_time(&self, t: Time) {
         self.now.fetch_max(t, Ordering::Relaxed);
+    }
+
+    /// A source (or another host) produced a sample at clock time `t`: counts it, and keeps the
+    /// time of the first.
+    pub fn source_sample(&self, t: Time) {
+        self.first_sample.get_or_init(|| t);
+        self.observe_time(t);
+        self.count_samples(1);
+    }
+
+    /// Clock time from the run's start to `end`, or from the first sample when that is a date
+    /// in simulated time (a replayed bag's clock jumps to its first stamp): the span a progress
+    /// line reports.
+    pub fn span_to(&self, end: Time, start: Time) -> Time {
+        match self.first_sample.get() {
+            Some(&first) if start == 0 && first >= DATES => end - first,
+            _ => end - start,
+        }
     }
 
     /// A snapshot for the end-of-run summary.

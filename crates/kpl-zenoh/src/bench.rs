@@ -36,6 +36,8 @@ use crate::config::ZenohOptions;
 use crate::session::{HostSession, Sessions};
 use crate::transport::{ZenohReceiver, ZenohSender};
 
+mod ros2;
+
 /// What to measure.
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
@@ -74,12 +76,36 @@ pub enum Payload {
     /// A `list<float>` of `size / 8` numbers (what `size` bytes hold in binary); their JSON text
     /// is about twice as long, and each number is printed and parsed.
     Floats,
+    /// A `geometry_msgs/msg/PoseStamped` through kpl's ROS 2 path (`kpl bench ros2`; [`ros2`]):
+    /// `size` is ignored, bare zenoh sends the message's CDR bytes.
+    #[serde(rename = "pose_stamped")]
+    PoseStamped,
+    /// A `visualization_msgs/msg/MarkerArray` of 100 markers through kpl's ROS 2 path.
+    #[serde(rename = "marker_array")]
+    MarkerArray,
 }
 
 impl Payload {
+    /// What bare zenoh sends: `size` bytes, or the CDR message of a ROS 2 payload.
+    pub fn bytes(self, size: usize) -> Result<Vec<u8>, BenchError> {
+        match ros2::message(self) {
+            Some(message) => message.cdr(),
+            None => Ok(payload(size)),
+        }
+    }
+
+    /// The size of what bare zenoh sends (a ROS 2 payload's CDR message), for `kpl bench ros2`'s
+    /// sizes.
+    pub fn size(self, size: usize) -> Result<usize, BenchError> {
+        Ok(self.bytes(size)?.len())
+    }
+
     fn value(self, size: usize) -> Value {
         match self {
-            Payload::String => Value::str(&String::from_utf8_lossy(&payload(size))),
+            // (a ROS 2 payload goes through `ros2`, never a KPL stream)
+            Payload::String | Payload::PoseStamped | Payload::MarkerArray => {
+                Value::str(&String::from_utf8_lossy(&payload(size)))
+            }
             Payload::Floats => {
                 Value::List((0..size / 8).map(|i| Value::Float(i as f64 * 0.37 - 41.3)).collect())
             }
@@ -88,7 +114,7 @@ impl Payload {
 
     fn ty(self) -> ValueType {
         match self {
-            Payload::String => ValueType::Str,
+            Payload::String | Payload::PoseStamped | Payload::MarkerArray => ValueType::Str,
             Payload::Floats => ValueType::List(Box::new(ValueType::Float)),
         }
     }
@@ -372,8 +398,8 @@ fn throughput(
         // Producer tokens outlive the session's last samples (see `ZenohSender::token`).
         let mut tokens = Vec::new();
         let stream = key("throughput");
-        match implementation {
-            Implementation::Bare => {
+        match (implementation, ros2::message(payload_kind)) {
+            (Implementation::Bare, _) => {
                 let publisher = session
                     .session
                     .declare_publisher(crate::keys::stream(&stream))
@@ -381,12 +407,21 @@ fn throughput(
                     .await
                     .map_err(failed)?;
                 wait_for_match(&publisher).await?;
-                let bytes = payload(size);
+                let bytes = payload_kind.bytes(size)?;
                 for _ in 0..messages {
                     publisher.put(bytes.clone()).await.map_err(failed)?;
                 }
             }
-            Implementation::Kpl => {
+            (Implementation::Kpl, Some(message)) => {
+                let ros2 = crate::ros2::Ros2Session::over(session.session.clone());
+                let mut writer = ros2::Writer::declare(&ros2, ros2::THROUGHPUT, &message).await?;
+                wait_for_match(writer.publisher()).await?;
+                for i in 0..messages {
+                    let (valid, value) = message.sample(i);
+                    writer.send(valid, &value).await?;
+                }
+            }
+            (Implementation::Kpl, None) => {
                 let mut sender =
                     ZenohSender::declare(&session, &stream, "main", BTreeSet::from(["peer".to_string()]))
                         .await
@@ -436,8 +471,8 @@ fn latency(
         let session = open(port, "main").await?;
         let mut tokens = Vec::new();
         let mut times = Vec::with_capacity(round_trips);
-        match implementation {
-            Implementation::Bare => {
+        match (implementation, ros2::message(payload_kind)) {
+            (Implementation::Bare, _) => {
                 let pong = session
                     .session
                     .declare_subscriber(crate::keys::stream(&key("pong")))
@@ -450,7 +485,7 @@ fn latency(
                     .await
                     .map_err(failed)?;
                 wait_for_match(&ping).await?;
-                let bytes = payload(size);
+                let bytes = payload_kind.bytes(size)?;
                 for i in 0..warmup + round_trips {
                     let start = Instant::now();
                     ping.put(bytes.clone()).await.map_err(failed)?;
@@ -464,7 +499,27 @@ fn latency(
                     }
                 }
             }
-            Implementation::Kpl => {
+            (Implementation::Kpl, Some(message)) => {
+                let ros2 = crate::ros2::Ros2Session::over(session.session.clone());
+                let pong = ros2::Reader::declare(&ros2, ros2::PONG, &message, session.options.queue).await?;
+                let mut ping = ros2::Writer::declare(&ros2, ros2::PING, &message).await?;
+                wait_for_match(ping.publisher()).await?;
+                for i in 0..warmup + round_trips {
+                    let (valid, value) = message.sample(i);
+                    let start = Instant::now();
+                    ping.send(valid, &value).await?;
+                    let Some((back, reply)) = pong.recv(IDLE).await? else {
+                        return Err(BenchError::Peer("no pong".into()));
+                    };
+                    if i >= warmup {
+                        times.push(start.elapsed().as_secs_f64() * 1e6);
+                    }
+                    if back != valid || !message.is_sent(&reply) {
+                        return Err(BenchError::Failed(format!("pong {i} is not the message sent")));
+                    }
+                }
+            }
+            (Implementation::Kpl, None) => {
                 let mut pong = ZenohReceiver::declare(&session, &key("pong"), payload_kind.ty(), "main")
                     .await
                     .map_err(failed)?;
@@ -528,8 +583,37 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
     runtime.block_on(async {
         let session = open(task.port, "peer").await?;
         let mut tokens = Vec::new();
-        let report = match (task.role, task.implementation) {
-            (Role::Sub, Implementation::Bare) => {
+        let ros2_message = ros2::message(task.payload);
+        let ros2 = crate::ros2::Ros2Session::over(session.session.clone());
+        let report = match (task.role, task.implementation, &ros2_message) {
+            (Role::Sub, Implementation::Kpl, Some(message)) => {
+                let reader =
+                    ros2::Reader::declare(&ros2, ros2::THROUGHPUT, message, session.options.queue).await?;
+                let mut report = PeerReport::default();
+                let mut first = None;
+                while report.received < task.count {
+                    let Some(sample) = reader.recv(IDLE).await? else { break };
+                    std::hint::black_box(sample);
+                    first.get_or_insert_with(Instant::now);
+                    report.received += 1;
+                }
+                report.elapsed_us = first.map_or(0, |f| f.elapsed().as_micros() as u64);
+                report
+            }
+            (Role::Pong, Implementation::Kpl, Some(message)) => {
+                let mut pong = ros2::Writer::declare(&ros2, ros2::PONG, message).await?;
+                let ping = ros2::Reader::declare(&ros2, ros2::PING, message, session.options.queue).await?;
+                let mut report = PeerReport::default();
+                while report.received < task.count {
+                    let Some((valid, value)) = ping.recv(IDLE).await? else { break };
+                    pong.send(valid, &value).await?;
+                    report.received += 1;
+                }
+                // Let the last pong leave before the session closes.
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                report
+            }
+            (Role::Sub, Implementation::Bare, _) => {
                 let sub = session
                     .session
                     .declare_subscriber(crate::keys::stream(&key("throughput")))
@@ -547,7 +631,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                 report.elapsed_us = first.map_or(0, |f| f.elapsed().as_micros() as u64);
                 report
             }
-            (Role::Sub, Implementation::Kpl) => {
+            (Role::Sub, Implementation::Kpl, _) => {
                 let mut receiver =
                     ZenohReceiver::declare(&session, &key("throughput"), task.payload.ty(), "peer")
                         .await
@@ -574,7 +658,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                 drop(receiver);
                 report
             }
-            (Role::Pong, Implementation::Bare) => {
+            (Role::Pong, Implementation::Bare, _) => {
                 let pong = session
                     .session
                     .declare_publisher(crate::keys::stream(&key("pong")))
@@ -594,7 +678,7 @@ pub fn run_peer(task: &PeerTask) -> Result<PeerReport, BenchError> {
                 }
                 report
             }
-            (Role::Pong, Implementation::Kpl) => {
+            (Role::Pong, Implementation::Kpl, _) => {
                 let mut pong = ZenohSender::declare(
                     &session,
                     &key("pong"),

@@ -155,7 +155,7 @@ fn map_error(ctx: &BuildContext<'_>, e: &MapError) -> BuildError {
 }
 
 /// What both ends have: the topic, its type and the node.
-struct Common {
+pub(crate) struct Common {
     router: String,
     domain: u32,
     namespace: String,
@@ -214,7 +214,28 @@ impl Common {
         })
     }
 
-    fn key(&self, hash: &str) -> String {
+    /// A topic of a shipped type, reliable with history `depth`, on node `node` in `/` of domain
+    /// 0 (`kpl bench ros2`'s topics).
+    pub(crate) fn shipped(topic: &str, type_name: &str, node: &str, depth: u32) -> Result<Common, String> {
+        let schema = kpl_ros2::Definitions::builtin().schema_of(type_name).map_err(|e| e.to_string())?;
+        Ok(Common {
+            router: String::new(),
+            domain: 0,
+            namespace: "/".into(),
+            node: node.into(),
+            topic: topic.into(),
+            hash: schema.type_hash(),
+            dds: schema.name().dds_name(),
+            schema,
+            qos: Qos { reliable: true, transient_local: false, depth: Some(depth) },
+        })
+    }
+
+    pub(crate) fn schema(&self) -> &Arc<Schema> {
+        &self.schema
+    }
+
+    pub(crate) fn key(&self, hash: &str) -> String {
         wire::topic_key(self.domain, &self.topic, &self.dds, hash)
     }
 
@@ -233,8 +254,8 @@ type NodeKey = (u32, String, String);
 
 /// A zenoh session for ROS 2, shared by the endpoints of a run that use the same router, with
 /// the nodes declared on it.
-struct Ros2Session {
-    session: zenoh::Session,
+pub(crate) struct Ros2Session {
+    pub(crate) session: zenoh::Session,
     zid: String,
     next_id: AtomicU64,
     /// The declared nodes by (domain, namespace, name): their ids and tokens.
@@ -275,6 +296,13 @@ impl Ros2Session {
         Ok(session)
     }
 
+    /// ROS 2 endpoints on a session of the caller's (`kpl bench ros2`'s, between its two
+    /// processes), not shared with a run's.
+    pub(crate) fn over(session: zenoh::Session) -> Arc<Ros2Session> {
+        let zid = session.zid().to_string();
+        Arc::new(Ros2Session { session, zid, next_id: AtomicU64::new(0), nodes: Default::default() })
+    }
+
     fn next_id(&self) -> u64 {
         self.next_id.fetch_add(1, Ordering::Relaxed)
     }
@@ -310,7 +338,7 @@ impl Ros2Session {
         }
     }
 
-    async fn endpoint_token(
+    pub(crate) async fn endpoint_token(
         &self,
         common: &Common,
         kind: EntityKind,
@@ -405,35 +433,13 @@ impl Source for Subscribe {
                     message = subscriber.recv_async() => {
                         let Ok(message) = message else { break };
                         messages += 1;
-                        let key = message.key_expr().as_str();
                         let where_ = || format!("ROS 2 `{}`, message {messages}", c.topic);
-                        let attachment = match message.attachment().map(|a| a.to_bytes()) {
-                            None => Err(wire::AttachmentError::Missing),
-                            Some(bytes) => Attachment::decode(&bytes),
-                        };
-                        let attachment = match attachment {
-                            Ok(a) => a,
-                            Err(e) => {
-                                no_attachment += 1;
-                                ctx.malformed(where_(), format!("{e} (rmw_zenoh sends 33 bytes: sequence number, time stamp, GID)"))?;
-                                continue;
-                            }
-                        };
-                        sequences.see(&attachment);
-                        if !key.ends_with(&c.hash) {
-                            wrong_type += 1;
-                            let hash = key.rsplit('/').next().unwrap_or("");
-                            ctx.malformed(where_(), format!("type hash {hash}, expected {} ({})", c.hash, c.schema.name()))?;
-                            continue;
+                        let (attachment, taken) = take(c, &self.map, &message, ctx.now());
+                        if let Some(attachment) = &attachment {
+                            sequences.see(attachment);
                         }
-                        let payload = message.payload().to_bytes();
-                        let decoded = cdr::decode(&c.schema, &payload).map_err(|e| e.to_string()).and_then(|msg| {
-                            let value = self.map.apply(&msg)?;
-                            Ok((self.map.valid_time(&msg), value))
-                        });
-                        match decoded {
+                        match taken {
                             Ok((valid, value)) => {
-                                let valid = valid.unwrap_or_else(|| if self.map.has_stamp() { attachment.source_timestamp / 1000 } else { ctx.now() });
                                 if ctx.end.is_some_and(|end| ctx.now() > end) {
                                     break;
                                 }
@@ -442,7 +448,15 @@ impl Source for Subscribe {
                                     break;
                                 }
                             }
-                            Err(e) => ctx.malformed(where_(), e)?,
+                            Err(Refused::Attachment(e)) => {
+                                no_attachment += 1;
+                                ctx.malformed(where_(), e)?;
+                            }
+                            Err(Refused::TypeHash(e)) => {
+                                wrong_type += 1;
+                                ctx.malformed(where_(), e)?;
+                            }
+                            Err(Refused::Malformed(e)) => ctx.malformed(where_(), e)?,
                         }
                     }
                     _ = ctx.wait_until(until) => {
@@ -471,12 +485,110 @@ impl Source for Subscribe {
     }
 }
 
-struct Open {
+/// Why a message from the wire is not a sample.
+pub(crate) enum Refused {
+    /// No attachment, or not rmw_zenoh's 33 bytes.
+    Attachment(String),
+    /// The key's type hash is not the declared type's.
+    TypeHash(String),
+    /// The CDR does not decode as the type, or the mapping cannot take the message.
+    Malformed(String),
+}
+
+/// What `ros2.subscribe` makes of one message from the wire: its attachment (when it has one),
+/// and its valid time and value, decoded from CDR and mapped (or why not). `now` is the valid
+/// time of a message whose mapping has no stamp.
+pub(crate) fn take(
+    c: &Common,
+    map: &InMap,
+    message: &zenoh::sample::Sample,
+    now: Time,
+) -> (Option<Attachment>, Result<(Time, Value), Refused>) {
+    let attachment = match message.attachment().map(|a| a.to_bytes()) {
+        None => Err(wire::AttachmentError::Missing),
+        Some(bytes) => Attachment::decode(&bytes),
+    };
+    let attachment = match attachment {
+        Ok(a) => a,
+        Err(e) => {
+            let why = format!("{e} (rmw_zenoh sends 33 bytes: sequence number, time stamp, GID)");
+            return (None, Err(Refused::Attachment(why)));
+        }
+    };
+    let key = message.key_expr().as_str();
+    if !key.ends_with(&c.hash) {
+        let hash = key.rsplit('/').next().unwrap_or("");
+        let why = format!("type hash {hash}, expected {} ({})", c.hash, c.schema.name());
+        return (Some(attachment), Err(Refused::TypeHash(why)));
+    }
+    let payload = message.payload().to_bytes();
+    let decoded = cdr::decode(&c.schema, &payload).map_err(|e| e.to_string()).and_then(|msg| {
+        let value = map.apply(&msg)?;
+        Ok((map.valid_time(&msg), value))
+    });
+    let taken = decoded.map_err(Refused::Malformed).map(|(valid, value)| {
+        let valid =
+            valid.unwrap_or_else(|| if map.has_stamp() { attachment.source_timestamp / 1000 } else { now });
+        (valid, value)
+    });
+    (Some(attachment), taken)
+}
+
+/// A declared ROS 2 publisher: its liveliness token, GID and sequence numbers.
+pub(crate) struct Open {
     _session: Arc<Ros2Session>,
     publisher: Publisher<'static>,
     _token: LivelinessToken,
     gid: [u8; 16],
     sequence: i64,
+}
+
+impl Open {
+    /// Declares the publisher of `c`'s topic (and its node's and its own liveliness tokens).
+    pub(crate) async fn declare(session: Arc<Ros2Session>, c: &Common) -> Result<Open, ProcessError> {
+        let publisher = session
+            .session
+            .declare_publisher(c.key(&c.hash))
+            .congestion_control(if c.qos.reliable {
+                CongestionControl::Block
+            } else {
+                CongestionControl::Drop
+            })
+            .await
+            .map_err(|e| ProcessError::failed(format!("cannot publish on `{}`: {e}", c.topic)))?;
+        let (id, token) = session.endpoint_token(c, EntityKind::Publisher).await?;
+        let gid = wire::gid(&session.zid, id);
+        Ok(Open { _session: session, publisher, _token: token, gid, sequence: 0 })
+    }
+
+    pub(crate) fn publisher(&self) -> &Publisher<'static> {
+        &self.publisher
+    }
+
+    /// Puts one CDR message with its attachment: the next sequence number, `now` (microseconds)
+    /// as the source time stamp and the publisher's GID.
+    pub(crate) async fn put(&mut self, payload: &[u8], now: Time) -> zenoh::Result<()> {
+        self.sequence += 1;
+        let attachment = Attachment {
+            sequence_number: self.sequence,
+            source_timestamp: now.saturating_mul(1000),
+            gid: self.gid,
+        };
+        self.publisher.put(payload.to_vec()).attachment(attachment.encode().to_vec()).await
+    }
+}
+
+/// What `ros2.publish` does with a sample before it goes on the wire: its value mapped into a
+/// message (`valid` its stamp) and encoded as CDR into `buffer`.
+pub(crate) fn encode(
+    c: &Common,
+    map: &mut OutMap,
+    valid: Time,
+    value: &Value,
+    buffer: &mut Vec<u8>,
+) -> Result<(), ProcessError> {
+    let msg = map.apply(valid, value).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))?;
+    cdr::encode_into(&c.schema, &msg, buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))
 }
 
 struct Publish {
@@ -491,21 +603,8 @@ struct Publish {
 impl Publish {
     async fn open(&mut self) -> Result<&mut Open, ProcessError> {
         if self.open.is_none() {
-            let c = &self.common;
-            let session = Ros2Session::open(&c.router).await?;
-            let publisher = session
-                .session
-                .declare_publisher(c.key(&c.hash))
-                .congestion_control(if c.qos.reliable {
-                    CongestionControl::Block
-                } else {
-                    CongestionControl::Drop
-                })
-                .await
-                .map_err(|e| ProcessError::failed(format!("cannot publish on `{}`: {e}", c.topic)))?;
-            let (id, token) = session.endpoint_token(c, EntityKind::Publisher).await?;
-            let gid = wire::gid(&session.zid, id);
-            self.open = Some(Open { _session: session, publisher, _token: token, gid, sequence: 0 });
+            let session = Ros2Session::open(&self.common.router).await?;
+            self.open = Some(Open::declare(session, &self.common).await?);
         }
         self.open.as_mut().ok_or_else(|| ProcessError::failed("no publisher"))
     }
@@ -519,20 +618,10 @@ impl AsyncUnit for Publish {
     ) -> BoxFuture<'a, Result<(), ProcessError>> {
         Box::pin(async move {
             let Some((_, sample)) = input.trigger_sample() else { return Ok(()) };
-            let msg = self
-                .map
-                .apply(sample.valid, &sample.value)
-                .map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
             let mut buffer = std::mem::take(&mut self.buffer);
-            cdr::encode_into(&self.common.schema, &msg, &mut buffer)
-                .map_err(|e| ProcessError::failed(format!("`{}`: {e}", self.common.topic)))?;
-            let now_ns = input.now.saturating_mul(1000);
+            encode(&self.common, &mut self.map, sample.valid, &sample.value, &mut buffer)?;
             let topic = self.common.topic.clone();
-            let open = self.open().await?;
-            open.sequence += 1;
-            let attachment =
-                Attachment { sequence_number: open.sequence, source_timestamp: now_ns, gid: open.gid };
-            let result = open.publisher.put(buffer.clone()).attachment(attachment.encode().to_vec()).await;
+            let result = self.open().await?.put(&buffer, input.now).await;
             self.buffer = buffer;
             if let Err(e) = result {
                 self.failures += 1;

@@ -1,5 +1,5 @@
 //! `kpl bench ...`: benchmarks whose figures go to `docs/performance.md`. The workloads live in
-//! `kpl-bench` (and the bare-zenoh baseline in `kpl-zenoh`); each reports ratios against a
+//! `kpl-bench` (and the bare-zenoh baseline, with its ROS 2 cases, in `kpl-zenoh`); each reports ratios against a
 //! baseline measured in the same run, and nothing here is asserted by a test.
 
 use std::io::Write;
@@ -24,6 +24,9 @@ pub enum Command {
     Python(kpl_bench::python::Args),
     /// Streams between two processes over zenoh, against bare zenoh publisher/subscriber code.
     Zenoh(crate::transport::BenchArgs),
+    /// ROS 2 messages (a PoseStamped, a 100-marker MarkerArray) between two processes through
+    /// kpl's ROS 2 path, against bare zenoh sending the same CDR bytes.
+    Ros2(crate::transport::Ros2BenchArgs),
 }
 
 pub fn run(command: Command) -> ExitCode {
@@ -36,6 +39,7 @@ pub fn run(command: Command) -> ExitCode {
         Command::Situations(args) => kpl_bench::situations::run(&args, out),
         Command::Python(args) => kpl_bench::python::run(&args, out),
         Command::Zenoh(args) => return crate::transport::bench(args),
+        Command::Ros2(args) => return crate::transport::bench_ros2(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

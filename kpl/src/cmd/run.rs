@@ -341,7 +341,9 @@ impl Progress {
                 let wall = start.elapsed().as_secs_f64();
                 let time = match clock {
                     ClockKind::Sim => {
-                        let now = stats.now.load(Ordering::Relaxed) - stats.start.load(Ordering::Relaxed);
+                        // From the first sample: a replay's clock jumps to its first stamp.
+                        let now = stats
+                            .span_to(stats.now.load(Ordering::Relaxed), stats.start.load(Ordering::Relaxed));
                         format!("sim {:.1}s  wall {wall:.1}s", now.max(0) as f64 / 1e6)
                     }
                     ClockKind::Wall => format!("{wall:.1}s"),
@@ -369,6 +371,19 @@ impl Progress {
     }
 }
 
+/// How much clock time the run covered. Simulated time counts from the first sample (a replay's
+/// clock jumps to its first stamp, which may be a date: then the span says from when).
+fn clock_span(report: &RunReport, clock: ClockKind) -> String {
+    let first = match (clock, report.first_sample) {
+        (ClockKind::Sim, Some(first)) if first >= kpl_runtime::stats::DATES => first,
+        (ClockKind::Sim, _) => return format!("{:.3} s simulated time", report.clock_elapsed as f64 / 1e6),
+        (ClockKind::Wall, _) => return format!("{:.3} s clock time", report.clock_elapsed as f64 / 1e6),
+    };
+    let span = (report.clock_elapsed - first).max(0) as f64 / 1e6;
+    let at = std::time::UNIX_EPOCH + Duration::from_micros(first.unsigned_abs());
+    format!("{span:.3} s simulated time from {} (the first sample)", humantime::format_rfc3339_millis(at))
+}
+
 /// The end-of-run summary as a table.
 fn describe(report: &RunReport, clock: ClockKind) -> String {
     let mut out = String::new();
@@ -382,11 +397,10 @@ fn describe(report: &RunReport, clock: ClockKind) -> String {
         Ending::Strict => "stopped at a malformed input (--strict)",
         Ending::UnitStopped => "stopped: a unit failed whose policy is to stop the run",
     };
-    let kind = if clock == ClockKind::Sim { "simulated" } else { "clock" };
     let _ = writeln!(
         out,
-        "run ended ({how}) after {:.3} s {kind} time, {:.3} s wall",
-        report.clock_elapsed as f64 / 1e6,
+        "run ended ({how}) after {}, {:.3} s wall",
+        clock_span(report, clock),
         report.wall_elapsed as f64 / 1e6
     );
     let width = report
