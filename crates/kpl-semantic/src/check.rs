@@ -1256,6 +1256,11 @@ impl Resolver<'_, '_, '_> {
                 vec![("this".to_string(), this)],
                 &[],
             );
+            if let Some(ty) = &f.ty
+                && !processes.iter().any(|p| matches!(&p.kind, hir::ProcessKind::Link(l) if l.to_type == ty.name))
+            {
+                self.checker.diagnostics.push(diag::forget_when_ineffective(sooner.span, &ty.name));
+            }
             let (Some(after), Some(shorter)) = (f.after.micros(), sooner.after.micros()) else { continue };
             if shorter >= after {
                 self.checker.diagnostics.push(diag::forget_not_sooner(

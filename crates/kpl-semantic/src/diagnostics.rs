@@ -60,6 +60,7 @@ pub const UNUSED_OUTPUT: &str = "W0202";
 pub const BARE_BOUND: &str = "W0203";
 pub const UNSET_ATTRIBUTE: &str = "W0204";
 pub const CHRONICLE_NOT_RUN: &str = "W0205";
+pub const FORGET_WHEN_INEFFECTIVE: &str = "W0206";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
@@ -558,4 +559,16 @@ pub fn chronicle_not_run(span: Span, chronicle: &str) -> Diagnostic {
     )
     .with_label("checked only")
     .with_hint("the recognition engine is the kpl-chronicle crate; its runtime adapter is not written yet")
+}
+
+pub fn forget_when_ineffective(span: Span, ty: &str) -> Diagnostic {
+    Diagnostic::warning(
+        FORGET_WHEN_INEFFECTIVE,
+        span,
+        format!("the `when` condition of `forget {ty}` has no effect: no link makes `{ty}` objects"),
+    )
+    .with_label("never evaluated")
+    .with_hint(
+        "objects that come from a source (percepts) are forgotten by time only; put the condition on a type a link makes, or remove it",
+    )
 }
