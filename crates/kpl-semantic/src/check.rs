@@ -1257,7 +1257,9 @@ impl Resolver<'_, '_, '_> {
                 &[],
             );
             if let Some(ty) = &f.ty
-                && !processes.iter().any(|p| matches!(&p.kind, hir::ProcessKind::Link(l) if l.to_type == ty.name))
+                && !processes
+                    .iter()
+                    .any(|p| matches!(&p.kind, hir::ProcessKind::Link(l) if l.to_type == ty.name))
             {
                 self.checker.diagnostics.push(diag::forget_when_ineffective(sooner.span, &ty.name));
             }

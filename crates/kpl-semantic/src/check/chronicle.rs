@@ -342,7 +342,7 @@ impl Checker<'_> {
     ) -> Option<(usize, usize)> {
         let (from_index, to_index) = (self.event_index(from, names)?, self.event_index(to, names)?);
         if let Some(minimal) = minimal
-            && !minimal.lower(from_index, to_index).is_some_and(|lo| lo >= 0)
+            && minimal.lower(from_index, to_index).is_none_or(|lo| lo < 0)
         {
             self.diagnostics.push(diag::chronicle_condition_order(span, &from.name, &to.name));
         }
