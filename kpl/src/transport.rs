@@ -72,12 +72,9 @@ pub fn bench(args: BenchArgs) -> ExitCode {
     if let Some(task) = &args.peer {
         return peer(task);
     }
-    let exe = match std::env::current_exe() {
+    let exe = match own_exe() {
         Ok(exe) => exe,
-        Err(err) => {
-            eprintln!("error: cannot find the kpl executable to start the other process: {err}");
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     let options = BenchOptions {
         sizes: args.sizes.clone(),
@@ -209,12 +206,9 @@ pub fn bench_ros2(args: Ros2BenchArgs) -> ExitCode {
     if let Some(task) = &args.peer {
         return peer(task);
     }
-    let exe = match std::env::current_exe() {
+    let exe = match own_exe() {
         Ok(exe) => exe,
-        Err(err) => {
-            eprintln!("error: cannot find the kpl executable to start the other process: {err}");
-            return ExitCode::from(2);
-        }
+        Err(code) => return code,
     };
     let make_peer = |task: &str| {
         let mut command = std::process::Command::new(&exe);
@@ -297,4 +291,12 @@ pub fn bench_ros2(args: Ros2BenchArgs) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// This `kpl` executable, which a benchmark starts again as its other process.
+fn own_exe() -> Result<std::path::PathBuf, ExitCode> {
+    std::env::current_exe().map_err(|err| {
+        eprintln!("error: cannot find the kpl executable to start the other process: {err}");
+        ExitCode::from(2)
+    })
 }

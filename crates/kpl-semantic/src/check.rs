@@ -1131,7 +1131,7 @@ impl Resolver<'_, '_, '_> {
             }
             // Names other than `from` and `to` are streams, as in monitors (a camera's
             // `in_view(cam, to.pos)`): they become inputs of the link process (port `env`).
-            for stream in self.scoped_formula(&c.formula, Context::Link { to_bound }, vars, provided) {
+            for stream in self.scoped_formula(&c.formula, Context::Link { to_bound }, vars, provided).0 {
                 if !inputs.iter().any(|i| i.port == "env" && i.stream.name == stream.name) {
                     inputs.push(hir::Input { port: "env".into(), stream });
                 }
@@ -1165,30 +1165,10 @@ impl Resolver<'_, '_, '_> {
     }
 
     fn monitor(&mut self, m: &ast::MonitorDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
-        // Borrow the checker's parts separately: the formula checker reads the types and the
-        // registry while the scope resolves stream names and marks streams used.
-        let Checker { registry, types, diagnostics, names, .. } = &mut *self.checker;
-        let mut scope = MonitorScope {
-            refs: BTreeMap::new(),
-            names,
-            drafts: self.drafts,
-            streams: self.streams,
-            used: self.used,
-        };
-        let mut checker = FormulaChecker {
-            streams: Some(&mut scope),
-            ..FormulaChecker::new(registry, types, Context::Monitor, Vec::new(), diagnostics)
-        };
-        checker.check_formula(&m.formula);
-        let used_streams = std::mem::take(&mut checker.used_streams);
-        let quantified = std::mem::take(&mut checker.quantified_types);
-        drop(checker);
-        let refs = std::mem::take(&mut scope.refs);
-        let mut inputs: Vec<hir::Input> = used_streams
-            .iter()
-            .filter_map(|name| refs.get(name).cloned())
-            .map(|stream| hir::Input { port: "state".into(), stream })
-            .collect();
+        let (refs, quantified) = self.scoped_formula(&m.formula, Context::Monitor, Vec::new(), &[]);
+        let used_streams: Vec<String> = refs.iter().map(|r| r.name.clone()).collect();
+        let mut inputs: Vec<hir::Input> =
+            refs.into_iter().map(|stream| hir::Input { port: "state".into(), stream }).collect();
         for ty in &quantified {
             let producers = self.producers_of(ty, &m.name.name);
             if producers.is_empty() {
@@ -1206,14 +1186,16 @@ impl Resolver<'_, '_, '_> {
     }
 
     /// Checks a formula whose names besides `vars` are streams (as a monitor's are), and gives
-    /// the streams it reads, in the order it names them.
+    /// the streams it reads, in the order it names them, and the object types it quantifies over.
     fn scoped_formula(
         &mut self,
         expr: &ast::Expr,
         context: Context,
         vars: Vec<(String, ValueType)>,
         local_functions: &[Function],
-    ) -> Vec<hir::StreamRef> {
+    ) -> (Vec<hir::StreamRef>, Vec<String>) {
+        // Borrow the checker's parts separately: the formula checker reads the types and the
+        // registry while the scope resolves stream names and marks streams used.
         let Checker { registry, types, diagnostics, names, .. } = &mut *self.checker;
         let mut scope = MonitorScope {
             refs: BTreeMap::new(),
@@ -1229,8 +1211,9 @@ impl Resolver<'_, '_, '_> {
         };
         checker.check_formula(expr);
         let used_streams = std::mem::take(&mut checker.used_streams);
+        let quantified = std::mem::take(&mut checker.quantified_types);
         drop(checker);
-        used_streams.iter().filter_map(|name| scope.refs.get(name).cloned()).collect()
+        (used_streams.iter().filter_map(|name| scope.refs.get(name).cloned()).collect(), quantified)
     }
 
     /// The conditions of `forget ... after T when C` (`this` is an object of the declaration's
@@ -1250,7 +1233,7 @@ impl Resolver<'_, '_, '_> {
                 .as_deref()
                 .and_then(|ty| self.checker.types.get(ty))
                 .map_or(ValueType::Any, |r| ValueType::Record(r.clone()));
-            let refs = self.scoped_formula(
+            let (refs, _) = self.scoped_formula(
                 &sooner.condition,
                 Context::Forget,
                 vec![("this".to_string(), this)],
