@@ -1,8 +1,9 @@
 //! Qualitative relations between objects on the road network (the DyKnow traffic relations), as
 //! functions formulas may call: `behind(a, b)`, `in_front(a, b)`, `beside(a, b)`,
-//! `beside_left(a, b)`, `beside_right(a, b)`, `same_lane(a, b)`, `same_road(a, b)`,
-//! `close(a, b, d)`, `approaching(a, b)`, `time_gap(a, b)`, `wrong_way(a)` and
-//! `angle_diff(h1, h2)`.
+//! `beside_left(a, b)`, `beside_right(a, b)`, `left_of(a, b)`, `same_lane(a, b)`,
+//! `same_road(a, b)`, `close(a, b, d)`, `gap(a, b)`, `approaching(a, b)`, `time_gap(a, b)`,
+//! `wrong_way(a)` and `angle_diff(h1, h2)`. A chronicle gives any of them hysteresis with
+//! `hysteresis(ENTER, LEAVE)` (docs/situations.md#qualitative-relations).
 //!
 //! They are pure functions of the attributes the link units computed
 //! ([`crate::attributes`]: `road`, `lane`, `lane_pos`, `heading`, `lane_heading`, `speed`) and
@@ -162,6 +163,24 @@ pub fn functions() -> Vec<Function> {
         pair("in_front", |a, b, _| Ok(behind(b, a))),
         pair("beside", |a, b, _| Ok(beside(a, b))),
         pair("beside_left", |a, b, f| Ok(beside(a, b) && left_of(a, b, f)?)),
+        Function::new("left_of", (2, Some(2)), |args| {
+            let a = object(&args[0], "left_of")?;
+            let b = on_road(&args[1], "left_of")?;
+            let pa = point(a, "left_of")?;
+            let pb = point(b.record, "left_of")?;
+            let heading = b
+                .heading
+                .ok_or_else(|| format!("left_of needs the attribute `heading` of {}", who(b.record)))?;
+            Ok(Value::Bool(geom::cross(geom::unit(heading), geom::sub(pa, pb)) > 0.0))
+        }),
+        Function::new("gap", (2, Some(2)), |args| {
+            let a = on_road(&args[0], "gap")?;
+            let b = on_road(&args[1], "gap")?;
+            if !same_road(&a, &b) {
+                return Ok(Value::Float(f64::NAN));
+            }
+            Ok(Value::Float(ahead(&a, &b) - overlap(&a, &b)))
+        }),
         pair("beside_right", |a, b, f| Ok(beside(a, b) && !left_of(a, b, f)?)),
         Function::new("close", (3, Some(3)), |args| {
             let a = on_road(&args[0], "close")?;
@@ -224,6 +243,13 @@ pub fn signatures() -> Vec<registry::Function> {
         f("in_front", vec![Any, Any], Bool, "a in front of b on the same road (behind(b, a))"),
         f("beside", vec![Any, Any], Bool, "a beside b: same road, another lane, overlapping along the road"),
         f("beside_left", vec![Any, Any], Bool, "a beside b, on b's left"),
+        f("left_of", vec![Any, Any], Bool, "a's centre left of b's, looking in b's heading (any road)"),
+        f(
+            "gap",
+            vec![Any, Any],
+            Float,
+            "metres from a's front to b's back along the road (positive: a behind b with room; NaN: not on the same road)",
+        ),
         f("beside_right", vec![Any, Any], Bool, "a beside b, on b's right"),
         f("close", vec![Any, Any, Float], Bool, "same road and within d metres along it"),
         f("approaching", vec![Any, Any], Bool, "the distance between a and b shrinks (from `pos` and `vel`)"),
@@ -295,6 +321,13 @@ mod tests {
         assert_eq!(call("close", &[a.clone(), b.clone(), Value::Float(15.0)]), Value::Bool(false));
         assert_eq!(call("approaching", &[a.clone(), b.clone()]), Value::Bool(true));
         assert_eq!(call("approaching", &[b.clone(), a.clone()]), Value::Bool(true), "symmetric");
+        // left_of looks along b's heading (east): lane 1 (y = -1.6) is left of lane 0 (y = -4.8).
+        assert_eq!(call("left_of", &[c.clone(), a.clone()]), Value::Bool(true));
+        assert_eq!(call("left_of", &[a.clone(), c.clone()]), Value::Bool(false));
+        // gap: 20 m between centres less half of 4 m + 4 m; negative the other way round.
+        assert_eq!(call("gap", &[a.clone(), b.clone()]).as_f64(), Some(16.0));
+        assert_eq!(call("gap", &[b.clone(), a.clone()]).as_f64(), Some(-24.0));
+        assert_eq!(call("gap", &[a.clone(), c.clone()]).as_f64(), Some(-2.0), "side by side: overlapping");
         // Gap 16 m (20 m between centres, 4 m of lengths) at 30 m/s.
         let gap = call("time_gap", &[a.clone(), b.clone()]).as_f64().unwrap();
         assert!((gap - 16.0 / 30.0).abs() < 1e-9, "{gap}");

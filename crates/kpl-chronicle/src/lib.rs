@@ -9,6 +9,8 @@
 //! - [`stn`]: consistency and minimal networks (Floyd-Warshall; a negative cycle names its
 //!   constraints). `kpl check` uses it for its diagnostics.
 //! - [`model`]: a chronicle with numbered parameters, nodes and conditions; [`model::Chronicle::compile`].
+//! - [`fluent`]: fluents with hysteresis (an entry and a leave condition), for relations that a
+//!   raw threshold would make flicker.
 //! - [`recognise`]: the incremental recogniser, a partial instance per candidate binding,
 //!   dropped when its deadline passes.
 //!
@@ -38,6 +40,7 @@
 //! assert_eq!(found[0].times, [0, 4_000_000]);
 //! ```
 
+pub mod fluent;
 pub mod model;
 pub mod recognise;
 pub mod stn;

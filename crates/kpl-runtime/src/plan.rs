@@ -77,6 +77,8 @@ pub enum Role {
     },
     /// A monitor, built by the runtime itself.
     Monitor,
+    /// A chronicle's recogniser (the registry's chronicle factory).
+    Chronicle,
 }
 
 /// A process that runs on this host.
@@ -240,6 +242,7 @@ impl Plan {
                 Role::Sink { entry } => format!("sink {entry}"),
                 Role::Link { via } => format!("link via {via}"),
                 Role::Monitor => "monitor".to_string(),
+                Role::Chronicle => "chronicle".to_string(),
             };
             let _ = writeln!(out, "process {}: {role}; outputs [{}]", process.name, process.ports.join(", "));
         }
@@ -314,6 +317,7 @@ fn planned_process(process: &hir::Process) -> PlannedProcess {
         hir::ProcessKind::Sink(call) => Role::Sink { entry: call.entry.clone() },
         hir::ProcessKind::Link(link) => Role::Link { via: link.via.entry.clone() },
         hir::ProcessKind::Monitor(_) => Role::Monitor,
+        hir::ProcessKind::Chronicle(_) => Role::Chronicle,
     };
     let mut ports = vec!["out".to_string()];
     ports.extend(process.ports.iter().map(|(n, _)| n.clone()));

@@ -110,7 +110,7 @@ impl BuildContext<'_> {
         match &self.process.kind {
             hir::ProcessKind::Source(c) | hir::ProcessKind::Compute(c) | hir::ProcessKind::Sink(c) => Some(c),
             hir::ProcessKind::Link(l) => Some(&l.via),
-            hir::ProcessKind::Monitor(_) => None,
+            hir::ProcessKind::Monitor(_) | hir::ProcessKind::Chronicle(_) => None,
         }
     }
 
@@ -164,6 +164,7 @@ pub struct Registry {
     sources: BTreeMap<String, SourceFactory>,
     units: BTreeMap<(EntryKind, String), UnitFactory>,
     links: Option<UnitFactory>,
+    chronicles: Option<UnitFactory>,
     functions: Vec<kpl_mtl::Function>,
     /// Implementations that live inside other processes, by type (the anchoring's link units and
     /// prediction models, which its link processes run).
@@ -244,6 +245,17 @@ impl Registry {
         self.signatures.add(entry);
     }
 
+    /// Sets how chronicle recognisers are built (one factory for every `chronicle` of a spec;
+    /// `kpl-std` sets it).
+    pub fn set_chronicle_processes<F>(&mut self, factory: F)
+    where
+        F: Fn(&mut BuildContext<'_>) -> Result<Box<dyn AsyncUnit>, BuildError> + Send + Sync + 'static,
+    {
+        if !self.signatures_only {
+            self.chronicles = Some(Box::new(factory));
+        }
+    }
+
     /// Sets how link processes are built (one factory for every `link` of a spec).
     pub fn set_link_processes<F>(&mut self, factory: F)
     where
@@ -319,6 +331,16 @@ impl Registry {
             .links
             .as_ref()
             .ok_or_else(|| ctx.error("this runtime has no link processes (kpl-anchor is not registered)"))?;
+        factory(ctx)
+    }
+
+    pub(crate) fn build_chronicle(
+        &self,
+        ctx: &mut BuildContext<'_>,
+    ) -> Result<Box<dyn AsyncUnit>, BuildError> {
+        let factory = self.chronicles.as_ref().ok_or_else(|| {
+            ctx.error("this runtime has no chronicle recognisers (kpl-std is not registered)")
+        })?;
         factory(ctx)
     }
 

@@ -469,6 +469,7 @@ fn build_processes(
                 registry.build_unit(&mut ctx, EntryKind::Sink, entry).map(TaskKind::Unit)
             }
             (Role::Link { .. }, _) => registry.build_link(&mut ctx).map(TaskKind::Unit),
+            (Role::Chronicle, _) => registry.build_chronicle(&mut ctx).map(TaskKind::Unit),
             (Role::Monitor, hir::ProcessKind::Monitor(monitor)) => {
                 crate::monitor::build(process, monitor, registry, process_stats)
                     .map(|m| TaskKind::Unit(Box::new(SyncUnit(m)) as Box<dyn AsyncUnit>))

@@ -153,6 +153,7 @@ enum Decl<'s> {
     Process(&'s ast::ProcessDecl),
     Link(&'s ast::LinkDecl),
     Monitor(&'s ast::MonitorDecl),
+    Chronicle(&'s ast::ChronicleDecl),
 }
 
 impl<'a> Checker<'a> {
@@ -175,6 +176,7 @@ impl<'a> Checker<'a> {
                 ast::Item::Process(p) => (Decl::Process(p), &p.name),
                 ast::Item::Link(l) => (Decl::Link(l), &l.name),
                 ast::Item::Monitor(m) => (Decl::Monitor(m), &m.name),
+                ast::Item::Chronicle(c) => (Decl::Chronicle(c), &c.name),
                 ast::Item::Stream(s) => {
                     if self.declare(&s.name, Named::Stream(stream_decls.len())) {
                         stream_decls.push(s);
@@ -378,6 +380,10 @@ impl<'a> Checker<'a> {
                     let names: Vec<&str> = vars.iter().map(|(var, _)| *var).collect();
                     (Some(hir::binding_verdict_type(&m.name.name, &names)), Vec::new())
                 }
+            }
+            Decl::Chronicle(c) => {
+                let names: Vec<&str> = c.params.iter().map(|p| p.name.name.as_str()).collect();
+                (Some(hir::recognition_type(&c.name.name, &names)), Vec::new())
             }
         }
     }
@@ -935,7 +941,61 @@ impl Resolver<'_, '_, '_> {
             }
             Decl::Link(l) => self.link(l),
             Decl::Monitor(m) => self.monitor(m),
+            Decl::Chronicle(c) => self.chronicle_process(c),
         }
+    }
+
+    /// A chronicle's recogniser: its inputs are the object streams of the parameter types of the
+    /// chronicle and of every chronicle it uses (they are recognised inside it, at the same
+    /// instants). The chronicle itself is checked later ([`Checker::chronicles`]).
+    fn chronicle_process(&mut self, c: &ast::ChronicleDecl) -> (hir::ProcessKind, Vec<hir::Input>) {
+        let mut types: Vec<String> = Vec::new();
+        let mut seen: Vec<&str> = Vec::new();
+        let mut todo: Vec<&ast::ChronicleDecl> = vec![c];
+        while let Some(decl) = todo.pop() {
+            if seen.contains(&decl.name.name.as_str()) {
+                continue;
+            }
+            seen.push(&decl.name.name);
+            for p in &decl.params {
+                if !types.contains(&p.ty.name) {
+                    types.push(p.ty.name.clone());
+                }
+            }
+            let patterns = decl.clauses.iter().filter_map(|clause| match clause {
+                ast::ChronicleClause::Event(e) => Some(&e.pattern),
+                ast::ChronicleClause::Never(n) => Some(&n.pattern),
+                _ => None,
+            });
+            for pattern in patterns {
+                let ast::EventPatternKind::Recognised { chronicle, .. } = &pattern.kind else { continue };
+                let used = self.drafts.iter().find_map(|d| match d.decl {
+                    Decl::Chronicle(u) if u.name.name == chronicle.name => Some(u),
+                    _ => None,
+                });
+                todo.extend(used);
+            }
+        }
+        let mut inputs = Vec::new();
+        for ty in &types {
+            if self.checker.types.get(ty).is_none() {
+                continue; // reported when the chronicle is checked
+            }
+            let producers = self.producers_of(ty, &c.name.name);
+            if producers.is_empty() {
+                self.checker.diagnostics.push(diag::no_producer(
+                    c.name.span,
+                    ty,
+                    &format!("chronicle `{}`", c.name.name),
+                ));
+            }
+            for stream in producers {
+                if !inputs.iter().any(|i: &hir::Input| i.stream.name == stream.name) {
+                    inputs.push(hir::Input { port: "objects".into(), stream });
+                }
+            }
+        }
+        (hir::ProcessKind::Chronicle(c.name.name.clone()), inputs)
     }
 
     /// A stream reference in an input position.
@@ -1368,6 +1428,7 @@ fn decl_kind(decl: Decl<'_>) -> &'static str {
         Decl::Process(p) => p.kind.keyword(),
         Decl::Link(_) => "link",
         Decl::Monitor(_) => "monitor",
+        Decl::Chronicle(_) => "chronicle",
     }
 }
 

@@ -55,6 +55,7 @@ pub const CHRONICLE_UNBOUND_PARAM: &str = "E0173";
 pub const CHRONICLE_CONDITION_ORDER: &str = "E0174";
 pub const CHRONICLE_CYCLE: &str = "E0175";
 pub const CHRONICLE_EMPTY: &str = "E0176";
+pub const CHRONICLE_HYSTERESIS_NESTED: &str = "E0177";
 pub const UNUSED_STREAM: &str = "W0201";
 pub const UNUSED_OUTPUT: &str = "W0202";
 pub const BARE_BOUND: &str = "W0203";
@@ -551,14 +552,26 @@ pub fn chronicle_empty(span: Span, chronicle: &str) -> Diagnostic {
         .with_hint("add events such as `event pass = beside(a, b) becomes true`")
 }
 
-pub fn chronicle_not_run(span: Span, chronicle: &str) -> Diagnostic {
+pub fn chronicle_hysteresis_nested(span: Span) -> Diagnostic {
+    Diagnostic::error(
+        CHRONICLE_HYSTERESIS_NESTED,
+        span,
+        "`hysteresis` is a whole predicate of a chronicle, not part of one".to_string(),
+    )
+    .with_label("inside another expression")
+    .with_hint("write `event e = hysteresis(ENTER, LEAVE) becomes true`, with the conditions inside it: `hysteresis(close(a, b, 20.0), not close(a, b, 25.0))`")
+}
+
+pub fn chronicle_not_run(span: Span, chronicle: &str, monitor: &str) -> Diagnostic {
     Diagnostic::warning(
         CHRONICLE_NOT_RUN,
         span,
-        format!("chronicle `{chronicle}` is checked, but `kpl run` does not recognise chronicles yet"),
+        format!(
+            "chronicle `{chronicle}` has monitor `{monitor}`'s verdicts as events, which `kpl run` does not feed to chronicles yet: it is never recognised"
+        ),
     )
-    .with_label("checked only")
-    .with_hint("the recognition engine is the kpl-chronicle crate; its runtime adapter is not written yet")
+    .with_label("never recognised by `kpl run`")
+    .with_hint("events that are predicates over the parameters, and other chronicles' recognitions, are run; a monitor's episodes arrive when they end, after the states the recogniser has passed")
 }
 
 pub fn forget_when_ineffective(span: Span, ty: &str) -> Diagnostic {

@@ -109,6 +109,7 @@ impl Process {
             ProcessKind::Sink(_) => "sink",
             ProcessKind::Link(_) => "link",
             ProcessKind::Monitor(_) => "monitor",
+            ProcessKind::Chronicle(_) => "chronicle",
         }
     }
 
@@ -128,6 +129,10 @@ pub enum ProcessKind {
     Sink(Call),
     Link(Box<Link>),
     Monitor(Monitor),
+    /// A chronicle's recogniser: the name of its [`Chronicle`] in [`Spec::chronicles`]. Its inputs
+    /// (port `objects`) are the object streams of its parameters' types and of the chronicles it
+    /// uses; its output is [`recognition_type`].
+    Chronicle(String),
 }
 
 /// A registry entry with its parameters resolved (defaults filled in; durations in microseconds).
@@ -230,6 +235,26 @@ pub fn binding_verdict_type(monitor: &str, vars: &[&str]) -> ValueType {
     fields.push(field("end", ValueType::Int));
     ValueType::Record(Arc::new(RecordType {
         name: Arc::from(format!("{monitor}.verdict")),
+        parent: None,
+        symbol: Arc::from(""),
+        fields,
+    }))
+}
+
+/// The type of a chronicle's recognitions: `{PARAM: SYMBOL, ..., verdict: true, start: µs, end:
+/// µs, times: [µs, ...]}`, the objects bound to its parameters, the time of its first and last
+/// event (the last is the valid time) and the time of each event in the order written. `verdict`,
+/// `start` and `end` are the fields of a monitor's `true` episodes, so `kpl situations` scores
+/// recognitions like situation monitors' episodes.
+pub fn recognition_type(chronicle: &str, params: &[&str]) -> ValueType {
+    let field = |name: &str, ty: ValueType| kpl_core::FieldType { name: Arc::from(name), ty };
+    let mut fields: Vec<kpl_core::FieldType> = params.iter().map(|p| field(p, ValueType::Str)).collect();
+    fields.push(field("verdict", ValueType::Bool));
+    fields.push(field("start", ValueType::Int));
+    fields.push(field("end", ValueType::Int));
+    fields.push(field("times", ValueType::List(Box::new(ValueType::Int))));
+    ValueType::Record(Arc::new(RecordType {
+        name: Arc::from(format!("{chronicle}.recognition")),
         parent: None,
         symbol: Arc::from(""),
         fields,
@@ -463,6 +488,10 @@ pub struct Chronicle {
     pub nevers: Vec<ChronicleNever>,
     pub window: Time,
 }
+
+/// The chronicle-only function that makes a whole predicate a fluent with hysteresis,
+/// `hysteresis(ENTER, LEAVE)` (`kpl_chronicle::fluent`): its recogniser keeps the state.
+pub const HYSTERESIS: &str = "hysteresis";
 
 /// What a chronicle's event is an occurrence of.
 #[derive(Debug, Clone, PartialEq)]

@@ -31,6 +31,7 @@ fn kind_detail(p: &hir::Process) -> String {
         }
         hir::ProcessKind::Link(l) => format!("{} -> {} via {}", l.from_type, l.to_type, l.via.entry),
         hir::ProcessKind::Monitor(_) => "formula".to_string(),
+        hir::ProcessKind::Chronicle(_) => "events".to_string(),
     }
 }
 
@@ -51,7 +52,7 @@ fn dot(spec: &Spec) -> String {
         hir::ProcessKind::Source(_) => "invhouse",
         hir::ProcessKind::Sink(_) => "house",
         hir::ProcessKind::Link(_) => "hexagon",
-        hir::ProcessKind::Monitor(_) => "diamond",
+        hir::ProcessKind::Monitor(_) | hir::ProcessKind::Chronicle(_) => "diamond",
         hir::ProcessKind::Compute(_) => "box",
     };
     let node = |out: &mut String, p: &hir::Process, indent: &str| {
@@ -107,7 +108,7 @@ fn mermaid(spec: &Spec) -> String {
             hir::ProcessKind::Source(_) => ("[/", "/]"),
             hir::ProcessKind::Sink(_) => ("[\\", "\\]"),
             hir::ProcessKind::Link(_) => ("{{", "}}"),
-            hir::ProcessKind::Monitor(_) => ("{", "}"),
+            hir::ProcessKind::Monitor(_) | hir::ProcessKind::Chronicle(_) => ("{", "}"),
             hir::ProcessKind::Compute(_) => ("[", "]"),
         };
         out.push_str(&format!("{indent}{}{open}\"{label}\"{close}\n", id(p)));

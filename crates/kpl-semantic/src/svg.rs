@@ -54,6 +54,7 @@ fn detail(p: &hir::Process) -> String {
         }
         hir::ProcessKind::Link(l) => format!("{} -> {} via {}", l.from_type, l.to_type, l.via.entry),
         hir::ProcessKind::Monitor(_) => "formula".to_string(),
+        hir::ProcessKind::Chronicle(_) => "events".to_string(),
     };
     format!("{} {what}", p.kind_name())
 }
@@ -226,7 +227,7 @@ fn fill(p: &hir::Process) -> &'static str {
         hir::ProcessKind::Source(_) => "#dbeafe",
         hir::ProcessKind::Compute(_) => "#ede9fe",
         hir::ProcessKind::Link(_) => "#dcfce7",
-        hir::ProcessKind::Monitor(_) => "#fef3c7",
+        hir::ProcessKind::Monitor(_) | hir::ProcessKind::Chronicle(_) => "#fef3c7",
         hir::ProcessKind::Sink(_) => "#f3f4f6",
     }
 }
@@ -383,7 +384,7 @@ pub fn svg(spec: &Spec) -> String {
         let b = layout.boxes[p.id];
         let (stroke, width) = host_colour(p.id).map_or(("#6b7280", 1.0), |c| (c, 2.5));
         let rx = match p.kind {
-            hir::ProcessKind::Monitor(_) | hir::ProcessKind::Link(_) => 14.0,
+            hir::ProcessKind::Monitor(_) | hir::ProcessKind::Chronicle(_) | hir::ProcessKind::Link(_) => 14.0,
             _ => 4.0,
         };
         let _ = writeln!(

@@ -10,6 +10,8 @@
 //!   docs/aapa.md.
 //! - [`anchor`]: hierarchical anchoring on the runtime (`kpl-anchor`'s engine): link processes,
 //!   `anchor.world_model`, `anchor.identify`; a user's link units and prediction models.
+//! - `chronicle`: every `chronicle` of a spec recognised on the runtime (`kpl-chronicle`'s
+//!   recogniser fed with the changes of its predicates), docs/language.md#chronicles.
 //! - [`python`]: `python.unit`, computational units in Python (or any language that speaks the
 //!   process-unit protocol) run in worker processes kpl supervises, docs/python.md.
 //! - [`driver`]: a spec's simulated trackers fed straight into the anchoring engine, with their
@@ -18,6 +20,7 @@
 mod aapa;
 pub mod anchor;
 mod camera;
+mod chronicle;
 pub mod driver;
 pub mod python;
 pub mod registry;

@@ -18,6 +18,7 @@ pub fn assemble(registry: &mut Registry) {
     crate::camera::register(registry);
     crate::aapa::register(registry);
     crate::anchor::register(registry);
+    crate::chronicle::register(registry);
     crate::python::register(registry);
     kpl_zenoh::register(registry);
     kpl_zenoh::ros2::register(registry);

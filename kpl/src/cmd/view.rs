@@ -128,7 +128,8 @@ fn shown_streams(spec: &hir::Spec, host: Option<&str>) -> Vec<String> {
                 &p.output,
                 Some(ValueType::List(item)) if matches!(&**item, ValueType::Record(r) if r.field("pos").is_some())
             ),
-            hir::ProcessKind::Sink(_) => false,
+            // A chronicle's recognitions are not drawn by the view yet.
+            hir::ProcessKind::Sink(_) | hir::ProcessKind::Chronicle(_) => false,
         })
         .map(|p| p.name.clone())
         .collect()

@@ -14,6 +14,24 @@ use crate::diagnostics as diag;
 use crate::formula::{Context, FormulaChecker};
 use crate::hir;
 
+use hir::HYSTERESIS;
+
+/// The span of a call of `hysteresis` inside `e`, if any.
+fn nested_hysteresis(e: &ast::Expr) -> Option<Span> {
+    use ast::ExprKind as K;
+    match &e.kind {
+        K::Call { func, .. } if func.name == HYSTERESIS => Some(func.span),
+        K::Call { args, .. } | K::And(args) | K::Or(args) => args.iter().find_map(nested_hysteresis),
+        K::Unary { expr, .. } | K::Temporal { body: expr, .. } | K::Quantified { body: expr, .. } => {
+            nested_hysteresis(expr)
+        }
+        K::Binary { lhs, rhs, .. } | K::Until { lhs, rhs, .. } => {
+            nested_hysteresis(lhs).or_else(|| nested_hysteresis(rhs))
+        }
+        K::Bool(_) | K::Number(_) | K::Str(_) | K::Duration(_) | K::Path(_) => None,
+    }
+}
+
 /// A chronicle's name and parameter types, for `recognised NAME(...)` in other chronicles.
 struct Signature {
     params: Vec<String>,
@@ -47,8 +65,10 @@ impl Checker<'_> {
         let mut decls = Vec::new();
         for item in &spec.items {
             let ast::Item::Chronicle(c) = item else { continue };
-            if let Some((_, first)) = self.names.get(&c.name.name) {
-                self.diagnostics.push(diag::duplicate(c.name.span, "name", &c.name.name, *first));
+            // Declared as a process (its recogniser); a second use of the name is reported there.
+            if let Some((_, first)) = self.names.get(&c.name.name)
+                && *first != c.name.span
+            {
                 continue;
             }
             if let Some((_, first)) = signatures.get(&c.name.name) {
@@ -69,7 +89,9 @@ impl Checker<'_> {
         }
         if !self.chronicle_cycles(&out) {
             for c in &out {
-                self.diagnostics.push(diag::chronicle_not_run(c.span, &c.name));
+                if let Some(monitor) = uses_monitor(c, &out) {
+                    self.diagnostics.push(diag::chronicle_not_run(c.span, &c.name, &monitor));
+                }
             }
         }
         out
@@ -297,10 +319,30 @@ impl Checker<'_> {
         indices
     }
 
+    /// Checks a predicate of a chronicle: a state formula over the parameters, which may be
+    /// `hysteresis(ENTER, LEAVE)` at its top (and only there: the recogniser keeps its state).
     fn chronicle_formula(&mut self, formula: &ast::Expr, params: &Params) {
+        let hysteresis = [crate::registry::Function::new(
+            HYSTERESIS,
+            vec![ValueType::Bool, ValueType::Bool],
+            ValueType::Bool,
+            "a fluent: becomes true when the first holds, false when the second holds",
+        )];
         let Checker { registry, types, diagnostics, .. } = self;
-        FormulaChecker::new(registry, types, Context::Chronicle, params.vars(), diagnostics)
-            .check_formula(formula);
+        FormulaChecker {
+            local_functions: &hysteresis,
+            ..FormulaChecker::new(registry, types, Context::Chronicle, params.vars(), diagnostics)
+        }
+        .check_formula(formula);
+        let inner: &[ast::Expr] = match &formula.kind {
+            ast::ExprKind::Call { func, args } if func.name == HYSTERESIS => args,
+            _ => std::slice::from_ref(formula),
+        };
+        for e in inner {
+            if let Some(span) = nested_hysteresis(e) {
+                self.diagnostics.push(diag::chronicle_hysteresis_nested(span));
+            }
+        }
     }
 
     fn event_index(&mut self, name: &ast::Ident, names: &[&str]) -> Option<usize> {
@@ -377,6 +419,27 @@ impl Checker<'_> {
         }
         false
     }
+}
+
+/// The first monitor whose verdicts `chronicle` (or a chronicle it uses) has as events: `kpl run`
+/// does not feed monitors' verdicts to chronicles yet. `chronicles` has no cycle.
+fn uses_monitor(chronicle: &hir::Chronicle, chronicles: &[hir::Chronicle]) -> Option<String> {
+    let sources =
+        chronicle.events.iter().map(|e| &e.source).chain(chronicle.nevers.iter().map(|n| &n.source));
+    for source in sources {
+        match source {
+            hir::EventSource::Monitor(m) => return Some(m.clone()),
+            hir::EventSource::Chronicle(name) => {
+                if let Some(m) =
+                    chronicles.iter().find(|c| c.name == *name).and_then(|c| uses_monitor(c, chronicles))
+                {
+                    return Some(m);
+                }
+            }
+            hir::EventSource::Predicate(_) => {}
+        }
+    }
+    None
 }
 
 fn find_cycle(

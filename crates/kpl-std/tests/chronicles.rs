@@ -1,0 +1,260 @@
+//! Chronicles on the runtime, as `kpl run specs/traffic/sumo_chronicles.kpl` runs them: the
+//! spec's `overtake` chronicle is recognised over the cars that anchoring makes of recorded SUMO
+//! traffic seen by the simulated tracker, and every recognition it recorded is what the pure
+//! recogniser (`kpl-chronicle`) gives on the events computed here, independently of the adapter,
+//! from the recorded cars: the spec's predicates written out in Rust over the traffic relations'
+//! implementations, a tuple's first value a change from false, a tuple that is gone false.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use kpl_chronicle::model::{Chronicle, Event, Hold, Pattern, SourceId};
+use kpl_chronicle::recognise::{Config, Recogniser};
+use kpl_chronicle::stn::Constraint;
+use kpl_core::{Time, Value};
+use kpl_runtime::RunConfig;
+
+const S: Time = 1_000_000;
+
+fn traffic_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic")
+}
+
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kpl-chronicle-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `(stream, valid, value)` of every recorded line.
+fn read_samples(path: &Path) -> Vec<(String, Time, serde_json::Value)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .map(|line| {
+            let json: serde_json::Value = serde_json::from_str(line).unwrap();
+            let stream = json["stream"].as_str().unwrap().to_string();
+            (stream, json["valid"].as_i64().unwrap(), json["value"].clone())
+        })
+        .collect()
+}
+
+/// The spec's predicates over the relations' implementations (not its formulas).
+struct Relations {
+    functions: BTreeMap<String, kpl_mtl::Function>,
+}
+
+impl Relations {
+    fn new() -> Relations {
+        let functions =
+            kpl_anchor::relations::functions().into_iter().map(|f| (f.name.to_string(), f)).collect();
+        Relations { functions }
+    }
+    fn call(&self, name: &str, args: &[Value]) -> bool {
+        matches!((self.functions[name].body)(args), Ok(Value::Bool(true)))
+    }
+    fn num(car: &Value, field: &str) -> f64 {
+        let Value::Record(r) = car else { return f64::NAN };
+        r.get(field).and_then(Value::as_f64).unwrap_or(f64::NAN)
+    }
+    fn flag(car: &Value, field: &str) -> bool {
+        let Value::Record(r) = car else { return false };
+        matches!(r.get(field), Some(Value::Bool(true)))
+    }
+    /// `behind(a, b) and close(a, b, 50.0) and a.measured and b.measured and a.speed > 3.0 and b.speed > 3.0`
+    fn back(&self, a: &Value, b: &Value) -> bool {
+        self.call("behind", &[a.clone(), b.clone()])
+            && self.close(a, b)
+            && Self::flag(a, "measured")
+            && Self::flag(b, "measured")
+            && Self::num(a, "speed") > 3.0
+            && Self::num(b, "speed") > 3.0
+    }
+    /// `beside(a, b)`
+    fn side(&self, a: &Value, b: &Value) -> bool {
+        self.call("beside", &[a.clone(), b.clone()])
+    }
+    /// `in_front(a, b) and a.speed > 4.0 and b.speed > 4.0`
+    fn front(&self, a: &Value, b: &Value) -> bool {
+        self.call("in_front", &[a.clone(), b.clone()])
+            && Self::num(a, "speed") > 4.0
+            && Self::num(b, "speed") > 4.0
+    }
+    /// `close(a, b, 50.0)`
+    fn close(&self, a: &Value, b: &Value) -> bool {
+        self.call("close", &[a.clone(), b.clone(), Value::Float(50.0)])
+    }
+}
+
+/// The `overtake` chronicle of the spec, for the pure recogniser: sources 0 to 3 are the
+/// predicates `back`, `side`, `front` and the hold's `close`.
+fn overtake_model() -> Chronicle {
+    let c = |later, earlier| Constraint { later, earlier, lo: Some(0), hi: Some(60 * S) };
+    let event = |source| Pattern { source: SourceId(source), args: vec![0, 1], value: true };
+    Chronicle {
+        name: "overtake".into(),
+        source: SourceId(4),
+        params: 2,
+        events: vec![event(0), event(1), event(2)],
+        constraints: vec![c(1, 0), c(2, 1), c(2, 0)],
+        holds: vec![Hold { source: SourceId(3), args: vec![0, 1], from: 0, to: 2 }],
+        nevers: vec![],
+    }
+}
+
+type Recognised = BTreeSet<(Vec<String>, Vec<Time>, Time)>;
+
+/// The recognitions the pure recogniser gives on the events of the recorded car snapshots.
+fn expected(snapshots: &[(Time, Vec<(String, Value)>)]) -> (Recognised, usize) {
+    let relations = Relations::new();
+    let mut recogniser: Recogniser<Arc<str>> =
+        Recogniser::new(vec![overtake_model().compile().unwrap()], Config::default()).unwrap();
+    let mut previous: Vec<BTreeMap<(String, String), bool>> = vec![BTreeMap::new(); 4];
+    let mut found = BTreeSet::new();
+    let mut events_total = 0;
+    for (valid, cars) in snapshots {
+        let mut events = Vec::new();
+        for (source, last) in previous.iter_mut().enumerate() {
+            let mut now = BTreeMap::new();
+            for (ida, a) in cars {
+                for (idb, b) in cars {
+                    if ida == idb {
+                        continue;
+                    }
+                    let value = match source {
+                        0 => relations.back(a, b),
+                        1 => relations.side(a, b),
+                        2 => relations.front(a, b),
+                        _ => relations.close(a, b),
+                    };
+                    now.insert((ida.clone(), idb.clone()), value);
+                }
+            }
+            let mut changes: Vec<((String, String), bool)> = Vec::new();
+            for (pair, &value) in &now {
+                if last.get(pair).copied().unwrap_or(false) != value {
+                    changes.push((pair.clone(), value));
+                }
+            }
+            for (pair, &value) in last.iter() {
+                if value && !now.contains_key(pair) {
+                    changes.push((pair.clone(), false));
+                }
+            }
+            changes.sort();
+            for ((a, b), value) in changes {
+                let args = vec![Arc::from(a.as_str()), Arc::from(b.as_str())];
+                events.push(Event { source: SourceId(source as u32), args, value, time: *valid });
+            }
+            *last = now;
+        }
+        events_total += events.len();
+        for r in recogniser.step(*valid, events).unwrap() {
+            found.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
+        }
+    }
+    (found, events_total)
+}
+
+#[test]
+fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+    let registry = kpl_std::registry();
+    let text = std::fs::read_to_string(traffic_dir().join("sumo_chronicles.kpl")).unwrap();
+    let spec = kpl_std::check_text(&text).unwrap();
+    let out_dir = fresh_dir("overtake");
+    let config = RunConfig {
+        duration: Some(90 * S),
+        seed: 3,
+        out_dir: out_dir.clone(),
+        spec_dir: traffic_dir(),
+        spec_name: "sumo_chronicles".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &registry, &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+
+    // The cars the chronicle's process saw: every `onroad_car` sample (its one input).
+    let car_type = spec.process("onroad_car").unwrap().output.clone().unwrap();
+    let samples = read_samples(&out_dir.join("sumo_chronicles/tracks.jsonl"));
+    let mut snapshots = Vec::new();
+    for (stream, valid, json) in samples.iter().filter(|(s, _, _)| s == "onroad_car") {
+        let Value::List(items) = Value::from_json(json, &car_type).unwrap() else {
+            panic!("{stream}: not a list")
+        };
+        let cars = items
+            .iter()
+            .filter_map(|car| match car {
+                Value::Record(r) => r.id.as_ref().map(|id| (id.to_string(), car.clone())),
+                _ => None,
+            })
+            .collect();
+        snapshots.push((*valid, cars));
+    }
+    assert!(snapshots.len() > 500, "{} car snapshots", snapshots.len());
+    let (want, events) = expected(&snapshots);
+
+    let recorded = read_samples(&out_dir.join("sumo_chronicles/situations.jsonl"));
+    let mut got = BTreeSet::new();
+    for (stream, valid, value) in &recorded {
+        assert_eq!(stream, "overtake");
+        assert_eq!(value["verdict"], true);
+        let times: Vec<Time> =
+            value["times"].as_array().unwrap().iter().map(|t| t.as_i64().unwrap()).collect();
+        assert_eq!(value["end"].as_i64(), Some(*valid));
+        assert_eq!(value["start"].as_i64(), times.iter().copied().min());
+        let binding =
+            vec![value["a"].as_str().unwrap().to_string(), value["b"].as_str().unwrap().to_string()];
+        got.insert((binding, times, *valid));
+    }
+    assert!(events > 100, "only {events} events");
+    assert!(want.len() >= 3, "the scenario's overtakes: {want:?}");
+    assert_eq!(got.len(), recorded.len(), "a recognition recorded twice");
+    assert_eq!(got, want);
+    let _ = std::fs::remove_dir_all(&out_dir);
+}
+
+/// Hysteresis in a chronicle's predicate, end to end: two cars whose distance jitters around
+/// 20 m. The raw threshold becomes true at every dip under 20 m; `hysteresis(d < 20, d > 25)`
+/// only at the first dip and after the cars were more than 25 m apart (hand-worked).
+#[test]
+fn hysteresis_keeps_a_jittering_relation_from_flickering() {
+    let dir = fresh_dir("hysteresis");
+    let distances = [30.0, 19.5, 20.5, 19.6, 20.4, 19.7, 30.0, 19.0, 20.2];
+    let mut data = String::new();
+    for (k, d) in distances.iter().enumerate() {
+        let x = 10.0 * k as f64;
+        data.push_str(&format!(
+            "{{\"stream\": \"cars\", \"valid\": {}, \"value\": [{{\"id\": \"c1\", \"pos\": [{x}, 0.0]}}, {{\"id\": \"c2\", \"pos\": [{}, 0.0]}}]}}\n",
+            k as i64 * S,
+            x + d
+        ));
+    }
+    std::fs::write(dir.join("cars.jsonl"), data).unwrap();
+    let text = "type Car symbol co { pos: vec2 }\n\
+        source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n\
+        chronicle near_raw(a: Car, b: Car) {\n  event meet = xydist(a.pos, b.pos) < 20.0 becomes true\n}\n\
+        chronicle near(a: Car, b: Car) {\n  event meet = hysteresis(xydist(a.pos, b.pos) < 20.0, xydist(a.pos, b.pos) > 25.0) becomes true\n}\n\
+        sink out = file.jsonl(near_raw, near, path: \"out.jsonl\")\n";
+    let spec = kpl_std::check_text(text).unwrap();
+    let config = RunConfig {
+        out_dir: dir.clone(),
+        spec_dir: dir.clone(),
+        spec_name: "hysteresis".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let recorded = read_samples(&dir.join("out.jsonl"));
+    let times = |stream: &str, a: &str| -> Vec<Time> {
+        recorded.iter().filter(|(s, _, v)| s == stream && v["a"] == a).map(|(_, t, _)| *t / S).collect()
+    };
+    // Both ordered pairs, at the same instants.
+    for a in ["c1", "c2"] {
+        assert_eq!(times("near_raw", a), [1, 3, 5, 7], "{recorded:?}");
+        assert_eq!(times("near", a), [1, 7], "{recorded:?}");
+    }
+    assert_eq!(recorded.len(), 12);
+    let _ = std::fs::remove_dir_all(&dir);
+}
