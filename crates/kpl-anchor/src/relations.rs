@@ -21,6 +21,9 @@ use kpl_mtl::Function;
 use kpl_roads::geom;
 use kpl_semantic::registry;
 
+/// What `gap` gives for two objects not on the same road: no room at all, so `gap(a, b) > x` is
+/// false for any sensible `x` (formulas refuse non-finite numbers).
+pub const NO_GAP_M: f64 = -1e9;
 /// The length of an object without a `size` attribute (a car), in metres.
 pub const DEFAULT_LENGTH_M: f64 = 4.5;
 /// The speed below which an object's direction of travel is not known (m/s): such an object is
@@ -177,7 +180,7 @@ pub fn functions() -> Vec<Function> {
             let a = on_road(&args[0], "gap")?;
             let b = on_road(&args[1], "gap")?;
             if !same_road(&a, &b) {
-                return Ok(Value::Float(f64::NAN));
+                return Ok(Value::Float(NO_GAP_M));
             }
             Ok(Value::Float(ahead(&a, &b) - overlap(&a, &b)))
         }),
@@ -248,7 +251,7 @@ pub fn signatures() -> Vec<registry::Function> {
             "gap",
             vec![Any, Any],
             Float,
-            "metres from a's front to b's back along the road (positive: a behind b with room; NaN: not on the same road)",
+            "metres from a's front to b's back along the road (positive: a behind b with room; -1e9: not on the same road)",
         ),
         f("beside_right", vec![Any, Any], Bool, "a beside b, on b's right"),
         f("close", vec![Any, Any, Float], Bool, "same road and within d metres along it"),
@@ -328,6 +331,12 @@ mod tests {
         assert_eq!(call("gap", &[a.clone(), b.clone()]).as_f64(), Some(16.0));
         assert_eq!(call("gap", &[b.clone(), a.clone()]).as_f64(), Some(-24.0));
         assert_eq!(call("gap", &[a.clone(), c.clone()]).as_f64(), Some(-2.0), "side by side: overlapping");
+        let mut other_road = b.clone();
+        if let Value::Record(r) = &mut other_road {
+            let r = Arc::make_mut(r);
+            r.fields.iter_mut().filter(|(n, _)| &**n == "road").for_each(|(_, v)| *v = Value::Int(7));
+        }
+        assert_eq!(call("gap", &[a.clone(), other_road]).as_f64(), Some(NO_GAP_M));
         // Gap 16 m (20 m between centres, 4 m of lengths) at 30 m/s.
         let gap = call("time_gap", &[a.clone(), b.clone()]).as_f64().unwrap();
         assert!((gap - 16.0 / 30.0).abs() < 1e-9, "{gap}");
