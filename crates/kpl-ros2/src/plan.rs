@@ -25,6 +25,7 @@
 //! against each other.
 
 use std::collections::HashMap;
+use std::fmt::Write as _;
 use std::sync::Arc;
 
 use kpl_core::{Record, RecordType, Time, Value, ValueType};
@@ -45,6 +46,16 @@ enum Leaf {
 }
 
 impl Leaf {
+    fn scalar(&self) -> Scalar<'_> {
+        match self {
+            Leaf::Bool(b) => Scalar::Bool(*b),
+            Leaf::Int(i) => Scalar::Int(*i),
+            Leaf::UInt(u) => Scalar::UInt(*u),
+            Leaf::Float(x) => Scalar::Float(*x),
+            Leaf::Str(s) => Scalar::Str(s),
+        }
+    }
+
     fn of(v: &MsgValue) -> Option<Leaf> {
         Some(match v {
             MsgValue::Bool(b) => Leaf::Bool(*b),
@@ -57,12 +68,49 @@ impl Leaf {
     }
 }
 
+/// A primitive's value as the tree path would hold it, borrowing its string: read from a message,
+/// or to be written.
+#[derive(Debug, Clone, Copy)]
+enum Scalar<'a> {
+    Bool(bool),
+    Int(i64),
+    UInt(u64),
+    Float(f64),
+    Str(&'a str),
+}
+
+impl<'a> Scalar<'a> {
+    fn of(v: &'a MsgValue) -> Option<Scalar<'a>> {
+        Some(match v {
+            MsgValue::Bool(b) => Scalar::Bool(*b),
+            MsgValue::Int(i) => Scalar::Int(*i),
+            MsgValue::UInt(u) => Scalar::UInt(*u),
+            MsgValue::Float(x) => Scalar::Float(*x),
+            MsgValue::Str(s) => Scalar::Str(s),
+            _ => return None,
+        })
+    }
+
+    /// The same value without a borrow (`None` for a string).
+    fn owned<'b>(self) -> Option<Scalar<'b>> {
+        Some(match self {
+            Scalar::Bool(b) => Scalar::Bool(b),
+            Scalar::Int(i) => Scalar::Int(i),
+            Scalar::UInt(u) => Scalar::UInt(u),
+            Scalar::Float(x) => Scalar::Float(x),
+            Scalar::Str(_) => return None,
+        })
+    }
+}
+
 /// Which value a field of the output gets: the valid time (sec or nanosec), or an entry's value
 /// (its first or second part: x and y of a vec2, sec and nanosec of a time).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum From {
     Stamp(u8),
     Entry(usize, u8),
+    /// A literal entry's value.
+    Literal(usize),
 }
 
 /// Which value each field (by its path of field indices) gets, where not its default.
@@ -279,9 +327,11 @@ pub(crate) struct EncodePlan {
     ops: Vec<EOp>,
     /// Per entry, its value when it is a literal.
     literals: Vec<Option<Leaf>>,
+    /// The entries that are not literals: evaluated per sample.
+    dynamic: Vec<usize>,
     /// Per entry, whether its parts go into float fields (a vec2's x and y).
     float_parts: Vec<[bool; 2]>,
-    empty: Arc<str>,
+    has_each: bool,
 }
 
 impl EncodePlan {
@@ -314,28 +364,35 @@ impl EncodePlan {
             element_assign.extend(stamp_leaves(element, stamp)?);
         }
         let mut literals = Vec::with_capacity(entries.len());
+        let mut dynamic = Vec::new();
         let mut float_parts = Vec::with_capacity(entries.len());
         for (k, (path, source)) in entries.iter().enumerate() {
+            let literal = match source {
+                Source::Literal(lit) => Some(Leaf::of(lit)?),
+                _ => None,
+            };
             let parts = leaves(schema, element, path)?;
             let mut floats = [false; 2];
             for (leaf, part) in parts {
                 let p = leaf_primitive(schema, element, &leaf)?;
                 floats[usize::from(part)] = matches!(p, Primitive::Float32 | Primitive::Float64);
                 let target = if each.is_some() { &mut element_assign } else { &mut root_assign };
-                target.insert(leaf, From::Entry(k, part));
+                let from = if literal.is_some() { From::Literal(k) } else { From::Entry(k, part) };
+                target.insert(leaf, from);
             }
             float_parts.push(floats);
-            literals.push(match source {
-                Source::Literal(lit) => Some(Leaf::of(lit)?),
-                _ => None,
-            });
+            if literal.is_none() {
+                dynamic.push(k);
+            }
+            literals.push(literal);
         }
         let builder = LayoutBuilder { schema, each: each.map(|(p, _)| (p.as_slice(), &element_assign)) };
         let mut ops = Vec::new();
         let mut pending = Vec::new();
         builder.walk(root, &mut Vec::new(), &root_assign, true, &mut ops, &mut pending)?;
         LayoutBuilder::flush(&mut pending, &mut ops);
-        Some(EncodePlan { ops, literals, float_parts, empty: Arc::from("") })
+        let has_each = ops.iter().any(|op| matches!(op, EOp::Each(..)));
+        Some(EncodePlan { ops, literals, dynamic, float_parts, has_each })
     }
 
     /// Writes the message of `value` at `valid` into `out` (cleared first, with the CDR header);
@@ -351,114 +408,122 @@ impl EncodePlan {
         out.clear();
         out.extend_from_slice(&[0, 1, 0, 0]);
         let stamp = match time_value(valid) {
-            MsgValue::Struct(f) => [Leaf::of(&f[0]).ok_or(())?, Leaf::of(&f[1]).ok_or(())?],
+            MsgValue::Struct(f) => match (&f[0], &f[1]) {
+                (MsgValue::Int(sec), MsgValue::UInt(nanosec)) => [Scalar::Int(*sec), Scalar::UInt(*nanosec)],
+                _ => return Err(()),
+            },
             _ => return Err(()),
         };
-        let mut parts: Vec<[Leaf; 2]> = Vec::with_capacity(entries.len());
-        let has_each = self.ops.iter().any(|op| matches!(op, EOp::Each(..)));
-        if !has_each {
+        let single;
+        let items: &[Value] = match value {
+            _ if !self.has_each => &[],
+            Value::List(items) => items,
+            other => {
+                single = [other.clone()];
+                &single
+            }
+        };
+        let mut parts: Vec<[Scalar<'_>; 2]> = vec![[Scalar::Bool(false); 2]; entries.len()];
+        if !self.has_each {
             self.evaluate(entries, numbers, value, &mut parts)?;
         }
-        let mut w = Writes { out, stamp: &stamp, parts: &mut parts };
+        let mut w = Writes { out, stamp, literals: &self.literals };
         for op in &self.ops {
             match op {
                 EOp::Each(bound, body) => {
-                    let single;
-                    let items: &[Value] = match value {
-                        Value::List(items) => items,
-                        other => {
-                            single = [other.clone()];
-                            &single
-                        }
-                    };
                     if bound.is_some_and(|n| items.len() > n) {
                         return Err(());
                     }
                     w.out.extend_from_slice(&[0; 3][..pad(w.out.len() - 4, 4)]);
                     w.out.extend_from_slice(&(items.len() as u32).to_le_bytes());
                     for item in items {
-                        self.evaluate(entries, numbers, item, w.parts)?;
+                        self.evaluate(entries, numbers, item, &mut parts)?;
                         for op in body {
-                            w.op(op)?;
+                            w.op(op, &parts)?;
                         }
                     }
                 }
-                op => w.op(op)?,
+                op => w.op(op, &parts)?,
             }
         }
         Ok(())
     }
 
-    /// The values of a sample's entries, in the mapping's order (as `OutMap::fill` computes them).
-    fn evaluate(
+    /// The values of a sample's entries that are not literals, in the mapping's order (as
+    /// `OutMap::fill` computes them).
+    fn evaluate<'v>(
         &self,
         entries: &[(Path, Source)],
         numbers: &mut HashMap<Arc<str>, i64>,
-        value: &Value,
-        parts: &mut Vec<[Leaf; 2]>,
+        value: &'v Value,
+        parts: &mut [[Scalar<'v>; 2]],
     ) -> Result<(), ()> {
-        parts.clear();
         let record = value.as_record();
-        let none = Leaf::Bool(false);
-        for (k, (path, source)) in entries.iter().enumerate() {
-            let part = match source {
-                Source::Literal(_) => [self.literals[k].clone().ok_or(())?, none.clone()],
-                Source::Symbol => {
-                    let id = record.and_then(|r| r.id.clone()).unwrap_or_else(|| self.empty.clone());
-                    [Leaf::Str(id), none.clone()]
-                }
+        let none = Scalar::Bool(false);
+        for &k in &self.dynamic {
+            let (path, source) = &entries[k];
+            parts[k] = match source {
+                Source::Literal(_) => return Err(()),
+                Source::Symbol => [Scalar::Str(record.and_then(|r| r.id.as_deref()).unwrap_or("")), none],
                 Source::Number => {
-                    let symbol = record.and_then(|r| r.id.clone()).unwrap_or_else(|| self.empty.clone());
-                    let n = number_of(&symbol, numbers);
-                    [Leaf::of(&number_value(n as f64, path.end)).ok_or(())?, none.clone()]
+                    let n = match record.and_then(|r| r.id.as_ref()) {
+                        Some(id) => number_of(id, numbers),
+                        None => number_of(&Arc::from(""), numbers),
+                    };
+                    [Scalar::of(&number_value(n as f64, path.end)).and_then(Scalar::owned).ok_or(())?, none]
                 }
-                Source::Attribute(a) => {
-                    let v = value.field(a).ok_or(())?;
-                    self.attribute(&v, path.end, self.float_parts[k]).ok_or(())?
-                }
+                Source::Attribute(a) => match (record, &**a) {
+                    (Some(r), "id") if r.id.is_some() => match (path.end, r.id.as_deref()) {
+                        (End::Primitive(Primitive::String(_)), Some(id)) => [Scalar::Str(id), none],
+                        _ => return Err(()),
+                    },
+                    (Some(r), a) => attribute(r.get(a).ok_or(())?, path.end, self.float_parts[k]).ok_or(())?,
+                    (None, a) => {
+                        let v = value.field(a).ok_or(())?;
+                        let [x, y] = attribute(&v, path.end, self.float_parts[k]).ok_or(())?;
+                        [x.owned().ok_or(())?, y.owned().ok_or(())?]
+                    }
+                },
             };
-            parts.push(part);
         }
         Ok(())
     }
+}
 
-    /// As `mapping::to_msg`, then as `OutMap::fill` writes a vec2 into x and y.
-    fn attribute(&self, v: &Value, end: End, floats: [bool; 2]) -> Option<[Leaf; 2]> {
-        let none = Leaf::Bool(false);
-        Some(match (end, v) {
-            (End::Xy(..), Value::Vec2(xy)) => {
-                let part = |i: usize| {
-                    if floats[i] { Leaf::Float(xy[i]) } else { Leaf::Int(xy[i] as i64) }
-                };
-                [part(0), part(1)]
-            }
-            (End::Time, Value::Int(t)) | (End::Duration, Value::Duration(t)) => {
-                let MsgValue::Struct(f) = time_value(*t) else { return None };
-                [Leaf::of(&f[0])?, Leaf::of(&f[1])?]
-            }
-            (End::Primitive(Primitive::Float32 | Primitive::Float64), v) => [Leaf::Float(v.as_f64()?), none],
-            (
-                End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64),
-                Value::Int(i),
-            ) => [Leaf::Int(*i), none],
-            (End::Primitive(p), Value::Int(i)) if p.size().is_some() => {
-                [Leaf::UInt(u64::try_from(*i).ok()?), none]
-            }
-            (End::Primitive(Primitive::Bool), Value::Bool(b)) => [Leaf::Bool(*b), none],
-            (End::Primitive(Primitive::String(_)), Value::Str(s)) => [Leaf::Str(s.clone()), none],
-            _ => return None,
-        })
-    }
+/// As `mapping::to_msg`, then as `OutMap::fill` writes a vec2 into x and y.
+fn attribute(v: &Value, end: End, floats: [bool; 2]) -> Option<[Scalar<'_>; 2]> {
+    let none = Scalar::Bool(false);
+    Some(match (end, v) {
+        (End::Xy(..), Value::Vec2(xy)) => {
+            let part = |i: usize| if floats[i] { Scalar::Float(xy[i]) } else { Scalar::Int(xy[i] as i64) };
+            [part(0), part(1)]
+        }
+        (End::Time, Value::Int(t)) | (End::Duration, Value::Duration(t)) => {
+            let MsgValue::Struct(f) = time_value(*t) else { return None };
+            [Scalar::of(&f[0])?.owned()?, Scalar::of(&f[1])?.owned()?]
+        }
+        (End::Primitive(Primitive::Float32 | Primitive::Float64), v) => [Scalar::Float(v.as_f64()?), none],
+        (
+            End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64),
+            Value::Int(i),
+        ) => [Scalar::Int(*i), none],
+        (End::Primitive(p), Value::Int(i)) if p.size().is_some() => {
+            [Scalar::UInt(u64::try_from(*i).ok()?), none]
+        }
+        (End::Primitive(Primitive::Bool), Value::Bool(b)) => [Scalar::Bool(*b), none],
+        (End::Primitive(Primitive::String(_)), Value::Str(s)) => [Scalar::Str(s), none],
+        _ => return None,
+    })
 }
 
 struct Writes<'a> {
     out: &'a mut Vec<u8>,
-    stamp: &'a [Leaf; 2],
-    parts: &'a mut Vec<[Leaf; 2]>,
+    stamp: [Scalar<'static>; 2],
+    literals: &'a [Option<Leaf>],
 }
 
 impl Writes<'_> {
-    fn op(&mut self, op: &EOp) -> Result<(), ()> {
+    fn op(&mut self, op: &EOp, parts: &[[Scalar<'_>; 2]]) -> Result<(), ()> {
         match op {
             EOp::Default(bytes) => {
                 self.out.extend_from_slice(&bytes[(self.out.len() - 4) % 8]);
@@ -466,8 +531,9 @@ impl Writes<'_> {
             }
             EOp::Leaf(p, from) => {
                 let leaf = match *from {
-                    From::Stamp(c) => &self.stamp[usize::from(c)],
-                    From::Entry(k, c) => &self.parts[k][usize::from(c)],
+                    From::Stamp(c) => self.stamp[usize::from(c)],
+                    From::Entry(k, c) => parts[k][usize::from(c)],
+                    From::Literal(k) => self.literals[k].as_ref().ok_or(())?.scalar(),
                 };
                 write_leaf(self.out, *p, leaf)
             }
@@ -477,14 +543,14 @@ impl Writes<'_> {
 }
 
 /// As the codec's `write_primitive`: the same variants fit, the same ranges.
-fn write_leaf(out: &mut Vec<u8>, p: Primitive, leaf: &Leaf) -> Result<(), ()> {
+fn write_leaf(out: &mut Vec<u8>, p: Primitive, leaf: Scalar<'_>) -> Result<(), ()> {
     use Primitive::*;
     let align = |out: &mut Vec<u8>, n: usize| {
         let pad = pad(out.len() - 4, n);
         out.resize(out.len() + pad, 0);
     };
     if let String(bound) = p {
-        let Leaf::Str(s) = leaf else { return Err(()) };
+        let Scalar::Str(s) = leaf else { return Err(()) };
         if bound.is_some_and(|n| s.len() > n as usize) || s.contains('\0') {
             return Err(());
         }
@@ -497,19 +563,19 @@ fn write_leaf(out: &mut Vec<u8>, p: Primitive, leaf: &Leaf) -> Result<(), ()> {
     let size = p.size().ok_or(())?;
     align(out, size);
     match (p, leaf) {
-        (Bool, Leaf::Bool(b)) => out.push(u8::from(*b)),
-        (Float32, Leaf::Float(x)) => out.extend_from_slice(&(*x as f32).to_le_bytes()),
-        (Float64, Leaf::Float(x)) => out.extend_from_slice(&x.to_le_bytes()),
-        (Int8 | Int16 | Int32 | Int64, Leaf::Int(i)) => {
+        (Bool, Scalar::Bool(b)) => out.push(u8::from(b)),
+        (Float32, Scalar::Float(x)) => out.extend_from_slice(&(x as f32).to_le_bytes()),
+        (Float64, Scalar::Float(x)) => out.extend_from_slice(&x.to_le_bytes()),
+        (Int8 | Int16 | Int32 | Int64, Scalar::Int(i)) => {
             let bits = size as u32 * 8;
-            if bits < 64 && (*i < -(1i64 << (bits - 1)) || *i >= 1i64 << (bits - 1)) {
+            if bits < 64 && (i < -(1i64 << (bits - 1)) || i >= 1i64 << (bits - 1)) {
                 return Err(());
             }
             out.extend_from_slice(&i.to_le_bytes()[..size]);
         }
-        (Byte | Char | UInt8 | UInt16 | UInt32 | UInt64, Leaf::UInt(u)) => {
+        (Byte | Char | UInt8 | UInt16 | UInt32 | UInt64, Scalar::UInt(u)) => {
             let bits = size as u32 * 8;
-            if bits < 64 && *u >= 1u64 << bits {
+            if bits < 64 && u >= 1u64 << bits {
                 return Err(());
             }
             out.extend_from_slice(&u.to_le_bytes()[..size]);
@@ -543,16 +609,6 @@ enum Elem {
     Octet,
     Fixed(usize),
     Ops(Vec<DOp>),
-}
-
-/// A primitive read from the message, borrowing its strings.
-#[derive(Debug, Clone, Copy)]
-enum Scalar<'a> {
-    Bool(bool),
-    Int(i64),
-    UInt(u64),
-    Float(f64),
-    Str(&'a str),
 }
 
 impl Scalar<'_> {
@@ -808,6 +864,7 @@ impl DecodePlan {
         let mut root = vec![Scalar::Bool(false); self.root_slots];
         let mut element = vec![Scalar::Bool(false); self.element_slots];
         let mut records: Option<Vec<Value>> = None;
+        let mut id = String::new();
         let mut first_stamp = None;
         for op in &self.ops {
             if let DOp::Each(kind, body) = op {
@@ -822,7 +879,7 @@ impl DecodePlan {
                     {
                         first_stamp = time_of(element[sec], element[nanosec]);
                     }
-                    list.push(self.record(&element)?);
+                    list.push(self.record(&element, &mut id)?);
                 }
                 records = Some(list);
             } else {
@@ -836,12 +893,12 @@ impl DecodePlan {
         };
         let value = match records {
             Some(list) => Value::List(list.into()),
-            None => self.record(&root)?,
+            None => self.record(&root, &mut id)?,
         };
         Ok((valid, value))
     }
 
-    fn record(&self, slots: &[Scalar<'_>]) -> Result<Value, ()> {
+    fn record(&self, slots: &[Scalar<'_>], id: &mut String) -> Result<Value, ()> {
         let mut fields = Vec::with_capacity(self.attributes.len());
         for (name, end, ty, read) in &self.attributes {
             let value = match (*read, end) {
@@ -867,12 +924,17 @@ impl DecodePlan {
             fields.push((name.clone(), value));
         }
         let id = match self.identity {
-            Some(slot) => Some(match slots[slot] {
-                Scalar::Int(i) => format!("{}{i}", self.ty.symbol).into(),
-                Scalar::UInt(u) => format!("{}{u}", self.ty.symbol).into(),
-                Scalar::Str(s) => format!("{}{s}", self.ty.symbol).into(),
-                _ => return Err(()),
-            }),
+            Some(slot) => {
+                id.clear();
+                id.push_str(&self.ty.symbol);
+                match slots[slot] {
+                    Scalar::Int(i) => write!(id, "{i}").map_err(|_| ())?,
+                    Scalar::UInt(u) => write!(id, "{u}").map_err(|_| ())?,
+                    Scalar::Str(s) => id.push_str(s),
+                    _ => return Err(()),
+                }
+                Some(Arc::from(id.as_str()))
+            }
             None => None,
         };
         Ok(Value::Record(Arc::new(Record { id, fields })))
@@ -952,6 +1014,10 @@ impl<'a> Cursor<'a> {
         let len = self.u32()?;
         if len == 0 {
             return Err(());
+        }
+        if len == 1 {
+            // The empty string: most of what a mapping skips.
+            return if self.take(1)? == [0] { Ok("") } else { Err(()) };
         }
         let bytes = self.take(len)?;
         let (text, nul) = bytes.split_at(len - 1);

@@ -22,7 +22,7 @@ use std::time::Duration;
 use kpl_core::{Time, Value, ValueType};
 use kpl_ros2::mapping::{InMap, MapError, OutMap};
 use kpl_ros2::wire::{self, Attachment, EntityKind, Node, Qos};
-use kpl_ros2::{Schema, cdr, topic};
+use kpl_ros2::{Schema, topic};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source};
@@ -496,8 +496,8 @@ pub(crate) enum Refused {
 }
 
 /// What `ros2.subscribe` makes of one message from the wire: its attachment (when it has one),
-/// and its valid time and value, decoded from CDR and mapped (or why not). `now` is the valid
-/// time of a message whose mapping has no stamp.
+/// and its valid time and value, read from the CDR by the mapping's decode plan (`InMap::decode`),
+/// or why not. `now` is the valid time of a message whose mapping has no stamp.
 pub(crate) fn take(
     c: &Common,
     map: &InMap,
@@ -522,11 +522,7 @@ pub(crate) fn take(
         return (Some(attachment), Err(Refused::TypeHash(why)));
     }
     let payload = message.payload().to_bytes();
-    let decoded = cdr::decode(&c.schema, &payload).map_err(|e| e.to_string()).and_then(|msg| {
-        let value = map.apply(&msg)?;
-        Ok((map.valid_time(&msg), value))
-    });
-    let taken = decoded.map_err(Refused::Malformed).map(|(valid, value)| {
+    let taken = map.decode(&payload).map_err(Refused::Malformed).map(|(valid, value)| {
         let valid =
             valid.unwrap_or_else(|| if map.has_stamp() { attachment.source_timestamp / 1000 } else { now });
         (valid, value)
@@ -578,8 +574,9 @@ impl Open {
     }
 }
 
-/// What `ros2.publish` does with a sample before it goes on the wire: its value mapped into a
-/// message (`valid` its stamp) and encoded as CDR into `buffer`.
+/// What `ros2.publish` does with a sample before it goes on the wire: its value written as the
+/// CDR of its message (`valid` its stamp) into `buffer` by the mapping's encode plan
+/// (`OutMap::encode_into`).
 pub(crate) fn encode(
     c: &Common,
     map: &mut OutMap,
@@ -587,8 +584,7 @@ pub(crate) fn encode(
     value: &Value,
     buffer: &mut Vec<u8>,
 ) -> Result<(), ProcessError> {
-    let msg = map.apply(valid, value).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))?;
-    cdr::encode_into(&c.schema, &msg, buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))
+    map.encode_into(valid, value, buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))
 }
 
 struct Publish {
