@@ -112,26 +112,17 @@ pub fn register(registry: &mut Registry) {
     );
 }
 
-/// A mapping error as `kpl check` reports it: in the entry of `map` (or the parameter) it names.
-fn problem(e: MapError) -> ParamProblem {
-    let (param, element) = match e.entry {
-        Some(i) => ("map".to_string(), Some(i)),
-        None => (e.param.to_string(), None),
-    };
-    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
-}
-
 /// `kpl check` of `ros2.subscribe`: its type (shipped, or of `msgs` beside the spec), and its
 /// mapping against the type and the stream's.
 fn check_subscribe(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(output) = call.output else { return Vec::new() };
-    topic::check_in(call.params, output, call.dir).err().map(problem).into_iter().collect()
+    topic::check_in(call.params, output, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 /// `kpl check` of `ros2.publish`: its type, and its mapping against the type and the input's.
 fn check_publish(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(input) = call.inputs.first() else { return Vec::new() };
-    topic::check_out(call.params, input, call.dir).err().map(problem).into_iter().collect()
+    topic::check_out(call.params, input, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
