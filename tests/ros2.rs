@@ -297,6 +297,30 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     );
 }
 
+/// `--for` on a replayed bag whose stamps are dates (specs/ros2/tracker/, 0.5 s steps from
+/// 2023-11-14T22:13:20Z for 30 s) counts from its first stamp, as the summary does: the run keeps
+/// the messages of the first 10 s, [first, first + 10 s) as on any clock, and says that `--for`
+/// ended it. (Counted from simulated time 0, it ended before the first message, with nothing.)
+#[test]
+fn for_counts_from_the_first_stamp_of_a_dated_bag() {
+    let out = common::fresh_dir("ros2", "replay-for").join("out");
+    let run = common::kpl(&["run", "specs/ros2/replay.kpl", "--for", "10s", "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{said}");
+    assert!(
+        said.contains("(--for reached) after 10.000 s simulated time from 2023-11-14T22:13:20"),
+        "{said}"
+    );
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["ending"], "duration_reached", "{summary:#}");
+    let tracks = lines(&out.join("tracks.jsonl"));
+    let stamps: Vec<i64> =
+        tracks.iter().filter(|l| l["stream"] == "markers").map(|l| l["valid"].as_i64().unwrap()).collect();
+    let first = 1_700_000_000_000_000;
+    assert_eq!(stamps, (0..20).map(|i| first + 500_000 * i).collect::<Vec<_>>());
+    assert!(tracks.iter().any(|l| l["stream"] == "onroad_car"), "the first 10 s make cars too");
+}
+
 /// The type hash a bag records for a topic (`topic_type_hash` in its MCAP channel, as `ros2 bag
 /// record` writes it from Jazzy on) is compared with the declared type's: the bag of rosbags
 /// with the hash rosbags computes for MarkerArray replays whole, the same bag with a hash one

@@ -398,7 +398,7 @@ impl Source for Subscribe {
             let mut sequences = Sequences::default();
             let (mut messages, mut wrong_type, mut no_attachment) = (0u64, 0u64, 0u64);
             loop {
-                let far = ctx.end.unwrap_or_else(|| ctx.now().saturating_add(FAR));
+                let far = ctx.end().unwrap_or_else(|| ctx.now().saturating_add(FAR));
                 let until = match gone_since {
                     Some(t) => far.min(t + self.idle),
                     None => far,
@@ -431,7 +431,7 @@ impl Source for Subscribe {
                         }
                         match taken {
                             Ok((valid, value)) => {
-                                if ctx.end.is_some_and(|end| ctx.now() > end) {
+                                if ctx.end().is_some_and(|end| ctx.now() > end) {
                                     break;
                                 }
                                 ctx.emit(valid, value).await;
@@ -451,7 +451,7 @@ impl Source for Subscribe {
                         }
                     }
                     _ = ctx.wait_until(until) => {
-                        if gone_since.is_some() || ctx.should_stop() || ctx.end.is_some_and(|end| ctx.now() >= end) {
+                        if gone_since.is_some() || ctx.should_stop() || ctx.end().is_some_and(|end| ctx.now() >= end) {
                             break;
                         }
                     }
