@@ -297,6 +297,30 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     );
 }
 
+/// `--for` on a replayed bag whose stamps are dates (specs/ros2/tracker/, 0.5 s steps from
+/// 2023-11-14T22:13:20Z for 30 s) counts from its first stamp, as the summary does: the run keeps
+/// the messages of the first 10 s, [first, first + 10 s) as on any clock, and says that `--for`
+/// ended it. (Counted from simulated time 0, it ended before the first message, with nothing.)
+#[test]
+fn for_counts_from_the_first_stamp_of_a_dated_bag() {
+    let out = common::fresh_dir("ros2", "replay-for").join("out");
+    let run = common::kpl(&["run", "specs/ros2/replay.kpl", "--for", "10s", "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{said}");
+    assert!(
+        said.contains("(--for reached) after 10.000 s simulated time from 2023-11-14T22:13:20"),
+        "{said}"
+    );
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["ending"], "duration_reached", "{summary:#}");
+    let tracks = lines(&out.join("tracks.jsonl"));
+    let stamps: Vec<i64> =
+        tracks.iter().filter(|l| l["stream"] == "markers").map(|l| l["valid"].as_i64().unwrap()).collect();
+    let first = 1_700_000_000_000_000;
+    assert_eq!(stamps, (0..20).map(|i| first + 500_000 * i).collect::<Vec<_>>());
+    assert!(tracks.iter().any(|l| l["stream"] == "onroad_car"), "the first 10 s make cars too");
+}
+
 /// The type hash a bag records for a topic (`topic_type_hash` in its MCAP channel, as `ros2 bag
 /// record` writes it from Jazzy on) is compared with the declared type's: the bag of rosbags
 /// with the hash rosbags computes for MarkerArray replays whole, the same bag with a hash one
@@ -367,6 +391,58 @@ sink tracks = file.jsonl(markers, path: "tracks.jsonl")
             );
         }
     }
+}
+
+/// The type hash a bag's `metadata.yaml` records for a topic (`type_description_hash`, as `ros2
+/// bag record` writes it from Jazzy on) is compared with the declared type's too: specs/ros2/tracker
+/// with its metadata.yaml's hash one digit off has every message counted as malformed, the error
+/// naming metadata.yaml and both hashes (the bag as shipped replays whole: `ros2.replay` above).
+#[test]
+fn a_bag_whose_metadata_records_another_type_hash_is_refused_message_by_message() {
+    let dir = common::fresh_dir("ros2", "metadata-hash");
+    let bag = dir.join("bag");
+    std::fs::create_dir_all(&bag).unwrap();
+    std::fs::copy(root().join("specs/ros2/tracker/tracker.mcap"), bag.join("tracker.mcap")).unwrap();
+    let metadata = std::fs::read_to_string(root().join("specs/ros2/tracker/metadata.yaml")).unwrap();
+    let shipped = "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf";
+    let altered = "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dce";
+    assert!(metadata.contains(shipped), "specs/ros2/tracker/metadata.yaml records another hash");
+    std::fs::write(bag.join("metadata.yaml"), metadata.replace(shipped, altered)).unwrap();
+    let spec = dir.join("replay.kpl");
+    std::fs::write(
+        &spec,
+        r#"type VisionPercept symbol vp { pos: vec2, size: float }
+source markers : list<VisionPercept> = ros2.replay(
+  path: "bag",
+  topic: "/tracker/markers",
+  type: "visualization_msgs/msg/MarkerArray",
+  each: "markers",
+  identity: "id",
+  map: ["pos = pose.position", "size = scale.x"],
+)
+sink tracks = file.jsonl(markers, path: "tracks.jsonl")
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let run = common::kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&run.stderr).to_string();
+    assert!(run.status.success(), "{said}");
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let process = summary["summary"]["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["process"] == "markers")
+        .cloned()
+        .unwrap_or_default();
+    let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
+    assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (0, 61), "{process}");
+    let example = process["malformed_examples"][0]["error"].as_str().unwrap();
+    assert!(
+        example.contains("metadata.yaml") && example.contains(altered) && example.contains(shipped),
+        "{example}"
+    );
 }
 
 /// `kpl bench ros2 --quick` (two processes on loopback: kpl's ROS 2 path against bare zenoh

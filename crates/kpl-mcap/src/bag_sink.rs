@@ -127,18 +127,10 @@ impl Unit for BagSink {
     }
 }
 
-fn problem(e: MapError) -> ParamProblem {
-    let (param, element) = match e.entry {
-        Some(i) => ("map".to_string(), Some(i)),
-        None => (e.param.to_string(), None),
-    };
-    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
-}
-
 /// `kpl check` of `ros2.bag`: its type and mapping, as `ros2.publish`'s.
 fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(input) = call.inputs.first() else { return Vec::new() };
-    topic::check_out(call.params, input, call.dir).err().map(problem).into_iter().collect()
+    topic::check_out(call.params, input, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 fn params<'c>(ctx: &'c BuildContext<'_>) -> &'c BTreeMap<String, Value> {

@@ -40,6 +40,8 @@ struct Replay {
     /// The declared type's RIHS01 hash, and whether the type is the spec's own (`msgs`).
     hash: String,
     user_msgs: bool,
+    /// The type hash the bag's `metadata.yaml` records for the topic, when it records one.
+    metadata_hash: Option<String>,
     map: InMap,
     clock: ClockKind,
 }
@@ -70,6 +72,19 @@ impl Source for Replay {
                             {
                                 let error = format!(
                                     "the bag records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
+                                    self.topic,
+                                    self.schema.name(),
+                                    if self.user_msgs { " from `msgs`" } else { ", shipped" },
+                                    self.hash
+                                );
+                                ctx.malformed(&location, error)?;
+                                continue;
+                            }
+                            if let Some(recorded) = &self.metadata_hash
+                                && *recorded != self.hash
+                            {
+                                let error = format!(
+                                    "the bag's metadata.yaml records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
                                     self.topic,
                                     self.schema.name(),
                                     if self.user_msgs { " from `msgs`" } else { ", shipped" },
@@ -113,18 +128,10 @@ impl Source for Replay {
     }
 }
 
-fn problem(e: MapError) -> ParamProblem {
-    let (param, element) = match e.entry {
-        Some(i) => ("map".to_string(), Some(i)),
-        None => (e.param.to_string(), None),
-    };
-    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
-}
-
 /// `kpl check` of `ros2.replay`: its type and mapping, as `ros2.subscribe`'s.
 fn check(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(output) = call.output else { return Vec::new() };
-    topic::check_in(call.params, output, call.dir).err().map(problem).into_iter().collect()
+    topic::check_in(call.params, output, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 fn params<'c>(ctx: &'c BuildContext<'_>) -> &'c BTreeMap<String, Value> {
@@ -162,7 +169,15 @@ pub fn register(registry: &mut Registry) {
             kpl_ros2::wire::check_topic(name).map_err(|e| ctx.error(format!("`topic`: {e}")))?;
             let user_msgs = !topic::text(params, "msgs").is_empty();
             let hash = schema.type_hash();
-            Ok(Box::new(Replay { display: path.display().to_string(), files, topic: name.to_string(), schema, hash, user_msgs, map, clock: ctx.clock }))
+            let metadata = path.join("metadata.yaml");
+            let metadata_hash = if path.is_dir() && metadata.exists() {
+                let text = std::fs::read_to_string(&metadata)
+                    .map_err(|e| ctx.error(format!("cannot read {}: {e}", metadata.display())))?;
+                kpl_ros2::rosbag2::recorded_type_hash(&text, name)
+            } else {
+                None
+            };
+            Ok(Box::new(Replay { display: path.display().to_string(), files, topic: name.to_string(), schema, hash, user_msgs, metadata_hash, map, clock: ctx.clock }))
         },
     );
 }

@@ -4,7 +4,10 @@
 //!   and mapped into 100 percepts (`InMap::apply`, specs/ros2/markers.kpl's mapping), against
 //!   `decode/json`: the JSON text of those 100 percepts parsed and typed;
 //! - `encode/map+cdr`: 100 cars mapped into a MarkerArray (`OutMap::apply`, markers.kpl's
-//!   `/kpl/cars` mapping) and encoded, against `encode/json`: the cars written as JSON.
+//!   `/kpl/cars` mapping) and encoded, against `encode/json`: the cars written as JSON;
+//! - `decode/plan` and `encode/plan`: the same by the mappings' compiled plans (`InMap::decode`,
+//!   `OutMap::encode_into`: what `ros2.subscribe` and `ros2.publish` run), which give the same
+//!   values and bytes without building the message (crates/kpl-ros2/tests/plans.rs).
 //!
 //! `cargo bench -p kpl-ros2 --bench cdr`; docs/performance.md has the figures as ratios.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)] // a benchmark
@@ -80,6 +83,7 @@ fn bench(c: &mut Criterion) {
             (map.valid_time(&msg), map.apply(&msg).unwrap())
         })
     });
+    group.bench_function("plan", |b| b.iter(|| map.decode(black_box(&bytes)).unwrap()));
     group.bench_function("json", |b| {
         b.iter(|| {
             let parsed: serde_json::Value = serde_json::from_slice(black_box(&json)).unwrap();
@@ -94,6 +98,12 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let msg = out.apply(valid, black_box(&cars)).unwrap();
             cdr::encode_into(&schema, &msg, &mut buffer).unwrap();
+            buffer.len()
+        })
+    });
+    group.bench_function("plan", |b| {
+        b.iter(|| {
+            out.encode_into(valid, black_box(&cars), &mut buffer).unwrap();
             buffer.len()
         })
     });

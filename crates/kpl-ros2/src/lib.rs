@@ -6,7 +6,8 @@
 //!   user's folders; [`Schema`]: one type with everything it uses, resolved;
 //! - [`hash`]: RIHS01 type hashes;
 //! - [`cdr`]: the dynamic CDR codec (with the encapsulation header), [`json`]: messages as JSON;
-//! - [`mapping`]: fields of messages into KPL values and back, as a spec declares it;
+//! - [`mapping`]: fields of messages into KPL values and back, as a spec declares it, run by
+//!   compiled plans (`plan`) that go between values and CDR without building the message;
 //! - [`topic`]: a topic's type and mapping as a spec's call declares them, checked the same
 //!   way by `kpl check` and a run;
 //! - [`wire`]: rmw_zenoh's keys, attachment, liveliness tokens and QoS;
@@ -22,6 +23,7 @@ pub mod hash;
 pub mod json;
 pub mod mapping;
 pub mod msg;
+mod plan;
 pub mod rosbag2;
 pub mod topic;
 pub mod wire;

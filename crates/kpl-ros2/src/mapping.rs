@@ -28,6 +28,7 @@ use crate::cdr::MsgValue;
 use crate::definitions::{Schema, SchemaBase};
 use crate::json;
 use crate::msg::{ArrayKind, Primitive};
+use crate::plan::{DecodePlan, EncodePlan};
 
 /// A mapping problem: which part of the declaration (`entry`: the index of the entry, or `None`
 /// for the parameter named in `param`), the byte range inside its text, the message and a hint.
@@ -72,13 +73,13 @@ pub struct OutSpec {
 
 /// A path resolved to field indices, and what it ends on.
 #[derive(Debug, Clone, PartialEq)]
-struct Path {
-    indices: Vec<usize>,
-    end: End,
+pub(crate) struct Path {
+    pub(crate) indices: Vec<usize>,
+    pub(crate) end: End,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum End {
+pub(crate) enum End {
     Primitive(Primitive),
     /// A message with numeric `x` and `y` at these indices.
     Xy(usize, usize, Option<usize>),
@@ -305,6 +306,10 @@ pub struct InMap {
     identity: Option<Path>,
     /// The valid time: a path from the message root, or from the element.
     stamp: Option<(bool, Path)>,
+    /// The schema, for the tree path.
+    schema: Arc<Schema>,
+    /// What [`InMap::decode`] runs, when the mapping has one.
+    plan: Option<DecodePlan>,
 }
 
 impl InMap {
@@ -433,7 +438,38 @@ impl InMap {
                 Err(_) => None,
             },
         };
-        Ok(InMap { each: each.map(|(p, _)| p), ty: ty.clone(), attributes, identity, stamp })
+        let each = each.map(|(p, _)| p);
+        let plan =
+            DecodePlan::compile(schema, each.as_ref(), ty, &attributes, identity.as_ref(), stamp.as_ref());
+        let schema = Arc::new(schema.clone());
+        Ok(InMap { each, ty: ty.clone(), attributes, identity, stamp, schema, plan })
+    }
+
+    /// The valid time (`None`: as [`InMap::valid_time`]) and KPL value of a message in CDR (with
+    /// its encapsulation header): what `InMap::apply(cdr::decode(..))` gives, read by the
+    /// mapping's decode plan (crate::plan) without building the message, or by that tree path
+    /// where the plan does not cover the mapping or fails on the message (for its exact error).
+    pub fn decode(&self, bytes: &[u8]) -> Result<(Option<Time>, Value), String> {
+        if let Some(plan) = &self.plan
+            && let Ok(decoded) = plan.decode(bytes)
+        {
+            return Ok(decoded);
+        }
+        self.decode_tree(bytes)
+    }
+
+    /// [`InMap::decode`] by the tree path: the whole message decoded, then mapped.
+    pub fn decode_tree(&self, bytes: &[u8]) -> Result<(Option<Time>, Value), String> {
+        let msg = crate::cdr::decode(&self.schema, bytes).map_err(|e| e.to_string())?;
+        let value = self.apply(&msg)?;
+        Ok((self.valid_time(&msg), value))
+    }
+
+    /// [`InMap::decode`] by the plan alone (`None`: no plan, `Some(Err(()))`: the plan refuses
+    /// the message), for the differential tests.
+    #[doc(hidden)]
+    pub fn decode_plan_only(&self, bytes: &[u8]) -> Option<Result<(Option<Time>, Value), ()>> {
+        self.plan.as_ref().map(|plan| plan.decode(bytes))
     }
 
     /// Whether the message has a time stamp the mapping reads (else the arrival time is used).
@@ -562,7 +598,7 @@ fn convert(v: &MsgValue, end: End, ty: &ValueType) -> Result<Value, String> {
 
 /// Where a field of the output message gets its value.
 #[derive(Debug, Clone, PartialEq)]
-enum Source {
+pub(crate) enum Source {
     Attribute(Arc<str>),
     Symbol,
     Number,
@@ -579,6 +615,8 @@ pub struct OutMap {
     root_stamp: Option<Vec<usize>>,
     element_stamp: Option<Vec<usize>>,
     numbers: HashMap<Arc<str>, i64>,
+    /// What [`OutMap::encode_into`] runs, when the mapping has one.
+    plan: Option<EncodePlan>,
 }
 
 impl OutMap {
@@ -682,7 +720,41 @@ impl OutMap {
             .as_ref()
             .and_then(|(_, s)| header_stamp(*s))
             .filter(|_| !set_texts.iter().any(|t| t == "header.stamp" || t == "header"));
-        Ok(OutMap { schema, each, entries, root_stamp, element_stamp, numbers: HashMap::new() })
+        let plan = EncodePlan::compile(
+            &schema,
+            each.as_ref(),
+            &entries,
+            root_stamp.as_ref(),
+            element_stamp.as_ref(),
+        );
+        Ok(OutMap { schema, each, entries, root_stamp, element_stamp, numbers: HashMap::new(), plan })
+    }
+
+    /// The message of one sample in CDR (with its encapsulation header), into `out` (cleared
+    /// first): the bytes of `cdr::encode(OutMap::apply(..))`, written by the mapping's encode plan
+    /// (crate::plan) without building the message, or by that tree path where the plan does not
+    /// cover the mapping or fails on the sample (for its exact error).
+    pub fn encode_into(&mut self, valid: Time, value: &Value, out: &mut Vec<u8>) -> Result<(), String> {
+        if let Some(plan) = &self.plan
+            && plan.encode(&self.entries, &mut self.numbers, valid, value, out).is_ok()
+        {
+            return Ok(());
+        }
+        self.encode_tree(valid, value, out)
+    }
+
+    /// [`OutMap::encode_into`] by the tree path: the message built, then encoded.
+    pub fn encode_tree(&mut self, valid: Time, value: &Value, out: &mut Vec<u8>) -> Result<(), String> {
+        let msg = self.apply(valid, value)?;
+        crate::cdr::encode_into(&self.schema, &msg, out).map_err(|e| e.to_string())
+    }
+
+    /// [`OutMap::encode_into`] by the plan alone (`None`: no plan, `Some(false)`: the plan
+    /// refuses the sample), for the differential tests.
+    #[doc(hidden)]
+    pub fn encode_plan_only(&mut self, valid: Time, value: &Value, out: &mut Vec<u8>) -> Option<bool> {
+        let plan = self.plan.as_ref()?;
+        Some(plan.encode(&self.entries, &mut self.numbers, valid, value, out).is_ok())
     }
 
     /// The message of one sample: `value` at valid time `valid`.
@@ -760,7 +832,7 @@ impl OutMap {
 
 /// A number that stays with a symbol: its trailing digits (`co12` is 12), or else the next free
 /// number in order of appearance.
-fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
+pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
     if let Some(&n) = numbers.get(symbol) {
         return n;
     }
@@ -775,7 +847,7 @@ fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
     n
 }
 
-fn number_value(n: f64, end: End) -> MsgValue {
+pub(crate) fn number_value(n: f64, end: End) -> MsgValue {
     match end {
         End::Primitive(Primitive::Float32 | Primitive::Float64) => MsgValue::Float(n),
         End::Primitive(Primitive::Int8 | Primitive::Int16 | Primitive::Int32 | Primitive::Int64) => {
@@ -791,7 +863,7 @@ fn set_time(msg: &mut MsgValue, path: &[usize], t: Time) {
     }
 }
 
-fn time_value(t: Time) -> MsgValue {
+pub(crate) fn time_value(t: Time) -> MsgValue {
     let sec = t.div_euclid(1_000_000);
     let nanosec = t.rem_euclid(1_000_000) * 1000;
     MsgValue::Struct(vec![

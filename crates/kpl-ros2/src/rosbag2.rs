@@ -135,9 +135,94 @@ impl Bag {
     }
 }
 
+/// The type hash a bag's `metadata.yaml` records for `topic`
+/// (`topics_with_message_count[].topic_metadata.type_description_hash`, as `ros2 bag record`
+/// writes it from Jazzy on; rosbags folds a long value onto the next, more indented line):
+/// `None` when the topic or its hash is not there (bags before Jazzy).
+pub fn recorded_type_hash(metadata_yaml: &str, topic: &str) -> Option<String> {
+    let lines: Vec<&str> = metadata_yaml.lines().collect();
+    let indent = |line: &str| line.len() - line.trim_start().len();
+    // A plain or quoted scalar after `key:`, with its folded continuation lines.
+    let scalar = |i: usize, rest: &str| {
+        let mut value = rest.trim().to_string();
+        for next in lines.iter().skip(i + 1) {
+            if next.trim().is_empty() || indent(next) <= indent(lines[i]) {
+                break;
+            }
+            if !value.is_empty() {
+                value.push(' ');
+            }
+            value.push_str(next.trim());
+        }
+        let unquoted = value
+            .strip_prefix('\'')
+            .and_then(|v| v.strip_suffix('\''))
+            .or_else(|| value.strip_prefix('"').and_then(|v| v.strip_suffix('"')))
+            .unwrap_or(&value);
+        unquoted.to_string()
+    };
+    let mut topics: Option<usize> = None;
+    let mut entry: Option<usize> = None;
+    let mut name: Option<String> = None;
+    for (i, line) in lines.iter().enumerate() {
+        let (at, text) = (indent(line), line.trim());
+        if text.is_empty() || text.starts_with('#') {
+            continue;
+        }
+        let Some(list) = topics else {
+            if text == "topics_with_message_count:" {
+                topics = Some(at);
+            }
+            continue;
+        };
+        if at < list || (at == list && !text.starts_with("- ")) {
+            break;
+        }
+        if text.starts_with("- ") && entry.is_none_or(|e| e == at) {
+            entry = Some(at);
+            name = None;
+        }
+        let key = text.trim_start_matches("- ");
+        if let Some(rest) = key.strip_prefix("name:") {
+            name = Some(scalar(i, rest));
+        } else if let Some(rest) = key.strip_prefix("type_description_hash:")
+            && name.as_deref() == Some(topic)
+        {
+            return Some(scalar(i, rest)).filter(|h| !h.is_empty());
+        }
+    }
+    None
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_recorded_type_hash_of_a_topic() {
+        // As rosbags writes it (specs/ros2/tracker/metadata.yaml): the value folded.
+        let rosbags = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../specs/ros2/tracker/metadata.yaml"
+        ))
+        .unwrap();
+        assert_eq!(
+            recorded_type_hash(&rosbags, "/tracker/markers").as_deref(),
+            Some("RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf")
+        );
+        assert_eq!(recorded_type_hash(&rosbags, "/other"), None);
+        // As `ros2 bag record` (Jazzy) writes it: entries open with `topic_metadata`, the QoS
+        // profiles (a list) between the name and the hash, two topics.
+        let record = "rosbag2_bagfile_information:\n  version: 9\n  topics_with_message_count:\n    - topic_metadata:\n        name: /a\n        type: std_msgs/msg/String\n        serialization_format: cdr\n        offered_qos_profiles:\n          - history: keep_last\n            depth: 10\n        type_description_hash: RIHS01_aaaa\n      message_count: 3\n    - topic_metadata:\n        name: \"/b\"\n        type: std_msgs/msg/String\n        offered_qos_profiles:\n          - history: keep_last\n        type_description_hash: 'RIHS01_bbbb'\n      message_count: 1\n  compression_format: \"\"\n";
+        assert_eq!(recorded_type_hash(record, "/a").as_deref(), Some("RIHS01_aaaa"));
+        assert_eq!(recorded_type_hash(record, "/b").as_deref(), Some("RIHS01_bbbb"));
+        assert_eq!(recorded_type_hash(record, "/c"), None);
+        // Before Jazzy: no hash.
+        assert_eq!(
+            recorded_type_hash("topics_with_message_count:\n- topic_metadata:\n    name: /a\n", "/a"),
+            None
+        );
+    }
 
     #[test]
     fn qos_is_a_yaml_list_of_rosbag2s_fields() {

@@ -20,6 +20,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use kpl_core::{Value, ValueType};
+use kpl_semantic::registry::ParamProblem;
 
 use crate::definitions::{Definitions, Schema};
 use crate::mapping::{InMap, InSpec, MapError, OutMap, OutSpec};
@@ -120,6 +121,16 @@ pub fn check_out(
         Some(schema) => OutMap::compile(schema, &out_spec(params), input).map(|_| ()),
         None => Ok(()),
     }
+}
+
+/// A mapping problem as `kpl check` reports it (for `ros2.subscribe`, `ros2.publish`,
+/// `ros2.replay` and `ros2.bag` alike): in the entry of `map` it names, or else the parameter.
+pub fn param_problem(e: MapError) -> ParamProblem {
+    let (param, element) = match e.entry {
+        Some(i) => ("map".to_string(), Some(i)),
+        None => (e.param.to_string(), None),
+    };
+    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
 }
 
 /// A mapping problem as one line (for a run or a conversion): the part of the `map` entry (or

@@ -80,6 +80,57 @@ impl Clock {
     }
 }
 
+/// Where `--for D` ends a run. On the wall clock, and on the simulated clock when the run's
+/// samples are times from 0, the end is the run's start plus `D`. A simulated run whose sources
+/// replay dated stamps (a rosbag2 bag's `header.stamp`) jumps from 0 to its first date at once,
+/// so `D` counts from that date instead: the end is fixed by the first time a source waits for,
+/// if that is a date ([`crate::stats::DATES`]). Shared by the sources and the run's end watcher.
+#[derive(Debug)]
+pub struct RunEnd {
+    duration: Time,
+    start: Time,
+    /// The end, once fixed: at once on the wall clock, by the first wait on the simulated one.
+    at: std::sync::OnceLock<Time>,
+}
+
+impl RunEnd {
+    pub fn new(clock: &Clock, duration: Time) -> RunEnd {
+        let end = RunEnd { duration, start: clock.start(), at: std::sync::OnceLock::new() };
+        if clock.kind() == ClockKind::Wall {
+            end.fixed(clock.start());
+        }
+        end
+    }
+
+    /// The end, fixing it if nothing has: `first` is the first time a source waits for (a
+    /// date on the simulated clock moves the end to `first + D`).
+    pub fn fixed(&self, first: Time) -> Time {
+        *self.at.get_or_init(|| {
+            let from = if self.start == 0 && first >= crate::stats::DATES { first } else { self.start };
+            from.saturating_add(self.duration)
+        })
+    }
+
+    /// The end if it is fixed; otherwise the earliest it can be (the start plus `D`).
+    pub fn earliest(&self) -> Time {
+        self.at.get().copied().unwrap_or_else(|| self.start.saturating_add(self.duration))
+    }
+
+    /// Waits until the clock reaches the end. On the simulated clock, time only jumps when
+    /// every task waits, so by the time the earliest end comes every source has asked for its
+    /// first time: if none fixed the end by then, it is the earliest.
+    pub async fn reached(&self, clock: &Clock) {
+        loop {
+            let end = self.earliest();
+            clock.sleep_until(end).await;
+            let fixed = *self.at.get_or_init(|| end);
+            if fixed <= clock.now() {
+                return;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -92,5 +143,28 @@ mod tests {
         assert_eq!(clock.now(), 3_600_000_000);
         clock.sleep_until(10).await; // in the past: returns at once
         assert_eq!(clock.now(), 3_600_000_000);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_dated_replay_s_end_counts_from_its_first_date() {
+        let clock = Clock::new(ClockKind::Sim);
+        let end = RunEnd::new(&clock, 10_000_000);
+        assert_eq!(end.earliest(), 10_000_000, "not fixed yet: from the start");
+        let first = 1_700_000_000_000_000;
+        assert_eq!(end.fixed(first), first + 10_000_000);
+        assert_eq!(end.fixed(0), first + 10_000_000, "fixed once");
+        end.reached(&clock).await;
+        assert_eq!(clock.now(), first + 10_000_000);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_run_from_zero_ends_at_its_duration_and_the_watcher_fixes_it() {
+        let clock = Clock::new(ClockKind::Sim);
+        let end = RunEnd::new(&clock, 2_000_000);
+        assert_eq!(end.fixed(500_000), 2_000_000, "a time from 0 is not a date");
+        let other = RunEnd::new(&clock, 3_000_000);
+        other.reached(&clock).await; // no source asked: the end is the start plus D
+        assert_eq!(clock.now(), 3_000_000);
+        assert_eq!(other.fixed(1_700_000_000_000_000), 3_000_000, "too late to move it");
     }
 }

@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use kpl_core::{Time, Value};
 
-use crate::clock::Clock;
+use crate::clock::{Clock, RunEnd};
 use crate::edge::{Closed, EdgeSender};
 use crate::process::ProcessError;
 use crate::sample::Sample;
@@ -148,8 +148,8 @@ pub struct SourceContext {
     pub clock: Clock,
     pub(crate) outputs: Outputs,
     pub(crate) stop: StopSignal,
-    /// The run ends at this clock time (`--for`), if set: later samples are not emitted.
-    pub end: Option<Time>,
+    /// Where the run ends (`--for`), if set: later samples are not emitted.
+    pub(crate) run_end: Option<Arc<RunEnd>>,
     pub(crate) strict: bool,
     pub stats: Arc<ProcessStats>,
     pub(crate) run_stats: Arc<RunStats>,
@@ -157,7 +157,7 @@ pub struct SourceContext {
 
 impl std::fmt::Debug for SourceContext {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SourceContext").field("name", &self.name).field("end", &self.end).finish()
+        f.debug_struct("SourceContext").field("name", &self.name).field("end", &self.end()).finish()
     }
 }
 
@@ -166,17 +166,24 @@ impl SourceContext {
         self.clock.now()
     }
 
+    /// The clock time the run ends at (`--for`), if set. On the simulated clock it can move
+    /// once, by a source's first wait for a date ([`RunEnd`]); until then it is the earliest.
+    pub fn end(&self) -> Option<Time> {
+        self.run_end.as_ref().map(|end| end.earliest())
+    }
+
     /// Whether the source should stop now (Ctrl-C, `--for` reached, a strict failure).
     pub fn should_stop(&self) -> bool {
-        self.stop.is_stopped() || self.end.is_some_and(|end| self.clock.now() > end)
+        self.stop.is_stopped() || self.end().is_some_and(|end| self.clock.now() > end)
     }
 
     /// Waits until clock time `t`. Returns false if the run stops first, or if `t` is past the
     /// run's end (the sample at `t` must then not be emitted): the source then waits for the
     /// end itself, so a run lasts its `--for` on either clock, even when its last sample came
-    /// earlier.
+    /// earlier. The first wait of a simulated run fixes where a dated replay's `--for` counts
+    /// from ([`RunEnd`]).
     pub async fn wait_until(&self, t: Time) -> bool {
-        if let Some(end) = self.end
+        if let Some(end) = self.run_end.as_ref().map(|end| end.fixed(t))
             && t > end
         {
             self.run_stats.reached_end.store(true, Ordering::Relaxed);

@@ -19,7 +19,7 @@ use kpl_semantic::hir::{self, ProcessId};
 use kpl_semantic::registry::EntryKind;
 use tokio::task::JoinSet;
 
-use crate::clock::{Clock, ClockKind};
+use crate::clock::{Clock, ClockKind, RunEnd};
 use crate::context::{Outputs, SourceContext, StopSignal};
 use crate::edge::{EdgeReceiver, EdgeSender, Received, edge};
 use crate::plan::{Origin, Plan, Role, Target};
@@ -275,11 +275,11 @@ pub async fn execute(
     stats.start.store(clock.start(), Ordering::Relaxed);
     stats.observe_time(clock.start());
     let stop = StopSignal::default();
-    let end = config.duration.map(|d| clock.start().saturating_add(d));
+    let end = config.duration.map(|d| Arc::new(RunEnd::new(&clock, d)));
     // Ctrl-C and SIGTERM from the start: a host waiting for the others stops cleanly too; and
     // --for from the start: waiting for other hosts counts in the run's time.
     let signals = Signals::watch(&stop);
-    let watchers = watch_for_the_end(&clock, end, &stop);
+    let watchers = watch_for_the_end(&clock, end.clone(), &stop);
     let stop_watching = || {
         signals.task.abort();
         watchers.abort();
@@ -565,7 +565,7 @@ fn spawn_processes(
     clock: &Clock,
     stats: &Arc<RunStats>,
     stop: &StopSignal,
-    end: Option<Time>,
+    end: Option<Arc<RunEnd>>,
     join: &mut JoinSet<Result<(), (String, ProcessError)>>,
 ) {
     for (id, task) in tasks {
@@ -575,6 +575,7 @@ fn spawn_processes(
         let clock = clock.clone();
         let stop = stop.clone();
         let strict = config.strict;
+        let end = end.clone();
         let port_names: Arc<[String]> = spec.processes[id].ports.iter().map(|(n, _)| n.clone()).collect();
         join.spawn(async move {
             let result = match task.kind {
@@ -584,7 +585,7 @@ fn spawn_processes(
                         clock,
                         outputs: task.outputs,
                         stop,
-                        end,
+                        run_end: end,
                         strict,
                         stats: process_stats,
                         run_stats,
@@ -655,11 +656,15 @@ async fn join_processes(
 
 /// Stops the run when the clock reaches `end` (`--for`); Ctrl-C and SIGTERM are watched by the
 /// run's signal task, which interrupts it.
-fn watch_for_the_end(clock: &Clock, end: Option<Time>, stop: &StopSignal) -> tokio::task::JoinHandle<()> {
+fn watch_for_the_end(
+    clock: &Clock,
+    end: Option<Arc<RunEnd>>,
+    stop: &StopSignal,
+) -> tokio::task::JoinHandle<()> {
     let (stop, clock) = (stop.clone(), clock.clone());
     tokio::spawn(async move {
         if let Some(end) = end {
-            clock.sleep_until(end).await;
+            end.reached(&clock).await;
             stop.stop();
         }
     })

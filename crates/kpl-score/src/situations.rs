@@ -7,7 +7,9 @@
 //!
 //! The true situations follow the definitions of the monitors of `specs/traffic/`:
 //! - `speeding`: over the lane's limit by [`TruthParams::speeding_margin_mps`] for at least
-//!   [`TruthParams::speeding_min`];
+//!   [`TruthParams::speeding_min`], from the threshold's crossing to the next, each found by
+//!   linear interpolation between the samples around it (the data's 0.5 s samples of a speed
+//!   that changes every 0.1 s would otherwise shorten each episode by up to a sample period);
 //! - `stopped`: under [`TruthParams::stop_speed_mps`] for at least [`TruthParams::stop_min`],
 //!   not in a junction, more than [`TruthParams::junction_margin_m`] before the lane's end, and
 //!   with no other standing vehicle in front within [`TruthParams::queue_gap_m`] on its lane;
@@ -140,6 +142,71 @@ fn against_lane(v: &TrueVehicle, params: &TruthParams) -> bool {
         && angle_between(v.heading, v.lane_heading) > std::f64::consts::FRAC_PI_2
 }
 
+/// Runs of a speed over a threshold per vehicle, with their ends at the threshold's crossings:
+/// floating car data samples a speed that SUMO changes every simulation step (0.1 s in
+/// scripts/sumo-scenarios.py) every 0.5 s, so the first and last sample over the threshold
+/// understate how long it was over by up to a sample period. A run begins where the speed,
+/// interpolated linearly between the last sample under and the first over, crosses the
+/// threshold, and ends at the crossing after the last sample over; a vehicle that appears (or
+/// leaves) over it begins (ends) at its first (last) sample. Kept when at least `min` long.
+#[derive(Debug, Default)]
+struct Crossings {
+    /// Per vehicle: the time and the excess over the threshold at its latest sample, and where
+    /// its open run began (if the excess is positive).
+    last: HashMap<String, (Time, f64, Option<f64>)>,
+}
+
+impl Crossings {
+    /// Records each vehicle's excess over the threshold (positive: over it) at `time`; closes
+    /// the runs of the vehicles under it, or gone.
+    fn step(
+        &mut self,
+        time: Time,
+        excess: Vec<(String, f64)>,
+        min: Time,
+        kind: &str,
+        out: &mut Vec<Situation>,
+    ) {
+        let t = time as f64;
+        let mut next = HashMap::with_capacity(excess.len());
+        for (id, e) in excess {
+            let previous = self.last.remove(&id);
+            let start = match (previous, e > 0.0) {
+                (_, false) => {
+                    if let Some((t0, e0, Some(start))) = previous {
+                        Self::close(&id, start, t0 as f64 + (t - t0 as f64) * e0 / (e0 - e), min, kind, out);
+                    }
+                    None
+                }
+                (Some((_, _, Some(start))), true) => Some(start),
+                (Some((t0, e0, None)), true) => Some(t0 as f64 + (t - t0 as f64) * (-e0) / (e - e0)),
+                (None, true) => Some(t),
+            };
+            next.insert(id, (time, e, start));
+        }
+        for (id, (t0, _, start)) in std::mem::replace(&mut self.last, next) {
+            if let Some(start) = start {
+                Self::close(&id, start, t0 as f64, min, kind, out);
+            }
+        }
+    }
+
+    fn finish(&mut self, min: Time, kind: &str, out: &mut Vec<Situation>) {
+        for (id, (t0, _, start)) in std::mem::take(&mut self.last) {
+            if let Some(start) = start {
+                Self::close(&id, start, t0 as f64, min, kind, out);
+            }
+        }
+    }
+
+    fn close(id: &str, start: f64, end: f64, min: Time, kind: &str, out: &mut Vec<Situation>) {
+        let (start, end) = (start.round() as Time, end.round() as Time);
+        if end - start >= min {
+            out.push(Situation { kind: kind.to_string(), objects: vec![id.to_string()], start, end });
+        }
+    }
+}
+
 /// Runs of a condition per key: from the first time it held to the last, kept when long enough.
 #[derive(Debug, Default)]
 struct Runs {
@@ -232,16 +299,14 @@ pub fn true_situations(steps: &[TrueStep], params: &TruthParams) -> TrueSituatio
 
 fn all_true_situations(steps: &[TrueStep], params: &TruthParams) -> Vec<Situation> {
     let mut out = Vec::new();
-    let (mut speeding, mut stopped, mut tailgating) = (Runs::default(), Runs::default(), Runs::default());
+    let mut speeding = Crossings::default();
+    let (mut stopped, mut tailgating) = (Runs::default(), Runs::default());
     let mut wrong_way = Runs::default();
     let mut passing: HashMap<(String, String), Passing> = HashMap::new();
     for step in steps {
         let v = &step.vehicles;
-        let over: Vec<Vec<String>> = v
-            .iter()
-            .filter(|x| x.speed > x.speed_limit + params.speeding_margin_mps)
-            .map(|x| vec![x.id.clone()])
-            .collect();
+        let over: Vec<(String, f64)> =
+            v.iter().map(|x| (x.id.clone(), x.speed - x.speed_limit - params.speeding_margin_mps)).collect();
         speeding.step(step.time, over, params.speeding_min, "speeding", &mut out);
         let standing = |x: &TrueVehicle| x.speed < params.stop_speed_mps;
         let queued = |x: &TrueVehicle| {
@@ -537,6 +602,35 @@ mod tests {
             heading: 0.0,
             lane_heading: 0.0,
         }
+    }
+
+    /// One car's speeds every 0.5 s (the limit is 25 m/s, the margin 3).
+    fn speeds(speeds: &[f64]) -> Vec<TrueStep> {
+        (speeds.iter().enumerate())
+            .map(|(k, &v)| TrueStep {
+                time: k as Time * 500_000,
+                vehicles: vec![vehicle("car", "e_0", 0.0, v)],
+            })
+            .collect()
+    }
+
+    fn speeding(steps: &[TrueStep]) -> Vec<(Time, Time)> {
+        let params = TruthParams { settle: 0, ..TruthParams::default() };
+        let truth = true_situations(steps, &params).situations;
+        truth.iter().filter(|s| s.kind == "speeding").map(|s| (s.start, s.end)).collect()
+    }
+
+    #[test]
+    fn a_speeding_episode_runs_between_the_threshold_s_crossings() {
+        // Over 28 m/s in the samples at 0.5, 1.0, 1.5 and 2.0 s (1.5 s apart); the speed crosses
+        // 28 m/s half way to the samples around them: over from 0.25 s to 2.25 s, 2 s.
+        assert_eq!(speeding(&speeds(&[27.0, 29.0, 29.0, 29.0, 29.0, 27.0])), [(250_000, 2_250_000)]);
+        // Falling faster at the end: under 28 at 2.125 s, 1.875 s over: not speeding.
+        assert_eq!(speeding(&speeds(&[27.0, 29.0, 29.0, 29.0, 29.0, 25.0])), []);
+        // Over from its first sample (it appeared speeding) to its last (it left).
+        assert_eq!(speeding(&speeds(&[30.0, 30.0, 30.0, 30.0, 30.0])), [(0, 2_000_000)]);
+        // Exactly at the threshold is not over it.
+        assert_eq!(speeding(&speeds(&[28.0; 10])), []);
     }
 
     /// A fast car (30 m/s) passes a truck (15 m/s) on the other lane; 0.5 s steps.

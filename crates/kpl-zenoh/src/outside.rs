@@ -142,7 +142,7 @@ impl Source for Subscribe {
             let (_session, subscriber) = self.subscribe().await?;
             let mut messages = 0u64;
             loop {
-                let until = ctx.end.unwrap_or_else(|| ctx.now().saturating_add(FAR));
+                let until = ctx.end().unwrap_or_else(|| ctx.now().saturating_add(FAR));
                 let message = tokio::select! {
                     biased;
                     message = subscriber.recv_async() => message,
@@ -152,7 +152,7 @@ impl Source for Subscribe {
                 messages += 1;
                 match codec::decode(&message.payload().to_bytes(), &self.ty) {
                     Ok(Message::Sample(sample)) => {
-                        if ctx.end.is_some_and(|end| sample.available > end) {
+                        if ctx.end().is_some_and(|end| sample.available > end) {
                             break;
                         }
                         ctx.emit_sample(sample).await;

@@ -22,7 +22,7 @@ use std::time::Duration;
 use kpl_core::{Time, Value, ValueType};
 use kpl_ros2::mapping::{InMap, MapError, OutMap};
 use kpl_ros2::wire::{self, Attachment, EntityKind, Node, Qos};
-use kpl_ros2::{Schema, cdr, topic};
+use kpl_ros2::{Schema, topic};
 use kpl_runtime::clock::ClockKind;
 use kpl_runtime::context::SourceContext;
 use kpl_runtime::process::{AsyncUnit, BoxFuture, Emitter, Input, ProcessError, Source};
@@ -112,26 +112,17 @@ pub fn register(registry: &mut Registry) {
     );
 }
 
-/// A mapping error as `kpl check` reports it: in the entry of `map` (or the parameter) it names.
-fn problem(e: MapError) -> ParamProblem {
-    let (param, element) = match e.entry {
-        Some(i) => ("map".to_string(), Some(i)),
-        None => (e.param.to_string(), None),
-    };
-    ParamProblem { param, element, range: e.range, message: e.message, hint: e.hint }
-}
-
 /// `kpl check` of `ros2.subscribe`: its type (shipped, or of `msgs` beside the spec), and its
 /// mapping against the type and the stream's.
 fn check_subscribe(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(output) = call.output else { return Vec::new() };
-    topic::check_in(call.params, output, call.dir).err().map(problem).into_iter().collect()
+    topic::check_in(call.params, output, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 /// `kpl check` of `ros2.publish`: its type, and its mapping against the type and the input's.
 fn check_publish(call: &CallTypes<'_>) -> Vec<ParamProblem> {
     let Some(input) = call.inputs.first() else { return Vec::new() };
-    topic::check_out(call.params, input, call.dir).err().map(problem).into_iter().collect()
+    topic::check_out(call.params, input, call.dir).err().map(topic::param_problem).into_iter().collect()
 }
 
 fn needs_wall_clock(ctx: &BuildContext<'_>) -> Result<(), BuildError> {
@@ -407,7 +398,7 @@ impl Source for Subscribe {
             let mut sequences = Sequences::default();
             let (mut messages, mut wrong_type, mut no_attachment) = (0u64, 0u64, 0u64);
             loop {
-                let far = ctx.end.unwrap_or_else(|| ctx.now().saturating_add(FAR));
+                let far = ctx.end().unwrap_or_else(|| ctx.now().saturating_add(FAR));
                 let until = match gone_since {
                     Some(t) => far.min(t + self.idle),
                     None => far,
@@ -440,7 +431,7 @@ impl Source for Subscribe {
                         }
                         match taken {
                             Ok((valid, value)) => {
-                                if ctx.end.is_some_and(|end| ctx.now() > end) {
+                                if ctx.end().is_some_and(|end| ctx.now() > end) {
                                     break;
                                 }
                                 ctx.emit(valid, value).await;
@@ -460,7 +451,7 @@ impl Source for Subscribe {
                         }
                     }
                     _ = ctx.wait_until(until) => {
-                        if gone_since.is_some() || ctx.should_stop() || ctx.end.is_some_and(|end| ctx.now() >= end) {
+                        if gone_since.is_some() || ctx.should_stop() || ctx.end().is_some_and(|end| ctx.now() >= end) {
                             break;
                         }
                     }
@@ -496,8 +487,8 @@ pub(crate) enum Refused {
 }
 
 /// What `ros2.subscribe` makes of one message from the wire: its attachment (when it has one),
-/// and its valid time and value, decoded from CDR and mapped (or why not). `now` is the valid
-/// time of a message whose mapping has no stamp.
+/// and its valid time and value, read from the CDR by the mapping's decode plan (`InMap::decode`),
+/// or why not. `now` is the valid time of a message whose mapping has no stamp.
 pub(crate) fn take(
     c: &Common,
     map: &InMap,
@@ -522,11 +513,7 @@ pub(crate) fn take(
         return (Some(attachment), Err(Refused::TypeHash(why)));
     }
     let payload = message.payload().to_bytes();
-    let decoded = cdr::decode(&c.schema, &payload).map_err(|e| e.to_string()).and_then(|msg| {
-        let value = map.apply(&msg)?;
-        Ok((map.valid_time(&msg), value))
-    });
-    let taken = decoded.map_err(Refused::Malformed).map(|(valid, value)| {
+    let taken = map.decode(&payload).map_err(Refused::Malformed).map(|(valid, value)| {
         let valid =
             valid.unwrap_or_else(|| if map.has_stamp() { attachment.source_timestamp / 1000 } else { now });
         (valid, value)
@@ -578,8 +565,9 @@ impl Open {
     }
 }
 
-/// What `ros2.publish` does with a sample before it goes on the wire: its value mapped into a
-/// message (`valid` its stamp) and encoded as CDR into `buffer`.
+/// What `ros2.publish` does with a sample before it goes on the wire: its value written as the
+/// CDR of its message (`valid` its stamp) into `buffer` by the mapping's encode plan
+/// (`OutMap::encode_into`).
 pub(crate) fn encode(
     c: &Common,
     map: &mut OutMap,
@@ -587,8 +575,7 @@ pub(crate) fn encode(
     value: &Value,
     buffer: &mut Vec<u8>,
 ) -> Result<(), ProcessError> {
-    let msg = map.apply(valid, value).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))?;
-    cdr::encode_into(&c.schema, &msg, buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))
+    map.encode_into(valid, value, buffer).map_err(|e| ProcessError::failed(format!("`{}`: {e}", c.topic)))
 }
 
 struct Publish {

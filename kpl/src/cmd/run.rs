@@ -57,7 +57,8 @@ pub struct Args {
     /// Which clock drives the run.
     #[arg(long, value_enum, default_value = "sim")]
     pub clock: ClockArg,
-    /// Stop after this much (simulated or wall) time, e.g. 60s, 500ms, 2min.
+    /// Stop after this much (simulated or wall) time, e.g. 60s, 500ms, 2min; a replay of dated
+    /// stamps (a rosbag2 bag) counts it from its first stamp.
     #[arg(long = "for", value_parser = parse_duration)]
     pub duration: Option<Time>,
     /// Seed of every random process (mixed with each process's name and its own `seed`).
