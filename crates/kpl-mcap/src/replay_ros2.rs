@@ -171,8 +171,9 @@ pub fn register(registry: &mut Registry) {
             let hash = schema.type_hash();
             let metadata = path.join("metadata.yaml");
             let metadata_hash = if path.is_dir() && metadata.exists() {
-                let text = std::fs::read_to_string(&metadata)
-                    .map_err(|e| ctx.error(format!("cannot read {}: {e}", metadata.display())))?;
+                // A bag's metadata.yaml is a few kB per topic: 16 MB is far beyond any real one.
+                let bytes = kpl_core::read::read_file(&metadata, 16 << 20).map_err(|e| ctx.error(e.to_string()))?;
+                let text = String::from_utf8_lossy(&bytes);
                 kpl_ros2::rosbag2::recorded_type_hash(&text, name)
             } else {
                 None
