@@ -17,6 +17,7 @@ mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Read;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
@@ -321,6 +322,45 @@ fn for_counts_from_the_first_stamp_of_a_dated_bag() {
     assert!(tracks.iter().any(|l| l["stream"] == "onroad_car"), "the first 10 s make cars too");
 }
 
+/// A spec in `dir` that replays `/tracker/markers` of the bag at `path` (beside it) as percepts,
+/// through markers.kpl's subscription mapping, into `tracks.jsonl`.
+fn replay_spec(dir: &Path, path: &str) -> PathBuf {
+    let spec = dir.join("replay.kpl");
+    let text = format!(
+        r#"type VisionPercept symbol vp {{ pos: vec2, size: float }}
+source markers : list<VisionPercept> = ros2.replay(
+  path: "{path}",
+  topic: "/tracker/markers",
+  type: "visualization_msgs/msg/MarkerArray",
+  each: "markers",
+  identity: "id",
+  map: ["pos = pose.position", "size = scale.x"],
+)
+sink tracks = file.jsonl(markers, path: "tracks.jsonl")
+"#
+    );
+    std::fs::write(&spec, text).unwrap();
+    spec
+}
+
+/// Runs a [`replay_spec`] into `out`, which must succeed: its standard error, the `markers`
+/// process's summary and how many samples of `markers` it recorded.
+fn replay(spec: &Path, out: &Path) -> (String, Value, usize) {
+    let run = common::kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&run.stderr).to_string();
+    assert!(run.status.success(), "{said}");
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let process = summary["summary"]["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["process"] == "markers")
+        .cloned()
+        .unwrap_or_default(); // left out of the summary when it has nothing to report
+    let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
+    (said, process, replayed)
+}
+
 /// The type hash a bag records for a topic (`topic_type_hash` in its MCAP channel, as `ros2 bag
 /// record` writes it from Jazzy on) is compared with the declared type's: the bag of rosbags
 /// with the hash rosbags computes for MarkerArray replays whole, the same bag with a hash one
@@ -330,22 +370,7 @@ fn for_counts_from_the_first_stamp_of_a_dated_bag() {
 fn a_bag_recorded_with_another_type_hash_is_refused_message_by_message() {
     let Some(python) = python("rosbags, mcap") else { return };
     let dir = common::fresh_dir("ros2", "type-hash");
-    let spec = dir.join("replay.kpl");
-    std::fs::write(
-        &spec,
-        r#"type VisionPercept symbol vp { pos: vec2, size: float }
-source markers : list<VisionPercept> = ros2.replay(
-  path: "bag.mcap",
-  topic: "/tracker/markers",
-  type: "visualization_msgs/msg/MarkerArray",
-  each: "markers",
-  identity: "id",
-  map: ["pos = pose.position", "size = scale.x"],
-)
-sink tracks = file.jsonl(markers, path: "tracks.jsonl")
-"#,
-    )
-    .unwrap();
+    let spec = replay_spec(&dir, "bag.mcap");
     let script = root().join("tests/rosbag2_oracle.py");
     let mut hashes = Vec::new();
     for (case, flip) in [("same", false), ("flipped", true)] {
@@ -361,20 +386,7 @@ sink tracks = file.jsonl(markers, path: "tracks.jsonl")
         let made: Value = serde_json::from_slice(&made.stdout).unwrap();
         let recorded = made["/tracker/markers"].as_str().unwrap().to_string();
         hashes.push(recorded.clone());
-        let out = dir.join(case);
-        let run = common::kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-        let said = String::from_utf8_lossy(&run.stderr).to_string();
-        assert!(run.status.success(), "{said}");
-        let summary: Value =
-            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-        let process = summary["summary"]["processes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["process"] == "markers")
-            .cloned()
-            .unwrap_or_default(); // left out of the summary when it has nothing to report
-        let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
+        let (said, process, replayed) = replay(&spec, &dir.join(case));
         if flip {
             assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (0, 61), "{process}");
             let example = process["malformed_examples"][0]["error"].as_str().unwrap();
@@ -408,35 +420,8 @@ fn a_bag_whose_metadata_records_another_type_hash_is_refused_message_by_message(
     let altered = "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dce";
     assert!(metadata.contains(shipped), "specs/ros2/tracker/metadata.yaml records another hash");
     std::fs::write(bag.join("metadata.yaml"), metadata.replace(shipped, altered)).unwrap();
-    let spec = dir.join("replay.kpl");
-    std::fs::write(
-        &spec,
-        r#"type VisionPercept symbol vp { pos: vec2, size: float }
-source markers : list<VisionPercept> = ros2.replay(
-  path: "bag",
-  topic: "/tracker/markers",
-  type: "visualization_msgs/msg/MarkerArray",
-  each: "markers",
-  identity: "id",
-  map: ["pos = pose.position", "size = scale.x"],
-)
-sink tracks = file.jsonl(markers, path: "tracks.jsonl")
-"#,
-    )
-    .unwrap();
-    let out = dir.join("out");
-    let run = common::kpl(&["run", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    let said = String::from_utf8_lossy(&run.stderr).to_string();
-    assert!(run.status.success(), "{said}");
-    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-    let process = summary["summary"]["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["process"] == "markers")
-        .cloned()
-        .unwrap_or_default();
-    let replayed = lines(&out.join("tracks.jsonl")).iter().filter(|l| l["stream"] == "markers").count();
+    let spec = replay_spec(&dir, "bag");
+    let (_, process, replayed) = replay(&spec, &dir.join("out"));
     assert_eq!((replayed, process["malformed"].as_u64().unwrap_or(0)), (0, 61), "{process}");
     let example = process["malformed_examples"][0]["error"].as_str().unwrap();
     assert!(

@@ -119,8 +119,9 @@ fn beside(a: &OnRoad<'_>, b: &OnRoad<'_>) -> bool {
 }
 
 /// Whether `a` is to the left of `b`, looking in `b`'s direction of travel.
-fn left_of(a: &OnRoad<'_>, b: &OnRoad<'_>, func: &str) -> Result<bool, String> {
-    let pa = point(a.record, func)?;
+/// Whether `a`'s centre is left of `b`'s, looking in `b`'s heading (`a` on a road or not).
+fn left_of(a: &Record, b: &OnRoad<'_>, func: &str) -> Result<bool, String> {
+    let pa = point(a, func)?;
     let pb = point(b.record, func)?;
     let heading =
         b.heading.ok_or_else(|| format!("{func} needs the attribute `heading` of {}", who(b.record)))?;
@@ -165,16 +166,11 @@ pub fn functions() -> Vec<Function> {
         pair("behind", |a, b, _| Ok(behind(a, b))),
         pair("in_front", |a, b, _| Ok(behind(b, a))),
         pair("beside", |a, b, _| Ok(beside(a, b))),
-        pair("beside_left", |a, b, f| Ok(beside(a, b) && left_of(a, b, f)?)),
+        pair("beside_left", |a, b, f| Ok(beside(a, b) && left_of(a.record, b, f)?)),
         Function::new("left_of", (2, Some(2)), |args| {
             let a = object(&args[0], "left_of")?;
             let b = on_road(&args[1], "left_of")?;
-            let pa = point(a, "left_of")?;
-            let pb = point(b.record, "left_of")?;
-            let heading = b
-                .heading
-                .ok_or_else(|| format!("left_of needs the attribute `heading` of {}", who(b.record)))?;
-            Ok(Value::Bool(geom::cross(geom::unit(heading), geom::sub(pa, pb)) > 0.0))
+            left_of(a, &b, "left_of").map(Value::Bool)
         }),
         Function::new("gap", (2, Some(2)), |args| {
             let a = on_road(&args[0], "gap")?;
@@ -184,7 +180,7 @@ pub fn functions() -> Vec<Function> {
             }
             Ok(Value::Float(ahead(&a, &b) - overlap(&a, &b)))
         }),
-        pair("beside_right", |a, b, f| Ok(beside(a, b) && !left_of(a, b, f)?)),
+        pair("beside_right", |a, b, f| Ok(beside(a, b) && !left_of(a.record, b, f)?)),
         Function::new("close", (3, Some(3)), |args| {
             let a = on_road(&args[0], "close")?;
             let b = on_road(&args[1], "close")?;

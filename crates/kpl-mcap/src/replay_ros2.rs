@@ -47,6 +47,20 @@ struct Replay {
 }
 
 impl Replay {
+    /// The error for a message of a topic that `recorded_in` records with another type hash than
+    /// the declared type's, if it does.
+    fn hash_differs(&self, recorded_in: &str, recorded: &str) -> Option<String> {
+        (recorded != self.hash).then(|| {
+            format!(
+                "{recorded_in} records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
+                self.topic,
+                self.schema.name(),
+                if self.user_msgs { " from `msgs`" } else { ", shipped" },
+                self.hash
+            )
+        })
+    }
+
     /// A message as the mapping takes it: valid time and value.
     fn map(&self, valid: i64, json: &serde_json::Value) -> Result<(i64, Value), String> {
         let msg = kpl_ros2::json::from_json(&self.schema, json)
@@ -67,29 +81,14 @@ impl Source for Replay {
                 while let Some(event) = reader.next_raw(&mut filter) {
                     let (valid, available, json, location) = match event {
                         RawEvent::Message { valid, available, value, location, .. } => {
-                            if let Some(recorded) = reader.type_hash(&self.topic)
-                                && recorded != self.hash
-                            {
-                                let error = format!(
-                                    "the bag records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
-                                    self.topic,
-                                    self.schema.name(),
-                                    if self.user_msgs { " from `msgs`" } else { ", shipped" },
-                                    self.hash
-                                );
-                                ctx.malformed(&location, error)?;
-                                continue;
-                            }
-                            if let Some(recorded) = &self.metadata_hash
-                                && *recorded != self.hash
-                            {
-                                let error = format!(
-                                    "the bag's metadata.yaml records `{}` with type hash {recorded}, but `{}` as kpl reads it (the spec's `type`{}) has type hash {}: the message definitions differ",
-                                    self.topic,
-                                    self.schema.name(),
-                                    if self.user_msgs { " from `msgs`" } else { ", shipped" },
-                                    self.hash
-                                );
+                            let differs = reader
+                                .type_hash(&self.topic)
+                                .and_then(|recorded| self.hash_differs("the bag", recorded))
+                                .or_else(|| {
+                                    let recorded = self.metadata_hash.as_deref()?;
+                                    self.hash_differs("the bag's metadata.yaml", recorded)
+                                });
+                            if let Some(error) = differs {
                                 ctx.malformed(&location, error)?;
                                 continue;
                             }

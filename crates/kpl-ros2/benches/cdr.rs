@@ -16,7 +16,7 @@ use std::sync::Arc;
 
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
 use kpl_core::{FieldType, Record, RecordType, Value, ValueType};
-use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec};
+use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec, workloads};
 use kpl_ros2::{Definitions, cdr};
 
 fn list_of(name: &str, symbol: &str) -> ValueType {
@@ -44,22 +44,7 @@ fn bench(c: &mut Criterion) {
     let cars = Value::List(cars.into());
     let out_spec = OutSpec {
         each: Some("markers".into()),
-        entries: [
-            "header.frame_id = 'map'",
-            "ns = symbol",
-            "id = number",
-            "type = 1",
-            "pose.position = pos",
-            "pose.orientation.w = 1.0",
-            "scale.x = size",
-            "scale.y = 1.8",
-            "scale.z = 1.5",
-            "color.g = 0.8",
-            "color.a = 1.0",
-            "lifetime.nanosec = 500000000",
-        ]
-        .map(String::from)
-        .to_vec(),
+        entries: workloads::MARKERS_OF_CARS.iter().map(|e| e.to_string()).collect(),
     };
     let mut out = OutMap::compile(schema.clone(), &out_spec, &cars_ty).unwrap();
     let valid = 1_700_000_000_000_000;
@@ -70,7 +55,7 @@ fn bench(c: &mut Criterion) {
         each: Some("markers".into()),
         identity: Some("id".into()),
         stamp: None,
-        entries: vec!["pos = pose.position".into(), "size = scale.x".into()],
+        entries: workloads::PERCEPTS_OF_MARKERS.iter().map(|e| e.to_string()).collect(),
     };
     let map = InMap::compile(&schema, &in_spec, &percept_ty).unwrap();
     let percepts = map.apply(&cdr::decode(&schema, &bytes).unwrap()).unwrap();

@@ -948,6 +948,47 @@ fn to_msg(v: &Value, end: End) -> Option<MsgValue> {
     })
 }
 
+/// The mappings the benchmarks run and the differential tests check (`kpl bench ros2`,
+/// `benches/cdr.rs`, `tests/plans.rs`), in one place.
+pub mod workloads {
+    /// specs/ros2/markers.kpl's `/kpl/cars` publication: a car as a marker of a
+    /// `visualization_msgs/msg/MarkerArray` (`each: "markers"`). `tests/plans.rs` checks that it
+    /// is the spec's text.
+    pub const MARKERS_OF_CARS: &[&str] = &[
+        "header.frame_id = 'map'",
+        "ns = symbol",
+        "id = number",
+        "type = 1",
+        "pose.position = pos",
+        "pose.orientation.w = 1.0",
+        "scale.x = size",
+        "scale.y = 1.8",
+        "scale.z = 1.5",
+        "color.g = 0.8",
+        "color.a = 1.0",
+        "lifetime.nanosec = 500000000",
+    ];
+    /// specs/ros2/markers.kpl's `/tracker/markers` subscription: a percept per marker
+    /// (`each: "markers"`, `identity: "id"`).
+    pub const PERCEPTS_OF_MARKERS: &[&str] = &["pos = pose.position", "size = scale.x"];
+    /// A pose as a `geometry_msgs/msg/PoseStamped`: a later entry sets a field (`z`) that an
+    /// earlier one (`pos`) set too.
+    pub const POSE_STAMPED: &[&str] = &[
+        "header.frame_id = 'map'",
+        "pose.position = pos",
+        "pose.position.z = z",
+        "pose.orientation.z = yaw_z",
+        "pose.orientation.w = yaw_w",
+    ];
+    /// The pose read back from the `PoseStamped`.
+    pub const POSE_OF_POSE_STAMPED: &[&str] = &[
+        "pos = pose.position",
+        "z = pose.position.z",
+        "yaw_z = pose.orientation.z",
+        "yaw_w = pose.orientation.w",
+    ];
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

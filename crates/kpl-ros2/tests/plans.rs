@@ -16,7 +16,7 @@ use std::sync::Arc;
 use kpl_core::{FieldType, Record, RecordType, Time, Value, ValueType};
 use kpl_ros2::cdr::{self, MsgValue};
 use kpl_ros2::definitions::{SchemaBase, SchemaField};
-use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec};
+use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec, workloads};
 use kpl_ros2::msg::{ArrayKind, Primitive};
 use kpl_ros2::{Definitions, Schema};
 use rand::{Rng, SeedableRng};
@@ -90,20 +90,7 @@ fn shipped_mappings_encode_and_decode_alike() {
     let defs = Definitions::builtin();
     let spec = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../specs/ros2/markers.kpl"))
         .unwrap();
-    let cars_map = [
-        "header.frame_id = 'map'",
-        "ns = symbol",
-        "id = number",
-        "type = 1",
-        "pose.position = pos",
-        "pose.orientation.w = 1.0",
-        "scale.x = size",
-        "scale.y = 1.8",
-        "scale.z = 1.5",
-        "color.g = 0.8",
-        "color.a = 1.0",
-        "lifetime.nanosec = 500000000",
-    ];
+    let cars_map = workloads::MARKERS_OF_CARS;
     let detections_map = [
         "header.frame_id = 'map'",
         "id = symbol",
@@ -114,16 +101,16 @@ fn shipped_mappings_encode_and_decode_alike() {
         "bbox.size.z = 1.5",
     ];
     // The mappings are the spec's, as written there.
-    for map in [&cars_map[..], &detections_map[..]] {
+    let percepts_map = workloads::PERCEPTS_OF_MARKERS;
+    for map in [cars_map, &detections_map[..], percepts_map] {
         let quoted: Vec<String> = map.iter().map(|e| format!("\"{e}\"")).collect();
         assert!(spec.contains(&format!("map: [{}]", quoted.join(", "))), "{map:?} is not markers.kpl's");
     }
-    assert!(spec.contains("map: [\"pos = pose.position\", \"size = scale.x\"]"));
     let car = record_type("Car", "co", &[("pos", ValueType::Vec2), ("size", ValueType::Float)]);
     let cars_ty = ValueType::List(Box::new(ValueType::Record(car)));
     let mut rng = ChaCha8Rng::seed_from_u64(26);
     for (type_name, each, entries) in [
-        ("visualization_msgs/msg/MarkerArray", "markers", &cars_map[..]),
+        ("visualization_msgs/msg/MarkerArray", "markers", cars_map),
         ("vision_msgs/msg/Detection3DArray", "detections", &detections_map[..]),
     ] {
         let schema = defs.schema_of(type_name).unwrap();
@@ -149,12 +136,12 @@ fn shipped_mappings_encode_and_decode_alike() {
         each: Some("markers".into()),
         identity: Some("id".into()),
         stamp: None,
-        entries: strings(&["pos = pose.position", "size = scale.x"]),
+        entries: strings(percepts_map),
     };
     let map = InMap::compile(&schema, &into, &ValueType::List(Box::new(ValueType::Record(percept)))).unwrap();
     let mut out = OutMap::compile(
         schema.clone(),
-        &OutSpec { each: Some("markers".into()), entries: strings(&cars_map) },
+        &OutSpec { each: Some("markers".into()), entries: strings(cars_map) },
         &cars_ty,
     )
     .unwrap();
@@ -192,27 +179,9 @@ fn the_bench_pose_encodes_and_decodes_alike() {
             ("yaw_w", ValueType::Float),
         ],
     );
-    let out = OutSpec {
-        each: None,
-        entries: strings(&[
-            "header.frame_id = 'map'",
-            "pose.position = pos",
-            "pose.position.z = z",
-            "pose.orientation.z = yaw_z",
-            "pose.orientation.w = yaw_w",
-        ]),
-    };
-    let into = InSpec {
-        each: None,
-        identity: None,
-        stamp: None,
-        entries: strings(&[
-            "pos = pose.position",
-            "z = pose.position.z",
-            "yaw_z = pose.orientation.z",
-            "yaw_w = pose.orientation.w",
-        ]),
-    };
+    let out = OutSpec { each: None, entries: strings(workloads::POSE_STAMPED) };
+    let into =
+        InSpec { each: None, identity: None, stamp: None, entries: strings(workloads::POSE_OF_POSE_STAMPED) };
     let compile = || OutMap::compile(schema.clone(), &out, &ValueType::Record(ty.clone())).unwrap();
     let (mut a, mut b, mut c) = (compile(), compile(), compile());
     let map = InMap::compile(&schema, &into, &ValueType::Record(ty.clone())).unwrap();

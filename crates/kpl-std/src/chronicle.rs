@@ -22,7 +22,7 @@
 //! `n` objects and a predicate over `k` parameters). Monitors' verdicts as events are not fed yet
 //! (`kpl check` says so with W0205): such an event never occurs.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
 use kpl_chronicle::fluent;
@@ -274,13 +274,14 @@ impl ChronicleUnit {
         let mut out = BTreeMap::new();
         for (ty, inputs) in &self.feeds {
             let mut objects: Objects<'v> = Vec::new();
+            let mut seen: HashSet<&'v str> = HashSet::new();
             for &i in inputs {
                 let Some(sample) = values.get(i).and_then(Option::as_ref) else { continue };
                 let Value::List(items) = &sample.value else { continue };
                 for item in items.iter() {
                     let Value::Record(record) = item else { continue };
                     let Some(id) = &record.id else { continue };
-                    if !objects.iter().any(|(o, _)| o == id) {
+                    if seen.insert(id) {
                         objects.push((id.clone(), item));
                     }
                 }

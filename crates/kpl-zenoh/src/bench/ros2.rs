@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use kpl_core::{FieldType, Record, RecordType, Time, Value, ValueType};
-use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec};
+use kpl_ros2::mapping::{InMap, InSpec, OutMap, OutSpec, workloads};
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Subscriber;
@@ -86,26 +86,12 @@ pub(super) fn message(payload: Payload) -> Option<Message> {
                 type_name: "geometry_msgs/msg/PoseStamped",
                 ty: ValueType::Record(ty),
                 value,
-                out: OutSpec {
-                    each: None,
-                    entries: entries(&[
-                        "header.frame_id = 'map'",
-                        "pose.position = pos",
-                        "pose.position.z = z",
-                        "pose.orientation.z = yaw_z",
-                        "pose.orientation.w = yaw_w",
-                    ]),
-                },
+                out: OutSpec { each: None, entries: entries(workloads::POSE_STAMPED) },
                 into: InSpec {
                     each: None,
                     identity: None,
                     stamp: None,
-                    entries: entries(&[
-                        "pos = pose.position",
-                        "z = pose.position.z",
-                        "yaw_z = pose.orientation.z",
-                        "yaw_w = pose.orientation.w",
-                    ]),
+                    entries: entries(workloads::POSE_OF_POSE_STAMPED),
                 },
             })
         }
@@ -126,28 +112,12 @@ pub(super) fn message(payload: Payload) -> Option<Message> {
                 type_name: "visualization_msgs/msg/MarkerArray",
                 ty: ValueType::List(Box::new(ValueType::Record(car))),
                 value: Value::List(cars),
-                out: OutSpec {
-                    each: Some("markers".into()),
-                    entries: entries(&[
-                        "header.frame_id = 'map'",
-                        "ns = symbol",
-                        "id = number",
-                        "type = 1",
-                        "pose.position = pos",
-                        "pose.orientation.w = 1.0",
-                        "scale.x = size",
-                        "scale.y = 1.8",
-                        "scale.z = 1.5",
-                        "color.g = 0.8",
-                        "color.a = 1.0",
-                        "lifetime.nanosec = 500000000",
-                    ]),
-                },
+                out: OutSpec { each: Some("markers".into()), entries: entries(workloads::MARKERS_OF_CARS) },
                 into: InSpec {
                     each: Some("markers".into()),
                     identity: Some("id".into()),
                     stamp: None,
-                    entries: entries(&["pos = pose.position", "size = scale.x"]),
+                    entries: entries(workloads::PERCEPTS_OF_MARKERS),
                 },
             })
         }
