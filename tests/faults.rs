@@ -735,7 +735,7 @@ fn a_frozen_consumer_holds_its_producer_only_briefly_and_loses_nothing_uncounted
     // consumer is stale (3 s without an acknowledgment, `flow::STALE`), then publishes on and
     // counts what it publishes as missed by the frozen host; what zenoh held for the frozen link
     // is lost when zenoh closes it, and counted by the consumer's sequence numbers once thawed.
-    // The producer does not wait for the thaw: it counts samples missed by q.
+    // The producer does not wait for the thaw: it counts samples published while q was away.
     let spec = "source ticks : int = timer(period: 100us)\n\
                 sink rec = file.jsonl(ticks, path: \"in.jsonl\")\n\
                 deploy {\n  host p { ticks }\n  host q { rec }\n}\n";
@@ -766,7 +766,9 @@ fn a_frozen_consumer_holds_its_producer_only_briefly_and_loses_nothing_uncounted
     let outbound = &p_report["transport"]["outbound"][0];
     let missed: u64 = outbound["missed"].as_array().unwrap().iter().map(|m| m[1].as_u64().unwrap()).sum();
     assert!(missed > 0, "p went on without the frozen q and counted what q missed: {outbound}");
-    assert!(lost >= missed, "what p counts missed by q, q counts lost: {lost} < {missed}");
+    // `missed` is what p published while it counted q away; zenoh may still hand some of it to q
+    // once thawed, so it bounds nothing of q's `lost` (on CI: missed 116,800, lost 102,675). The
+    // ledger above is what must hold.
     let timer = p_report["summary"]["processes"].to_string();
     let late = timer
         .split("at worst a tick went out ")
@@ -774,7 +776,7 @@ fn a_frozen_consumer_holds_its_producer_only_briefly_and_loses_nothing_uncounted
         .and_then(|s| s.split(" late").next())
         .unwrap_or("0 s");
     eprintln!(
-        "frozen consumer (12 s): p published {n}, q received {received}, counted lost {lost} ({missed} of them \
-         while p saw q away); p's timer at worst {late} late"
+        "frozen consumer (12 s): p published {n}, q received {received}, counted lost {lost}; p published {missed} \
+         while it saw q away; p's timer at worst {late} late"
     );
 }
