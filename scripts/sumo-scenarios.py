@@ -47,6 +47,9 @@ Scenarios:
             side at red lights, some cars over the limit): issue 24's traffic made elsewhere.
   spider    a spider network (6 arms, 3 circles), one lane each way at 50 km/h; random trips of
             which every second one ends inside the map (the vehicle leaves where its route ends).
+  reckless  overtake's road (600 s) with cars, trucks and reckless drivers (aggressive lane-change
+            parameters); truth.jsonl: the reckless cut-ins, computed here from the floating car
+            data (reckless_truth), which `kpl situations` reads beside the traffic file.
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -382,15 +385,150 @@ def spider(s, duration):
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
 
+RECKLESS_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.04" lcSpeedGain="2" lcKeepRight="0.3" lcAssertive="1" tau="1.2" minGap="2.5"/>
+    <vType id="reckless" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.3" speedDev="0.03" lcSpeedGain="1" lcKeepRight="20" lcAssertive="10" lcCooperative="0" tau="0.4" minGap="0.5"/>
+    <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="17" speedFactor="1.0" speedDev="0.03" tau="1.0" minGap="2.5"/>
+</additional>
+"""
+
+
+def reckless(s, duration):
+    """Overtakes on `overtake`'s road, some of them reckless: `reckless` drivers (SUMO's lane
+    change model made aggressive: lcAssertive 10, lcKeepRight 20, lcCooperative 0, tau 0.4 s,
+    minGap 0.5 m) pull back into the right lane as soon as the overtaken vehicle's secure gap
+    allows, normal cars (lcKeepRight 0.3, tau 1.2 s) later. The truth (reckless_truth, written
+    to truth.jsonl) is computed from the floating car data."""
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
+    s.write("edges.edg.xml", '<edges>\n'
+                '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
+                '</edges>\n')
+    s.write("vtypes.xml", RECKLESS_VTYPES)
+    s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+    flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="350" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="reckless" type="reckless" route="r" begin="0" end="%d" vehsPerHour="300" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="trucks" type="truck" route="r" begin="0" end="%d" vehsPerHour="250" '
+             'departLane="0" departSpeed="max"/>' % duration]
+    s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    # Lane changes take one simulation step (SUMO's default): with `--lanechange.duration 1.5`
+    # the reckless drivers kept headways of 1.1 s or more (docs/situations.md#reckless-overtakes).
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+# The truth of the reckless overtake, from SUMO's floating car data alone (not from KPL's
+# relations): `a` overtakes `b` recklessly when it changes lane into `b`'s lane in front of `b`
+# (both on one edge, b behind: b's front behind a's back) and stays on it for RECKLESS_STAY_S
+# (a lane change undone at once is no cut-in a camera could see), having been behind `b` (a's front
+# behind b's back) on that edge within RECKLESS_WINDOW_S before, both moving at least
+# RECKLESS_MIN_SPEED, and the gap it leaves (a's back to b's front, metres) is less than
+# RECKLESS_HEADWAY_S seconds of b's speed: b must brake or drive closer than the one-second
+# rule. The situation runs from the last sample a was behind b to the cut-in's sample. Cut-ins
+# by vehicles present for less than SETTLE_S are left out (the tracker has not anchored them).
+RECKLESS_HEADWAY_S = 1.0
+RECKLESS_WINDOW_S = 30.0
+RECKLESS_MIN_SPEED = 3.0
+RECKLESS_STAY_S = 1.0
+SETTLE_S = 3.0
+
+
+def fcd_samples(fcd_gz):
+    """(time, {vehicle: (edge, lane, front pos, speed, type, y)}) of a recording."""
+    out = []
+    with gzip.open(fcd_gz, "rt") as f:
+        text = f.read()
+    for block in re.finditer(r'<timestep time="([^"]*)"(.*?)</timestep>', text, re.S):
+        vehicles = {}
+        for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
+            a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
+            lane = a["lane"]
+            vehicles[a["id"]] = (lane.rsplit("_", 1)[0], lane, float(a["pos"]), float(a["speed"]),
+                                 a.get("type", ""), float(a["y"]))
+        out.append((float(block.group(1)), vehicles))
+    return out
+
+
+def vtype_lengths(vtypes_xml):
+    with open(vtypes_xml) as f:
+        text = f.read()
+    return {m.group(1): float(m.group(2)) for m in re.finditer(r'<vType id="([^"]*)"[^>]*length="([^"]*)"', text)}
+
+
+def reckless_truth(folder):
+    """Writes truth.jsonl in a scenario folder: one line per reckless cut-in (module comment
+    above; the safe ones are counted, not written), with `kind` reckless_overtake,
+    `objects` [a, b], `start` and `end` in seconds from the recording's first time, `headway_s`,
+    and `entering` when a vehicle was present for less than SETTLE_S."""
+    samples = fcd_samples(os.path.join(folder, "fcd.xml.gz"))
+    lengths = vtype_lengths(os.path.join(folder, "vtypes.xml"))
+    origin = samples[0][0] if samples else 0.0
+    first_seen = {}
+    behind_at = {}  # (a, b) -> last time a's front was behind b's back on one edge
+    lines = []
+    previous = {}
+    # (vehicle, time) -> the last time of the run of samples on its lane from that time.
+    stay_end = {}
+    following = {}
+    for time, vehicles in reversed(samples):
+        for v, d in vehicles.items():
+            later = following.get(v)
+            end = later[1] if later and later[0] == d[1] else time
+            following[v] = (d[1], end)
+            stay_end[(v, time)] = end
+    for time, vehicles in samples:
+        for v in vehicles:
+            first_seen.setdefault(v, time)
+        for a, (edge_a, lane_a, front_a, speed_a, type_a, _) in vehicles.items():
+            back_a = front_a - lengths.get(type_a, 5.0)
+            for b, (edge_b, lane_b, front_b, speed_b, type_b, _) in vehicles.items():
+                if a == b or edge_a != edge_b:
+                    continue
+                back_b = front_b - lengths.get(type_b, 5.0)
+                if front_a < back_b and back_b - front_a < 50.0:
+                    behind_at[(a, b)] = time
+                was = previous.get(a)
+                cut_in = (was is not None and was[0] == edge_a and was[1] != lane_a and lane_b == lane_a
+                          and front_b < back_a and stay_end[(a, time)] - time >= RECKLESS_STAY_S)
+                if not cut_in:
+                    continue
+                start = behind_at.get((a, b))
+                if start is None or time - start > RECKLESS_WINDOW_S:
+                    continue
+                del behind_at[(a, b)]  # one cut-in per overtake
+                if speed_a < RECKLESS_MIN_SPEED or speed_b < RECKLESS_MIN_SPEED:
+                    continue
+                gap = back_a - front_b
+                headway = gap / speed_b
+                entering = min(time - first_seen[a], time - first_seen[b]) < SETTLE_S
+                kind = "reckless_overtake" if headway < RECKLESS_HEADWAY_S else "safe_cut_in"
+                lines.append({"kind": kind, "objects": [a, b], "start": round(start - origin, 3),
+                              "end": round(time - origin, 3), "gap_m": round(gap, 2),
+                              "headway_s": round(headway, 3), "entering": entering})
+        previous = {v: (d[0], d[1]) for v, d in vehicles.items()}
+    with open(os.path.join(folder, "truth.jsonl"), "w") as f:
+        for line in lines:
+            if line["kind"] == "reckless_overtake":
+                f.write(json.dumps(line) + "\n")
+    counts = {}
+    for line in lines:
+        counts[line["kind"]] = counts.get(line["kind"], 0) + 1
+    return "truth.jsonl: %s" % ", ".join("%d %s" % (n, k) for k, n in sorted(counts.items()))
+
+
+# The scenarios whose truth is computed here (truth.jsonl), not by kpl situations.
+TRUTHS = {"reckless": reckless_truth}
+
 # The scenarios with occluders (and whether they get a horizontal bridge too).
 OCCLUDED = {"grid": True, "random": True, "highway": False}
 
 
 SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
              "motorway": motorway, "wrong_way": wrong_way, "town400": town400,
-             "tls_grid": tls_grid, "spider": spider}
+             "tls_grid": tls_grid, "spider": spider, "reckless": reckless}
 DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
-              "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240}
+              "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240, "reckless": 600}
 
 
 def main():
@@ -426,6 +564,8 @@ def main():
                 shutil.copy(os.path.join(work, vtypes), os.path.join(target, "vtypes.xml"))
             if name in OCCLUDED:
                 occluders(target, OCCLUDED[name])
+            if name in TRUTHS:
+                print("%s: %s" % (name, TRUTHS[name](target)))
             sizes = ", ".join("%s %d KiB" % (f, os.path.getsize(os.path.join(target, f)) // 1024)
                               for f in sorted(os.listdir(target)))
             print("%s: %s" % (target, sizes))

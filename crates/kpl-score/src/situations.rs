@@ -451,6 +451,65 @@ pub fn read_situations_file(path: &Path) -> std::io::Result<(Vec<Situation>, usi
     read_situations(std::io::BufReader::new(kpl_core::read::open(path)?))
 }
 
+/// Reads true situations computed elsewhere (a scenario's `truth.jsonl`, as
+/// `scripts/sumo-scenarios.py` writes it for situations whose truth is not computed here): one
+/// JSON object a line with `kind`, `objects` (the true vehicles' names), `start` and `end` in
+/// seconds from the recording's first time, and optionally `entering: true` for one left out as
+/// its vehicles entered; other fields are ignored, blank lines skipped. Adds them to `truth`
+/// (kept ordered by kind, then start) and returns their kinds. A malformed line is an error that
+/// names its line number.
+pub fn add_true_situations(reader: impl BufRead, truth: &mut TrueSituations) -> Result<Vec<String>, String> {
+    let mut kinds: Vec<String> = Vec::new();
+    let mut lines = kpl_core::read::LineReader::new(reader, kpl_core::read::MAX_RECORDING_LINE);
+    let mut number = 0usize;
+    loop {
+        number += 1;
+        let line = match lines.next_line() {
+            Ok(Some(line)) => String::from_utf8_lossy(line).into_owned(),
+            Ok(None) => break,
+            Err(error) => return Err(format!("line {number}: {error}")),
+        };
+        if line.trim().is_empty() {
+            continue;
+        }
+        let json: serde_json::Value =
+            serde_json::from_str(&line).map_err(|e| format!("line {number}: not JSON: {e}"))?;
+        let seconds = |field: &str| -> Result<Time, String> {
+            let s = json
+                .get(field)
+                .and_then(serde_json::Value::as_f64)
+                .filter(|s| s.is_finite() && s.abs() < 1e9);
+            s.map(|s| (s * 1e6).round() as Time)
+                .ok_or_else(|| format!("line {number}: `{field}` is not a number of seconds"))
+        };
+        let kind = json
+            .get("kind")
+            .and_then(serde_json::Value::as_str)
+            .ok_or_else(|| format!("line {number}: no `kind`"))?
+            .to_string();
+        let objects: Option<Vec<String>> = json
+            .get("objects")
+            .and_then(serde_json::Value::as_array)
+            .and_then(|a| a.iter().map(|o| o.as_str().map(str::to_string)).collect());
+        let objects = objects.ok_or_else(|| format!("line {number}: `objects` is not a list of names"))?;
+        let (start, end) = (seconds("start")?, seconds("end")?);
+        if end < start {
+            return Err(format!("line {number}: `end` is before `start`"));
+        }
+        if !kinds.contains(&kind) {
+            kinds.push(kind.clone());
+        }
+        let situation = Situation { kind, objects, start, end };
+        if json.get("entering").and_then(serde_json::Value::as_bool) == Some(true) {
+            truth.entering.push(situation);
+        } else {
+            truth.situations.push(situation);
+        }
+    }
+    truth.situations.sort_by(|a, b| (&a.kind, a.start).cmp(&(&b.kind, b.start)));
+    Ok(kinds)
+}
+
 /// The scores of one kind of situation.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct KindScore {
@@ -588,6 +647,29 @@ pub fn match_situations(
 #[allow(clippy::unwrap_used)] // tests
 mod tests {
     use super::*;
+
+    #[test]
+    fn true_situations_from_a_file_join_the_computed_ones() {
+        let mut truth = TrueSituations::default();
+        let text = "{\"kind\": \"reckless_overtake\", \"objects\": [\"r.1\", \"t.0\"], \"start\": 51.0, \"end\": 53.5, \"headway_s\": 0.4}\n\n\
+            {\"kind\": \"reckless_overtake\", \"objects\": [\"r.2\", \"t.0\"], \"start\": 1.0, \"end\": 2.0, \"entering\": true}\n";
+        let kinds = add_true_situations(text.as_bytes(), &mut truth).unwrap();
+        assert_eq!(kinds, ["reckless_overtake"]);
+        assert_eq!(truth.situations.len(), 1);
+        assert_eq!(truth.situations[0].objects, ["r.1", "t.0"]);
+        assert_eq!((truth.situations[0].start, truth.situations[0].end), (51_000_000, 53_500_000));
+        assert_eq!(truth.entering.len(), 1);
+        for (bad, why) in [
+            ("{\"kind\": \"x\", \"objects\": [\"a\"], \"start\": 2, \"end\": 1}", "line 1: `end` is before"),
+            ("{\"objects\": [], \"start\": 1, \"end\": 2}", "line 1: no `kind`"),
+            ("\n{\"kind\": \"x\", \"objects\": [1], \"start\": 1, \"end\": 2}", "line 2: `objects`"),
+            ("{\"kind\": \"x\", \"objects\": [], \"start\": \"soon\", \"end\": 2}", "line 1: `start`"),
+            ("not json", "line 1: not JSON"),
+        ] {
+            let error = add_true_situations(bad.as_bytes(), &mut TrueSituations::default()).unwrap_err();
+            assert!(error.starts_with(why), "{bad}: {error}");
+        }
+    }
 
     fn vehicle(id: &str, lane: &str, lane_pos: f64, speed: f64) -> TrueVehicle {
         TrueVehicle {

@@ -1,6 +1,7 @@
-//! Chronicles on the runtime, as `kpl run specs/traffic/sumo_chronicles.kpl` runs them: the
-//! spec's `overtake` chronicle is recognised over the cars that anchoring makes of recorded SUMO
-//! traffic seen by the simulated tracker, and every recognition it recorded is what the pure
+//! Chronicles on the runtime, as `kpl run specs/traffic/sumo_chronicles.kpl` (and
+//! `sumo_reckless.kpl`) run them: the spec's `overtake` (`reckless_overtake`) chronicle is
+//! recognised over the cars that anchoring makes of recorded SUMO traffic seen by the simulated
+//! tracker, and every recognition it recorded is what the pure
 //! recogniser (`kpl-chronicle`) gives on the events computed here, independently of the adapter,
 //! from the recorded cars: the spec's predicates written out in Rust over the traffic relations'
 //! implementations, a tuple's first value a change from false, a tuple that is gone false.
@@ -86,15 +87,27 @@ impl Relations {
     fn close(&self, a: &Value, b: &Value) -> bool {
         self.call("close", &[a.clone(), b.clone(), Value::Float(50.0)])
     }
+    /// `same_lane(a, b) and in_front(a, b) and time_gap(b, a) < 1.0 and a.measured and
+    /// b.measured and b.speed > 3.0`
+    fn cut(&self, a: &Value, b: &Value) -> bool {
+        let time_gap = (self.functions["time_gap"].body)(&[b.clone(), a.clone()]);
+        self.call("same_lane", &[a.clone(), b.clone()])
+            && self.call("in_front", &[a.clone(), b.clone()])
+            && matches!(time_gap, Ok(Value::Float(t)) if t < 1.0)
+            && Self::flag(a, "measured")
+            && Self::flag(b, "measured")
+            && Self::num(b, "speed") > 3.0
+    }
 }
 
-/// The `overtake` chronicle of the spec, for the pure recogniser: sources 0 to 3 are the
-/// predicates `back`, `side`, `front` and the hold's `close`.
-fn overtake_model() -> Chronicle {
-    let c = |later, earlier| Constraint { later, earlier, lo: Some(0), hi: Some(60 * S) };
+/// The `overtake` chronicle of sumo_chronicles.kpl (within 60 s) or `reckless_overtake` of
+/// sumo_reckless.kpl (within 30 s), for the pure recogniser: sources 0 to 3 are the predicates
+/// `back`, `side`, `front` (`cut`) and the hold's `close`.
+fn overtake_model(name: &str, within: Time) -> Chronicle {
+    let c = |later, earlier| Constraint { later, earlier, lo: Some(0), hi: Some(within) };
     let event = |source| Pattern { source: SourceId(source), args: vec![0, 1], value: true };
     Chronicle {
-        name: "overtake".into(),
+        name: name.into(),
         source: SourceId(4),
         params: 2,
         events: vec![event(0), event(1), event(2)],
@@ -106,11 +119,16 @@ fn overtake_model() -> Chronicle {
 
 type Recognised = BTreeSet<(Vec<String>, Vec<Time>, Time)>;
 
-/// The recognitions the pure recogniser gives on the events of the recorded car snapshots.
-fn expected(snapshots: &[(Time, Vec<(String, Value)>)]) -> (Recognised, usize) {
+/// The recognitions the pure recogniser gives on the events of the recorded car snapshots, with
+/// `third` as the predicate of the third event (`front` or `cut`).
+fn expected(
+    snapshots: &[(Time, Vec<(String, Value)>)],
+    model: Chronicle,
+    third: fn(&Relations, &Value, &Value) -> bool,
+) -> (Recognised, usize) {
     let relations = Relations::new();
     let mut recogniser: Recogniser<Arc<str>> =
-        Recogniser::new(vec![overtake_model().compile().unwrap()], Config::default()).unwrap();
+        Recogniser::new(vec![model.compile().unwrap()], Config::default()).unwrap();
     let mut previous: Vec<BTreeMap<(String, String), bool>> = vec![BTreeMap::new(); 4];
     let mut found = BTreeSet::new();
     let mut events_total = 0;
@@ -126,7 +144,7 @@ fn expected(snapshots: &[(Time, Vec<(String, Value)>)]) -> (Recognised, usize) {
                     let value = match source {
                         0 => relations.back(a, b),
                         1 => relations.side(a, b),
-                        2 => relations.front(a, b),
+                        2 => third(&relations, a, b),
                         _ => relations.close(a, b),
                     };
                     now.insert((ida.clone(), idb.clone()), value);
@@ -158,18 +176,19 @@ fn expected(snapshots: &[(Time, Vec<(String, Value)>)]) -> (Recognised, usize) {
     (found, events_total)
 }
 
-#[test]
-fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+/// Runs `SPEC.kpl` for `seconds` and returns the car snapshots its chronicle saw and the
+/// recognitions of `stream` it recorded (binding, event times, valid time).
+fn run_spec(spec_name: &str, stream: &str, seconds: Time) -> (Vec<(Time, Vec<(String, Value)>)>, Recognised) {
     let registry = kpl_std::registry();
-    let text = std::fs::read_to_string(traffic_dir().join("sumo_chronicles.kpl")).unwrap();
+    let text = std::fs::read_to_string(traffic_dir().join(format!("{spec_name}.kpl"))).unwrap();
     let spec = kpl_std::check_text(&text).unwrap();
-    let out_dir = fresh_dir("overtake");
+    let out_dir = fresh_dir(spec_name);
     let config = RunConfig {
-        duration: Some(90 * S),
+        duration: Some(seconds * S),
         seed: 3,
         out_dir: out_dir.clone(),
         spec_dir: traffic_dir(),
-        spec_name: "sumo_chronicles".into(),
+        spec_name: spec_name.into(),
         ..RunConfig::default()
     };
     let report = kpl_runtime::run(&spec, &registry, &config, None).unwrap();
@@ -177,7 +196,7 @@ fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
 
     // The cars the chronicle's process saw: every `onroad_car` sample (its one input).
     let car_type = spec.process("onroad_car").unwrap().output.clone().unwrap();
-    let samples = read_samples(&out_dir.join("sumo_chronicles/tracks.jsonl"));
+    let samples = read_samples(&out_dir.join(format!("{spec_name}/tracks.jsonl")));
     let mut snapshots = Vec::new();
     for (stream, valid, json) in samples.iter().filter(|(s, _, _)| s == "onroad_car") {
         let Value::List(items) = Value::from_json(json, &car_type).unwrap() else {
@@ -193,12 +212,11 @@ fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
         snapshots.push((*valid, cars));
     }
     assert!(snapshots.len() > 500, "{} car snapshots", snapshots.len());
-    let (want, events) = expected(&snapshots);
 
-    let recorded = read_samples(&out_dir.join("sumo_chronicles/situations.jsonl"));
+    let recorded = read_samples(&out_dir.join(format!("{spec_name}/situations.jsonl")));
     let mut got = BTreeSet::new();
-    for (stream, valid, value) in &recorded {
-        assert_eq!(stream, "overtake");
+    for (name, valid, value) in &recorded {
+        assert_eq!(name, stream);
         assert_eq!(value["verdict"], true);
         let times: Vec<Time> =
             value["times"].as_array().unwrap().iter().map(|t| t.as_i64().unwrap()).collect();
@@ -208,11 +226,29 @@ fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
             vec![value["a"].as_str().unwrap().to_string(), value["b"].as_str().unwrap().to_string()];
         got.insert((binding, times, *valid));
     }
+    assert_eq!(got.len(), recorded.len(), "a recognition recorded twice");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    (snapshots, got)
+}
+
+#[test]
+fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+    let (snapshots, got) = run_spec("sumo_chronicles", "overtake", 90);
+    let (want, events) = expected(&snapshots, overtake_model("overtake", 60 * S), Relations::front);
     assert!(events > 100, "only {events} events");
     assert!(want.len() >= 3, "the scenario's overtakes: {want:?}");
-    assert_eq!(got.len(), recorded.len(), "a recognition recorded twice");
     assert_eq!(got, want);
-    let _ = std::fs::remove_dir_all(&out_dir);
+}
+
+/// The reckless overtake of sumo_reckless.kpl on the first 90 s of its traffic (the truth of
+/// scripts/sumo-scenarios.py has one reckless cut-in in them, at 56 s; the spec recognises it).
+#[test]
+fn the_reckless_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+    let (snapshots, got) = run_spec("sumo_reckless", "reckless_overtake", 90);
+    let (want, events) = expected(&snapshots, overtake_model("reckless_overtake", 30 * S), Relations::cut);
+    assert!(events > 100, "only {events} events");
+    assert!(!want.is_empty(), "the scenario's reckless overtake: {want:?}");
+    assert_eq!(got, want);
 }
 
 /// Hysteresis in a chronicle's predicate, end to end: two cars whose distance jitters around

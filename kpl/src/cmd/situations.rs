@@ -22,8 +22,8 @@ Examples:
   kpl situations out/sumo_situations --traffic specs/traffic/sumo/overtake/fcd.xml.gz
 
 The recognised situations are the recorded verdict records with `verdict: true`, `start` and `end`
-of the monitors named overtake, speeding, stopped, tailgating, wrong_way (other monitors are listed
-without a truth). The true situations are computed from the traffic file (SUMO FCD with `lane` and
+of the monitors and chronicles named overtake, speeding, stopped, tailgating, wrong_way, or a kind
+of --situations-truth (others are listed without a truth). The true situations are computed from the traffic file (SUMO FCD with `lane` and
 `pos`; a vehicle on a lane the network does not have is placed on its nearest lane), its first time
 being the run's time 0. A recognised situation is correct when a true one of its
 kind is about the vehicles its symbols stood for (the CLEAR MOT mapping of the car stream against
@@ -47,6 +47,11 @@ pub struct Args {
     /// [default: vtypes.xml beside the traffic file, if there is one; else SUMO's defaults].
     #[arg(long, value_name = "FILE")]
     vtypes: Option<PathBuf>,
+    /// True situations computed elsewhere, of kinds this command does not compute (JSON lines:
+    /// `kind`, `objects`, `start`, `end` in seconds; `scripts/sumo-scenarios.py` writes them for
+    /// the reckless overtakes) [default: truth.jsonl beside the traffic file, if there is one].
+    #[arg(long, value_name = "FILE")]
+    situations_truth: Option<PathBuf>,
     /// The stream of cars whose symbols the situations name.
     #[arg(long, value_name = "STREAM", default_value = "onroad_car")]
     stream: String,
@@ -136,7 +141,16 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
         speeding_min: args.speeding_min,
         ..TruthParams::default()
     };
-    let true_situations = situations::true_situations(&true_steps, &params);
+    let mut true_situations = situations::true_situations(&true_steps, &params);
+    let mut truth_kinds: Vec<String> = TRUE_KINDS.iter().map(ToString::to_string).collect();
+    let extra = args.situations_truth.clone().or_else(|| Some(beside("truth.jsonl")).filter(|p| p.is_file()));
+    if let Some(path) = extra {
+        let file = kpl_core::read::open(&path).map_err(|e| (2, format!("{}: {e}", path.display())))?;
+        let kinds = situations::add_true_situations(std::io::BufReader::new(file), &mut true_situations)
+            .map_err(|e| (1, format!("{}: {e}", path.display())))?;
+        truth_kinds.extend(kinds.into_iter().filter(|k| !TRUE_KINDS.contains(&k.as_str())));
+    }
+    let truth_kinds: Vec<&str> = truth_kinds.iter().map(String::as_str).collect();
     let truth = &true_situations.situations;
 
     let recording =
@@ -165,14 +179,14 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
     let matched = situations::match_situations(
         &recognised,
         &true_situations,
-        TRUE_KINDS,
+        &truth_kinds,
         mapping,
         &MatchOptions { slack },
     );
     let text = match args.format {
         Format::Table => {
             let left_out = matched.recognised.iter().filter(|r| r.left_out).count();
-            table(&matched.scores, true_situations.entering.len(), left_out, &params)
+            table(&matched.scores, true_situations.entering.len(), left_out, &params, &truth_kinds)
         }
         Format::Json => {
             let truth: Vec<TrueItem<'_>> = truth
@@ -312,7 +326,13 @@ fn jsonl_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
     Ok(out)
 }
 
-fn table(scores: &[KindScore], entering: usize, left_out: usize, params: &TruthParams) -> String {
+fn table(
+    scores: &[KindScore],
+    entering: usize,
+    left_out: usize,
+    params: &TruthParams,
+    truth_kinds: &[&str],
+) -> String {
     let mut out =
         String::from("kind          recognised  correct  precision   true  found  recall  unmapped\n");
     let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
@@ -341,12 +361,12 @@ fn table(scores: &[KindScore], entering: usize, left_out: usize, params: &TruthP
         ));
     }
     let uncovered: Vec<&str> =
-        scores.iter().filter(|s| !TRUE_KINDS.contains(&s.kind.as_str())).map(|s| s.kind.as_str()).collect();
+        scores.iter().filter(|s| !truth_kinds.contains(&s.kind.as_str())).map(|s| s.kind.as_str()).collect();
     if !uncovered.is_empty() {
         out.push_str(&format!(
-            "no truth for: {} (only {} are computed from the traffic)\n",
+            "no truth for: {} (only {} are computed from the traffic or given by --situations-truth)\n",
             uncovered.join(", "),
-            TRUE_KINDS.join(", ")
+            truth_kinds.join(", ")
         ));
     }
     out
