@@ -266,36 +266,12 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     assert!(converted.status.success(), "{said}");
     assert!(said.contains("sample(s) of `markers` are not in the bag"), "{said}");
     assert!(bag.join("metadata.yaml").is_file() && bag.join("cars_0.mcap").is_file());
-    let read = std::process::Command::new(&python)
-        .arg(&script)
-        .arg("read")
-        .arg(&bag)
-        .arg(out.join("tracks.jsonl"))
-        .output()
-        .unwrap();
-    assert!(
-        read.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&read.stdout),
-        String::from_utf8_lossy(&read.stderr)
-    );
+    oracle_reads_bag(&python, &bag, &out.join("tracks.jsonl"));
 
     // The bag the run wrote itself (`ros2.bag` sinks of replay.kpl, the same mappings), read the
     // same way.
     assert!(out.join("cars/metadata.yaml").is_file() && out.join("cars/cars_0.mcap").is_file());
-    let read = std::process::Command::new(&python)
-        .arg(&script)
-        .arg("read")
-        .arg(out.join("cars"))
-        .arg(out.join("tracks.jsonl"))
-        .output()
-        .unwrap();
-    assert!(
-        read.status.success(),
-        "the run's own bag: {}{}",
-        String::from_utf8_lossy(&read.stdout),
-        String::from_utf8_lossy(&read.stderr)
-    );
+    oracle_reads_bag(&python, &out.join("cars"), &out.join("tracks.jsonl"));
 }
 
 /// A bag split as `ros2 bag record --max-bag-duration` splits it: replay.kpl's `ros2.bag` sinks
@@ -340,19 +316,7 @@ fn a_split_bag_is_one_recording() {
             "{file} in metadata.yaml:\n{metadata}"
         );
     }
-    let read = std::process::Command::new(&python)
-        .arg(root().join("tests/rosbag2_oracle.py"))
-        .arg("read")
-        .arg(&bag)
-        .arg(out.join("tracks.jsonl"))
-        .output()
-        .unwrap();
-    assert!(
-        read.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&read.stdout),
-        String::from_utf8_lossy(&read.stderr)
-    );
+    oracle_reads_bag(&python, &bag, &out.join("tracks.jsonl"));
 
     // Back to JSON lines: every message of every file, in order, as the run recorded the cars.
     let tracks = lines(&out.join("tracks.jsonl"));
@@ -406,6 +370,25 @@ fn kpl_ros2_hash(metadata: &str, topic: &str) -> String {
     let line =
         metadata[from..].lines().find(|l| l.trim_start().starts_with("type_description_hash:")).unwrap();
     line.split('"').nth(1).unwrap().to_string()
+}
+
+/// Has `tests/rosbag2_oracle.py read` check the bag at `bag` (rosbags through its metadata.yaml,
+/// mcap-ros2-support file by file) against the cars of the recording `tracks`.
+fn oracle_reads_bag(python: &str, bag: &Path, tracks: &Path) {
+    let read = std::process::Command::new(python)
+        .arg(root().join("tests/rosbag2_oracle.py"))
+        .arg("read")
+        .arg(bag)
+        .arg(tracks)
+        .output()
+        .unwrap();
+    assert!(
+        read.status.success(),
+        "{}: {}{}",
+        bag.display(),
+        String::from_utf8_lossy(&read.stdout),
+        String::from_utf8_lossy(&read.stderr)
+    );
 }
 
 /// `--for` on a replayed bag whose stamps are dates (specs/ros2/tracker/, 0.5 s steps from

@@ -10,7 +10,7 @@ in real time as MarkerArrays: one marker per vehicle, `id` its track id, `pose.p
 `scale.x` its length, `header.stamp` the time it was published. It subscribes to /kpl/cars
 (MarkerArray, decoded by rclpy) and /kpl/detections (vision_msgs/Detection3DArray, decoded by
 rosbags from kpl's shipped definitions, as there is no rclpy wheel of vision_msgs). At the end it
-sends three bad messages (no attachment, a wrong type hash, truncated CDR), takes its publisher
+sends three bad messages (no attachment, one of a publisher declared with another type hash, truncated CDR), takes its publisher
 away, waits for kpl to finish, and writes RESULT: what it received and the ROS 2 graph it saw.
 """
 
@@ -177,7 +177,17 @@ def main():
     good = serialize_message(MarkerArray())
     seq += 1
     publisher.put(good)
-    wrong = session.declare_publisher(topic_keyexpr(0, "/tracker/markers", dds, "RIHS01_" + "0" * 64))
+    # A publisher of the topic with another definition of the type: a node declares it in the
+    # graph (its token carries the hash), and kpl, which subscribes to its own type's key as
+    # rmw_zenoh does, subscribes to this one's to count its messages.
+    wrong_hash = "RIHS01_" + "0" * 64
+    wrong_entity = EndpointEntity(node=node, entity_id=3, kind=EntityKind.PUBLISHER, name="/tracker/markers",
+                                  dds_type_name=dds, type_hash=wrong_hash, qos=qos)
+    wrong_token = session.liveliness().declare_token(endpoint_liveliness_keyexpr(wrong_entity))
+    wrong = session.declare_publisher(topic_keyexpr(0, "/tracker/markers", dds, wrong_hash))
+    deadline = time.time() + 10
+    while not wrong.matching_status.matching and time.time() < deadline:
+        time.sleep(0.05)
     wrong.put(good, attachment=Attachment(sequence_id=seq, timestamp_ns=time.time_ns(), gid=gid).to_bytes())
     seq += 1
     publisher.put(serialize_message(msg)[:7], attachment=Attachment(sequence_id=seq, timestamp_ns=time.time_ns(), gid=gid).to_bytes())
@@ -185,6 +195,7 @@ def main():
     graph = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok is not None]
     result["graph"] = sorted(g for g in graph if "/tracker" not in g.split("/")[8:9] and g.split("/")[2] != zid)
     wrong.undeclare()
+    wrong_token.undeclare()
     pub_token.undeclare()
     publisher.undeclare()
     # kpl ends a few seconds after the publisher has gone: wait for its node to leave the graph.

@@ -161,6 +161,23 @@ impl Node {
     }
 }
 
+/// The DDS type and type hash that a publisher's or subscription's liveliness token
+/// ([`Node::endpoint_token`]) declares: its 11th and 12th chunks. `None` for a node's token or a
+/// key that is not a token.
+pub fn token_type(token: &str) -> Option<(&str, &str)> {
+    let mut chunks = token.split('/');
+    if chunks.next()? != ADMIN_SPACE {
+        return None;
+    }
+    let mut rest = chunks.skip(4);
+    if !matches!(rest.next()?, "MP" | "MS") {
+        return None;
+    }
+    let mut rest = rest.skip(4);
+    let (dds_type, hash) = (rest.next()?, rest.next()?);
+    (!dds_type.is_empty() && !hash.is_empty()).then_some((dds_type, hash))
+}
+
 /// The QoS that a ROS 2 endpoint declares (the parts rmw_zenoh writes in tokens).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Qos {
@@ -306,5 +323,23 @@ mod tests {
     fn attachments_of_other_lengths_are_refused() {
         assert_eq!(Attachment::decode(&[0; 17]), Err(AttachmentError::Length(17)));
         assert_eq!(Attachment::decode(&[0; 33]), Err(AttachmentError::GidLength(0)));
+    }
+
+    #[test]
+    fn a_tokens_type_and_hash_are_its_eleventh_and_twelfth_chunks() {
+        let node =
+            Node { domain: 3, session_id: "aa".into(), node_id: 1, namespace: "/a".into(), name: "n".into() };
+        let token = node.endpoint_token(
+            7,
+            EntityKind::Publisher,
+            "/t/x",
+            "pkg::msg::dds_::M_",
+            "RIHS01_ab",
+            &Qos::default(),
+        );
+        assert_eq!(token_type(&token), Some(("pkg::msg::dds_::M_", "RIHS01_ab")));
+        assert_eq!(token_type(&node.token()), None);
+        assert_eq!(token_type("other/3/aa/1/7/MP/%/%a/n/%t%x/T/H/q"), None);
+        assert_eq!(token_type("@ros2_lv/3/aa/1/7/MP/%/%a/n"), None);
     }
 }

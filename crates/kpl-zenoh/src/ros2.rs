@@ -226,8 +226,15 @@ impl Common {
         &self.schema
     }
 
-    pub(crate) fn key(&self, hash: &str) -> String {
-        wire::topic_key(self.domain, &self.topic, &self.dds, hash)
+    /// The data key of the topic's messages of this type.
+    pub(crate) fn data_key(&self) -> String {
+        wire::topic_key(self.domain, &self.topic, &self.dds, &self.hash)
+    }
+
+    /// Why a message on data key `key` is refused when that key's type hash is not the type's.
+    fn hash_refusal(&self, key: &str) -> String {
+        let hash = key.rsplit('/').next().unwrap_or("");
+        format!("type hash {hash}, expected {} ({})", self.hash, self.schema.name())
     }
 
     fn warn_qos(&self, warn: impl Fn(String)) {
@@ -374,9 +381,12 @@ impl Source for Subscribe {
             c.warn_qos(|w| ctx.warn(w));
             let session = Ros2Session::open(&c.router).await?;
             let depth = c.qos.depth.unwrap_or(1000) as usize;
+            // The exact key, as rmw_zenoh subscribes: a wildcard for the type hash made zenoh
+            // route every message anew (a quarter of the throughput; docs/performance.md).
+            // Publishers of another type are found by their tokens (`OtherTypes`).
             let subscriber = session
                 .session
-                .declare_subscriber(c.key("*"))
+                .declare_subscriber(c.data_key())
                 .with(zenoh::handlers::RingChannel::new(depth))
                 .await
                 .map_err(|e| ProcessError::failed(format!("cannot subscribe to `{}`: {e}", c.topic)))?;
@@ -392,6 +402,7 @@ impl Source for Subscribe {
                     ProcessError::failed(format!("cannot watch the publishers of `{}`: {e}", c.topic))
                 })?;
             let (_id, _token) = session.endpoint_token(c, EntityKind::Subscription).await?;
+            let mut others = OtherTypes::new();
             let mut alive: HashMap<String, ()> = HashMap::new();
             let mut seen_publisher = false;
             let mut gone_since: Option<Time> = None;
@@ -409,6 +420,9 @@ impl Source for Subscribe {
                         let Ok(token) = token else { break };
                         match token.kind() {
                             SampleKind::Put => {
+                                if let Some(warning) = others.see(&session, c, token.key_expr().as_str()).await {
+                                    ctx.warn(warning);
+                                }
                                 alive.insert(token.key_expr().to_string(), ());
                                 seen_publisher = true;
                                 gone_since = None;
@@ -450,6 +464,11 @@ impl Source for Subscribe {
                             Err(Refused::Malformed(e)) => ctx.malformed(where_(), e)?,
                         }
                     }
+                    Some(key) = others.messages.recv() => {
+                        messages += 1;
+                        wrong_type += 1;
+                        ctx.malformed(format!("ROS 2 `{}`, message {messages}", c.topic), c.hash_refusal(&key))?;
+                    }
                     _ = ctx.wait_until(until) => {
                         if gone_since.is_some() || ctx.should_stop() || ctx.end().is_some_and(|end| ctx.now() >= end) {
                             break;
@@ -459,6 +478,14 @@ impl Source for Subscribe {
                 if ctx.should_stop() {
                     break;
                 }
+            }
+            for _ in 0..others.overflow.load(Ordering::Relaxed) {
+                messages += 1;
+                wrong_type += 1;
+                ctx.malformed(
+                    format!("ROS 2 `{}`", c.topic),
+                    "a message of a publisher of another type hash, counted while kpl was busy",
+                )?;
             }
             if sequences.lost > 0 {
                 ctx.warn(format!("`{}`: {} message(s) lost before kpl took them (gaps in the publishers' sequence numbers; raise `depth`)", c.topic, sequences.lost));
@@ -473,6 +500,69 @@ impl Source for Subscribe {
             }
             Ok(())
         })
+    }
+}
+
+/// The publishers of a subscription's topic whose tokens declare another type (hash) than its
+/// own: rmw_zenoh would not match them, kpl subscribes to each one's exact data key (at most
+/// [`OtherTypes::MAX`]) so that their messages are counted as refused, and says so once per type.
+struct OtherTypes {
+    subscribers: HashMap<String, zenoh::pubsub::Subscriber<()>>,
+    sender: tokio::sync::mpsc::Sender<String>,
+    /// The data keys of their messages, as they come.
+    messages: tokio::sync::mpsc::Receiver<String>,
+    /// Messages that came while `messages` was full.
+    overflow: Arc<AtomicU64>,
+}
+
+impl OtherTypes {
+    const MAX: usize = 16;
+
+    fn new() -> OtherTypes {
+        let (sender, messages) = tokio::sync::mpsc::channel(256);
+        OtherTypes { subscribers: HashMap::new(), sender, messages, overflow: Arc::default() }
+    }
+
+    /// A publisher's token: a warning when it declares a type kpl had not seen on the topic.
+    async fn see(&mut self, session: &Ros2Session, c: &Common, token: &str) -> Option<String> {
+        let (dds, hash) = wire::token_type(token)?;
+        if hash == c.hash {
+            return None;
+        }
+        let key = wire::topic_key(c.domain, &c.topic, dds, hash);
+        if self.subscribers.contains_key(&key) {
+            return None;
+        }
+        if self.subscribers.len() >= OtherTypes::MAX {
+            return Some(format!(
+                "`{}`: a publisher of type {dds} with type hash {hash}: its messages are not counted (more than {} types on the topic)",
+                c.topic,
+                OtherTypes::MAX
+            ));
+        }
+        let (sender, overflow) = (self.sender.clone(), self.overflow.clone());
+        let declared = session
+            .session
+            .declare_subscriber(&key)
+            .callback(move |sample| {
+                if sender.try_send(sample.key_expr().to_string()).is_err() {
+                    overflow.fetch_add(1, Ordering::Relaxed);
+                }
+            })
+            .await;
+        let why = match declared {
+            Ok(subscriber) => {
+                self.subscribers.insert(key, subscriber);
+                "its messages are refused and counted"
+            }
+            Err(_) => "kpl cannot count its messages",
+        };
+        Some(format!(
+            "`{}`: a publisher of type {dds} with type hash {hash}, but {} has type hash {}: {why}",
+            c.topic,
+            c.schema.name(),
+            c.hash
+        ))
     }
 }
 
@@ -508,9 +598,7 @@ pub(crate) fn take(
     };
     let key = message.key_expr().as_str();
     if !key.ends_with(&c.hash) {
-        let hash = key.rsplit('/').next().unwrap_or("");
-        let why = format!("type hash {hash}, expected {} ({})", c.hash, c.schema.name());
-        return (Some(attachment), Err(Refused::TypeHash(why)));
+        return (Some(attachment), Err(Refused::TypeHash(c.hash_refusal(key))));
     }
     let payload = message.payload().to_bytes();
     let taken = map.decode(&payload).map_err(Refused::Malformed).map(|(valid, value)| {
@@ -535,7 +623,7 @@ impl Open {
     pub(crate) async fn declare(session: Arc<Ros2Session>, c: &Common) -> Result<Open, ProcessError> {
         let publisher = session
             .session
-            .declare_publisher(c.key(&c.hash))
+            .declare_publisher(c.data_key())
             .congestion_control(if c.qos.reliable {
                 CongestionControl::Block
             } else {

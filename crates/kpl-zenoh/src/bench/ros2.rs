@@ -203,7 +203,7 @@ impl Reader {
             InMap::compile(common.schema(), &message.into, &message.ty).map_err(|e| failed(e.message))?;
         let subscriber = session
             .session
-            .declare_subscriber(common.key("*"))
+            .declare_subscriber(common.data_key())
             .with(zenoh::handlers::FifoChannel::new(queue))
             .await
             .map_err(failed)?;
