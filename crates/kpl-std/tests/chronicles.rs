@@ -119,6 +119,9 @@ fn overtake_model(name: &str, within: Time) -> Chronicle {
 
 type Recognised = BTreeSet<(Vec<String>, Vec<Time>, Time)>;
 
+/// The cars of each state: `(valid, [(symbol, car)])`.
+type Snapshots = Vec<(Time, Vec<(String, Value)>)>;
+
 /// The recognitions the pure recogniser gives on the events of the recorded car snapshots, with
 /// `third` as the predicate of the third event (`front` or `cut`).
 fn expected(
@@ -178,7 +181,7 @@ fn expected(
 
 /// Runs `SPEC.kpl` for `seconds` and returns the car snapshots its chronicle saw and the
 /// recognitions of `stream` it recorded (binding, event times, valid time).
-fn run_spec(spec_name: &str, stream: &str, seconds: Time) -> (Vec<(Time, Vec<(String, Value)>)>, Recognised) {
+fn run_spec(spec_name: &str, stream: &str, seconds: Time) -> (Snapshots, Recognised) {
     let registry = kpl_std::registry();
     let text = std::fs::read_to_string(traffic_dir().join(format!("{spec_name}.kpl"))).unwrap();
     let spec = kpl_std::check_text(&text).unwrap();
