@@ -333,12 +333,14 @@ fn table(
     params: &TruthParams,
     truth_kinds: &[&str],
 ) -> String {
+    // The kind column is as wide as the longest kind (13 at least: `tailgating` and the header).
+    let width = scores.iter().map(|s| s.kind.len()).max().unwrap_or(0).max(13);
     let mut out =
-        String::from("kind          recognised  correct  precision   true  found  recall  unmapped\n");
+        format!("{:<width$} recognised  correct  precision   true  found  recall  unmapped\n", "kind");
     let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
     for s in scores {
         out.push_str(&format!(
-            "{:<13} {:>10} {:>8} {:>10} {:>6} {:>6} {:>7} {:>9}\n",
+            "{:<width$} {:>10} {:>8} {:>10} {:>6} {:>6} {:>7} {:>9}\n",
             s.kind,
             s.recognised,
             s.correct,
