@@ -298,6 +298,116 @@ fn a_bag_of_rosbags_replays_and_the_cars_go_into_a_bag() {
     );
 }
 
+/// A bag split as `ros2 bag record --max-bag-duration` splits it: replay.kpl's `ros2.bag` sinks
+/// with `max_bag_duration: 5s` write the 30 s of cars into several files (`cars_0.mcap`,
+/// `cars_1.mcap`, ...), each spanning less than 5 s, all listed in `metadata.yaml`; rosbags
+/// (through `metadata.yaml`) and mcap-ros2-support (file by file) read every message, equal to
+/// the recording. `kpl convert` reads the split bag back whole, and a bag whose `metadata.yaml`
+/// records another type hash for a topic than its definition's has that topic's messages
+/// skipped, each saying so.
+#[test]
+fn a_split_bag_is_one_recording() {
+    let Some(python) = python("rosbags, mcap-ros2-support") else { return };
+    let dir = common::fresh_dir("ros2", "split");
+    let text = std::fs::read_to_string(root().join("specs/ros2/replay.kpl")).unwrap();
+    let abs = |p: &str| root().join(p).display().to_string();
+    let mut variant =
+        text.replace("path: \"tracker\"", &format!("path: \"{}\"", abs("specs/ros2/tracker"))).replace(
+            "\"../traffic/sumo/grid/net.xml.gz\"",
+            &format!("\"{}\"", abs("specs/traffic/sumo/grid/net.xml.gz")),
+        );
+    assert_eq!(variant.matches("  path: \"cars\",\n").count(), 2, "replay.kpl's two ros2.bag sinks");
+    variant = variant.replace("  path: \"cars\",\n", "  path: \"cars\",\n  max_bag_duration: 5s,\n");
+    let spec = dir.join("split.kpl");
+    std::fs::write(&spec, variant).unwrap();
+    let out = dir.join("out");
+    let run = common::kpl(&["run", spec.to_str().unwrap(), "--quiet", "--out", out.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+
+    let bag = out.join("cars");
+    let mut files: Vec<String> = std::fs::read_dir(&bag)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".mcap"))
+        .collect();
+    files.sort_by_key(|n| n.trim_start_matches("cars_").trim_end_matches(".mcap").parse::<u32>().unwrap());
+    assert!(files.len() >= 5, "30 s in files of under 5 s: {files:?}");
+    assert_eq!(files, (0..files.len()).map(|i| format!("cars_{i}.mcap")).collect::<Vec<_>>());
+    let metadata = std::fs::read_to_string(bag.join("metadata.yaml")).unwrap();
+    for file in &files {
+        assert!(
+            metadata.contains(&format!("  - path: \"{file}\"\n")),
+            "{file} in metadata.yaml:\n{metadata}"
+        );
+    }
+    let read = std::process::Command::new(&python)
+        .arg(root().join("tests/rosbag2_oracle.py"))
+        .arg("read")
+        .arg(&bag)
+        .arg(out.join("tracks.jsonl"))
+        .output()
+        .unwrap();
+    assert!(
+        read.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&read.stdout),
+        String::from_utf8_lossy(&read.stderr)
+    );
+
+    // Back to JSON lines: every message of every file, in order, as the run recorded the cars.
+    let tracks = lines(&out.join("tracks.jsonl"));
+    let cars: Vec<&Value> = tracks.iter().filter(|l| l["stream"] == "onroad_car").collect();
+    let back = dir.join("back.jsonl");
+    let converted = common::kpl(&["convert", bag.to_str().unwrap(), back.to_str().unwrap()]);
+    assert!(converted.status.success(), "{}", String::from_utf8_lossy(&converted.stderr));
+    let back = lines(&back);
+    let markers: Vec<&Value> = back.iter().filter(|l| l["stream"] == "/kpl/cars").collect();
+    assert_eq!((markers.len(), back.len()), (cars.len(), 2 * cars.len()));
+    for (car, marker) in cars.iter().zip(&markers) {
+        assert_eq!(marker["available"], car["available"]);
+        let ns: Vec<&str> = marker["value"]["markers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| m["ns"].as_str().unwrap())
+            .collect();
+        let ids: Vec<&str> =
+            car["value"].as_array().unwrap().iter().map(|c| c["id"].as_str().unwrap()).collect();
+        assert_eq!(ns, ids);
+    }
+
+    // metadata.yaml records another type hash for /kpl/cars: its messages are skipped, each saying why.
+    let hash = kpl_ros2_hash(&metadata, "/kpl/cars");
+    let mut altered = hash.clone();
+    altered.replace_range(hash.len() - 1.., if hash.ends_with('0') { "1" } else { "0" });
+    std::fs::write(bag.join("metadata.yaml"), metadata.replace(&hash, &altered)).unwrap();
+    let converted =
+        common::kpl(&["convert", bag.to_str().unwrap(), dir.join("altered.jsonl").to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&converted.stderr);
+    assert_eq!(converted.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains(&format!(
+            "{}: {} sample(s), {} skipped",
+            dir.join("altered.jsonl").display(),
+            cars.len(),
+            cars.len()
+        )),
+        "{said}"
+    );
+    assert!(
+        said.contains("metadata.yaml records") && said.contains(&altered) && said.contains(&hash),
+        "{said}"
+    );
+}
+
+/// The `type_description_hash` that `metadata.yaml` (as kpl writes it) records for `topic`.
+fn kpl_ros2_hash(metadata: &str, topic: &str) -> String {
+    let from = metadata.find(&format!("name: \"{topic}\"")).unwrap();
+    let line =
+        metadata[from..].lines().find(|l| l.trim_start().starts_with("type_description_hash:")).unwrap();
+    line.split('"').nth(1).unwrap().to_string()
+}
+
 /// `--for` on a replayed bag whose stamps are dates (specs/ros2/tracker/, 0.5 s steps from
 /// 2023-11-14T22:13:20Z for 30 s) counts from its first stamp, as the summary does: the run keeps
 /// the messages of the first 10 s, [first, first + 10 s) as on any clock, and says that `--for`

@@ -252,8 +252,11 @@ def read(bag, tracks):
         for conn, t, raw in reader.messages():
             by_rosbags[conn.topic].append((t, reader.deserialize(raw, conn.msgtype)))
     by_mcap = {'/kpl/cars': [], '/kpl/detections': []}
-    for m in read_ros2_messages(str(next(Path(bag).glob('*.mcap')))):
-        by_mcap[m.channel.topic].append((m.log_time_ns, m.ros_msg))
+    # A bag split into several files (`<bag>_0.mcap`, `<bag>_1.mcap`, ...): each in turn.
+    files = sorted(Path(bag).glob('*.mcap'), key=lambda p: int(p.stem.rsplit('_', 1)[-1]))
+    for file in files:
+        for m in read_ros2_messages(str(file)):
+            by_mcap[m.channel.topic].append((m.log_time_ns, m.ros_msg))
     for name, got in (('rosbags', by_rosbags), ('mcap-ros2-support', by_mcap)):
         for topic, messages in got.items():
             if len(messages) != len(samples):

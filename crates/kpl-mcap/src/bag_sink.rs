@@ -28,13 +28,16 @@ use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::{BuildContext, Registry};
 use kpl_semantic::registry::{CallTypes, Entry, EntryKind, Param, ParamProblem, ParamType, TypeReq};
 
-use crate::rosbag2::{BagWriter, TopicId};
+use crate::rosbag2::{BagWriter, Split, TopicId};
 
 /// A bag that one or more sinks write: the writer (made at the first message or end), the
 /// topics added so far by sink, and how many of its sinks have not ended.
 #[derive(Default)]
 struct Shared {
     writer: Option<BagWriter>,
+    /// When the bag's files are split (the first sink's `max_bag_size` and `max_bag_duration`;
+    /// the others must agree).
+    split: Option<Split>,
     failed: Option<String>,
     open: usize,
 }
@@ -73,7 +76,8 @@ impl BagSink {
             return Err(self.failed(why));
         }
         if shared.writer.is_none() {
-            shared.writer = Some(BagWriter::create(&self.dir).map_err(|e| self.failed(e))?);
+            let split = shared.split.unwrap_or_default();
+            shared.writer = Some(BagWriter::create_split(&self.dir, split).map_err(|e| self.failed(e))?);
         }
         let Some(writer) = shared.writer.as_mut() else { return Err(self.failed("no writer")) };
         let id = match self.id {
@@ -138,6 +142,25 @@ fn params<'c>(ctx: &'c BuildContext<'_>) -> &'c BTreeMap<String, Value> {
     ctx.call().map_or(&NONE, |c| &c.params)
 }
 
+/// `max_bag_size` and `max_bag_duration` (0: no limit).
+fn split_of(params: &BTreeMap<String, Value>) -> Result<Split, String> {
+    let bytes = params.get("max_bag_size").and_then(Value::as_i64).unwrap_or(0);
+    let duration = match params.get("max_bag_duration") {
+        Some(Value::Duration(us) | Value::Int(us)) => *us,
+        _ => 0,
+    };
+    if bytes < 0 {
+        return Err(format!("`max_bag_size`: {bytes} is not a size in bytes (0 for no limit)"));
+    }
+    if duration < 0 {
+        return Err("`max_bag_duration`: a negative duration (0s for no limit)".to_string());
+    }
+    Ok(Split {
+        max_bytes: (bytes > 0).then_some(bytes.unsigned_abs()),
+        max_duration: (duration > 0).then_some(duration),
+    })
+}
+
 /// Registers `ros2.bag`.
 pub fn register(registry: &mut Registry) {
     registry.add_unit(
@@ -157,6 +180,8 @@ pub fn register(registry: &mut Registry) {
         .param(Param::optional("reliability", ParamType::Choice(vec!["reliable".into(), "best_effort".into()]), Value::str("reliable"), "the QoS the bag says the topic was offered with"))
         .param(Param::optional("durability", ParamType::Choice(vec!["volatile".into(), "transient_local".into()]), Value::str("volatile"), "the QoS the bag says the topic was offered with"))
         .param(Param::optional("depth", ParamType::Int, Value::Int(10), "the QoS history depth the bag says the topic was offered with"))
+        .param(Param::optional("max_bag_size", ParamType::Int, Value::Int(0), "split the bag: a new file once a file's messages reach this many bytes (0: never; `ros2 bag record --max-bag-size`)"))
+        .param(Param::optional("max_bag_duration", ParamType::Duration, Value::Duration(0), "split the bag: a new file once a message comes this long after the file's first (0s: never; `ros2 bag record --max-bag-duration`)"))
         .checked_by(check),
         |ctx| {
             let params = params(ctx);
@@ -179,11 +204,21 @@ pub fn register(registry: &mut Registry) {
                 ),
             };
             let dir = ctx.output_path(topic::text(params, "path"));
+            let split = split_of(params).map_err(|e| ctx.error(e))?;
             let shared = {
                 let mut bags = bags().lock().map_err(|_| ctx.error("the bags of the run are unusable"))?;
                 bags.entry(dir.clone()).or_default().clone()
             };
             if let Ok(mut shared) = shared.lock() {
+                match shared.split {
+                    Some(first) if first != split => {
+                        return Err(ctx.error(format!(
+                            "the sinks of the bag {} split it differently (`max_bag_size`, `max_bag_duration`): give them the same values",
+                            dir.display()
+                        )));
+                    }
+                    _ => shared.split = Some(split),
+                }
                 shared.open += 1;
             }
             Ok(Box::new(SyncUnit(BagSink {

@@ -18,7 +18,7 @@
 //! Channels that KPL writes for viewers (metadata [`crate::VIEW_KEY`]: Foxglove's schemas, see
 //! [`crate::foxglove`]) are skipped: the samples are in the stream's own channel.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -102,6 +102,8 @@ struct Records {
     schemas: HashMap<u16, (String, String, Vec<u8>)>,
     /// The shipped ROS 2 message definitions, read at the first rosbag2 channel.
     ros2: Option<kpl_ros2::Definitions>,
+    /// The type hashes the bag's `metadata.yaml` records, by topic ([`Reader::recorded_hashes`]).
+    recorded: BTreeMap<String, String>,
     /// Messages read so far (kept or not), for locations.
     messages: u64,
 }
@@ -111,6 +113,13 @@ struct Records {
 pub const TYPE_HASH_KEY: &str = "topic_type_hash";
 
 impl Reader {
+    /// Has the file's rosbag2 channels checked against the type hashes that its bag's
+    /// `metadata.yaml` records (by topic), as against their own `topic_type_hash`.
+    pub fn recorded_hashes(mut self, hashes: BTreeMap<String, String>) -> Reader {
+        self.records.recorded = hashes;
+        self
+    }
+
     /// The type hash that the channels of `topic` read so far record (rosbag2's
     /// `topic_type_hash`; `None` when none does, as in bags of older recorders).
     pub fn type_hash(&self, topic: &str) -> Option<&str> {
@@ -153,6 +162,7 @@ impl Reader {
                 channels: HashMap::new(),
                 schemas: HashMap::new(),
                 ros2: None,
+                recorded: BTreeMap::new(),
                 messages: 0,
             },
             done: false,
@@ -278,6 +288,7 @@ impl Records {
         match opcode {
             op::CHANNEL => match mcap::parse_record(op::CHANNEL, data) {
                 Ok(Record::Channel(channel)) => {
+                    let type_hash = channel.metadata.get(TYPE_HASH_KEY).filter(|h| !h.is_empty()).cloned();
                     let encoding = if channel.metadata.contains_key(VIEW_KEY) {
                         Encoding::View
                     } else if channel.metadata.contains_key(SAMPLE_KEY) {
@@ -285,11 +296,10 @@ impl Records {
                     } else if channel.message_encoding == "json" {
                         Encoding::Json
                     } else if channel.message_encoding == "cdr" {
-                        self.cdr_encoding(channel.schema_id)
+                        self.cdr_encoding(channel.schema_id, &channel.topic, type_hash.as_deref())
                     } else {
                         Encoding::Other(channel.message_encoding.clone())
                     };
-                    let type_hash = channel.metadata.get(TYPE_HASH_KEY).filter(|h| !h.is_empty()).cloned();
                     self.channels
                         .insert(channel.id, Channel { topic: channel.topic.into(), encoding, type_hash });
                     None
@@ -336,8 +346,10 @@ impl Records {
         }
     }
 
-    /// How a `cdr` channel with schema `id` is read: its `ros2msg` definition, or why not.
-    fn cdr_encoding(&mut self, id: u16) -> Encoding {
+    /// How a `cdr` channel of `topic` with schema `id` is read: its `ros2msg` definition, or why
+    /// not (also when the type hash of that definition is not the one the channel or the bag's
+    /// `metadata.yaml` records: the definition is not the one the messages were recorded with).
+    fn cdr_encoding(&mut self, id: u16, topic: &str, channel_hash: Option<&str>) -> Encoding {
         if id == 0 {
             return Encoding::Unusable("no schema (rosbag2 channels have a `ros2msg` one)".into());
         }
@@ -351,9 +363,20 @@ impl Records {
         }
         let text = String::from_utf8_lossy(data);
         let defs = self.ros2.get_or_insert_with(kpl_ros2::Definitions::builtin);
-        match defs.schema_of_ros2msg(name, &text) {
-            Ok(schema) => Encoding::Cdr(schema),
-            Err(e) => Encoding::Unusable(format!("its schema `{name}` does not read: {e}")),
+        let schema = match defs.schema_of_ros2msg(name, &text) {
+            Ok(schema) => schema,
+            Err(e) => return Encoding::Unusable(format!("its schema `{name}` does not read: {e}")),
+        };
+        let computed = schema.type_hash();
+        let recorded = [
+            (channel_hash, "the channel's `topic_type_hash`"),
+            (self.recorded.get(topic).map(String::as_str), "the bag's metadata.yaml"),
+        ];
+        match recorded.into_iter().find_map(|(hash, by)| Some((hash?, by)).filter(|(h, _)| *h != computed)) {
+            Some((hash, by)) => Encoding::Unusable(format!(
+                "its `ros2msg` schema `{name}` has type hash {computed} and {by} records {hash}: the bag holds another definition of the type than the one its messages were recorded with"
+            )),
+            None => Encoding::Cdr(schema),
         }
     }
 }

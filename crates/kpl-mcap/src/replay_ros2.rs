@@ -168,15 +168,7 @@ pub fn register(registry: &mut Registry) {
             kpl_ros2::wire::check_topic(name).map_err(|e| ctx.error(format!("`topic`: {e}")))?;
             let user_msgs = !topic::text(params, "msgs").is_empty();
             let hash = schema.type_hash();
-            let metadata = path.join("metadata.yaml");
-            let metadata_hash = if path.is_dir() && metadata.exists() {
-                // A bag's metadata.yaml is a few kB per topic: 16 MB is far beyond any real one.
-                let bytes = kpl_core::read::read_file(&metadata, 16 << 20).map_err(|e| ctx.error(e.to_string()))?;
-                let text = String::from_utf8_lossy(&bytes);
-                kpl_ros2::rosbag2::recorded_type_hash(&text, name)
-            } else {
-                None
-            };
+            let metadata_hash = crate::rosbag2::recorded_hashes(&path).map_err(|e| ctx.error(e))?.remove(name);
             Ok(Box::new(Replay { display: path.display().to_string(), files, topic: name.to_string(), schema, hash, user_msgs, metadata_hash, map, clock: ctx.clock }))
         },
     );

@@ -4,10 +4,10 @@
 //! also in each channel's `offered_qos_profiles`). Text only: the MCAP file is `kpl-mcap`'s.
 //!
 //! ```
-//! use kpl_ros2::rosbag2::{Bag, BagTopic};
+//! use kpl_ros2::rosbag2::{Bag, BagFile, BagTopic};
 //! use kpl_ros2::wire::Qos;
 //! let bag = Bag {
-//!     file: "cars_0.mcap".into(),
+//!     files: vec![BagFile { path: "cars_0.mcap".into(), start: 1_000, end: 3_000, message_count: 2 }],
 //!     start: 1_000,
 //!     end: 3_000,
 //!     topics: vec![BagTopic {
@@ -30,14 +30,24 @@ use crate::wire::Qos;
 /// The metadata version rosbag2 writes since Jazzy (QoS profiles as a YAML list).
 pub const VERSION: u32 = 9;
 
-/// A bag of one MCAP file: its name in the folder, the first and last message's receive time
-/// (nanoseconds since the epoch) and its topics.
+/// A bag: its MCAP files in order (one, unless the recording was split), the first and last
+/// message's receive time (nanoseconds since the epoch) and its topics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bag {
-    pub file: String,
+    pub files: Vec<BagFile>,
     pub start: u64,
     pub end: u64,
     pub topics: Vec<BagTopic>,
+}
+
+/// A file of a bag: its name in the folder, its first and last message's receive time
+/// (nanoseconds since the epoch) and how many messages it holds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagFile {
+    pub path: String,
+    pub start: u64,
+    pub end: u64,
+    pub message_count: u64,
 }
 
 /// A topic of a bag: its name, type (`pkg/msg/Name`), RIHS01 hash, QoS and message count.
@@ -118,12 +128,21 @@ impl Bag {
         }
         let _ = writeln!(out, "{p}compression_format: \"\"");
         let _ = writeln!(out, "{p}compression_mode: \"\"");
-        let _ = writeln!(out, "{p}relative_file_paths:\n{p}  - {}", quoted(&self.file));
+        let _ = writeln!(out, "{p}relative_file_paths:");
+        for file in &self.files {
+            let _ = writeln!(out, "{p}  - {}", quoted(&file.path));
+        }
         let _ = writeln!(out, "{p}files:");
-        let _ = writeln!(out, "{p}  - path: {}", quoted(&self.file));
-        let _ = writeln!(out, "{p}    starting_time:\n{p}      nanoseconds_since_epoch: {}", self.start);
-        let _ = writeln!(out, "{p}    duration:\n{p}      nanoseconds: {}", self.duration());
-        let _ = writeln!(out, "{p}    message_count: {}", self.message_count());
+        for file in &self.files {
+            let _ = writeln!(out, "{p}  - path: {}", quoted(&file.path));
+            let _ = writeln!(out, "{p}    starting_time:\n{p}      nanoseconds_since_epoch: {}", file.start);
+            let _ = writeln!(
+                out,
+                "{p}    duration:\n{p}      nanoseconds: {}",
+                file.end.saturating_sub(file.start)
+            );
+            let _ = writeln!(out, "{p}    message_count: {}", file.message_count);
+        }
         let _ = writeln!(out, "{p}custom_data: ~");
         let _ = writeln!(out, "{p}ros_distro: kpl");
         out
@@ -140,6 +159,12 @@ impl Bag {
 /// writes it from Jazzy on; rosbags folds a long value onto the next, more indented line):
 /// `None` when the topic or its hash is not there (bags before Jazzy).
 pub fn recorded_type_hash(metadata_yaml: &str, topic: &str) -> Option<String> {
+    recorded_type_hashes(metadata_yaml).remove(topic)
+}
+
+/// The type hashes a bag's `metadata.yaml` records, by topic ([`recorded_type_hash`]).
+pub fn recorded_type_hashes(metadata_yaml: &str) -> std::collections::BTreeMap<String, String> {
+    let mut hashes = std::collections::BTreeMap::new();
     let lines: Vec<&str> = metadata_yaml.lines().collect();
     let indent = |line: &str| line.len() - line.trim_start().len();
     // A plain or quoted scalar after `key:`, with its folded continuation lines.
@@ -186,12 +211,15 @@ pub fn recorded_type_hash(metadata_yaml: &str, topic: &str) -> Option<String> {
         if let Some(rest) = key.strip_prefix("name:") {
             name = Some(scalar(i, rest));
         } else if let Some(rest) = key.strip_prefix("type_description_hash:")
-            && name.as_deref() == Some(topic)
+            && let Some(name) = name.take()
         {
-            return Some(scalar(i, rest)).filter(|h| !h.is_empty());
+            let hash = scalar(i, rest);
+            if !hash.is_empty() {
+                hashes.insert(name, hash);
+            }
         }
     }
-    None
+    hashes
 }
 
 #[cfg(test)]
@@ -217,6 +245,8 @@ mod tests {
         assert_eq!(recorded_type_hash(record, "/a").as_deref(), Some("RIHS01_aaaa"));
         assert_eq!(recorded_type_hash(record, "/b").as_deref(), Some("RIHS01_bbbb"));
         assert_eq!(recorded_type_hash(record, "/c"), None);
+        let all = recorded_type_hashes(record);
+        assert_eq!(all.keys().collect::<Vec<_>>(), ["/a", "/b"]);
         // Before Jazzy: no hash.
         assert_eq!(
             recorded_type_hash("topics_with_message_count:\n- topic_metadata:\n    name: /a\n", "/a"),

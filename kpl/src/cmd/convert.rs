@@ -25,7 +25,7 @@ use kpl_runtime::builtins::{SampleLine, StreamFilter, read_line};
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n  kpl run specs/ros2/replay.kpl --out out/replay\n  kpl convert out/replay/tracks.jsonl out/replay/cars --spec specs/ros2/markers.kpl\n\nThe direction follows the extensions (.jsonl, .mcap; none: a rosbag2 bag, written through the\nros2.publish sinks of --spec, each sample of the stream a sink publishes a message of its topic). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
+    after_help = "Examples:\n  kpl run specs/ok/tracker.kpl --for 5s --out out/rec\n  kpl convert out/rec/percepts.jsonl out/rec/percepts.mcap --spec specs/ok/tracker.kpl\n  kpl convert out/rec/percepts.mcap out/rec/back.jsonl\n  kpl run specs/ros2/replay.kpl --out out/replay\n  kpl convert out/replay/tracks.jsonl out/replay/cars --spec specs/ros2/markers.kpl\n  kpl convert out/replay/cars out/replay/cars.jsonl\n\nThe direction follows the extensions (.jsonl, .mcap; none: a rosbag2 bag, written through the\nros2.publish sinks of --spec, each sample of the stream a sink publishes a message of its topic,\nor read whole into .jsonl with its type hashes checked). Going to MCAP, each stream is also written\nin Foxglove's schemas (objects, percepts, situations, and the roads, occluders and camera of\n--spec) for its 3D panel; --no-foxglove leaves them out. Going from MCAP, a file cut short by a\nkilled run gives what its chunks hold, and says where it ends. Lines or messages that do not convert are\nreported with where they are and skipped. Exit status: 0 done, 1 some did not convert, 2 usage or\nI/O errors."
 )]
 pub struct Args {
     /// The recording to read (.jsonl or .mcap).
@@ -44,6 +44,14 @@ pub struct Args {
     /// Only the streams' own channels, not their views in Foxglove's schemas.
     #[arg(long)]
     pub no_foxglove: bool,
+    /// Writing a rosbag2 bag: a new MCAP file once a file's messages reach this many bytes (as
+    /// `ros2 bag record --max-bag-size`).
+    #[arg(long, value_name = "BYTES")]
+    pub max_bag_size: Option<u64>,
+    /// Writing a rosbag2 bag: a new MCAP file once a message comes this long after the file's
+    /// first (`60s`; as `ros2 bag record --max-bag-duration`).
+    #[arg(long, value_name = "DURATION", value_parser = kpl_core::parse_duration)]
+    pub max_bag_duration: Option<kpl_core::Time>,
 }
 
 fn extension(path: &Path) -> &str {
@@ -51,6 +59,12 @@ fn extension(path: &Path) -> &str {
 }
 
 pub fn run(args: Args) -> ExitCode {
+    let to_bag = extension(&args.output).is_empty();
+    if !to_bag && (args.max_bag_size.is_some() || args.max_bag_duration.is_some()) {
+        eprintln!(
+            "warning: --max-bag-size and --max-bag-duration split a rosbag2 bag; the output is not one"
+        );
+    }
     let result = match (extension(&args.input), extension(&args.output)) {
         ("jsonl", "mcap") => {
             let (types, scene) = match &args.spec {
@@ -70,7 +84,8 @@ pub fn run(args: Args) -> ExitCode {
             let views = (!args.no_foxglove).then(|| Views::new(std::sync::Arc::new(scene)));
             to_mcap(&args.input, &args.output, &types, compression, views)
         }
-        ("mcap", "jsonl") => to_jsonl(&args.input, &args.output),
+        ("mcap", "jsonl") => to_jsonl(std::slice::from_ref(&args.input), BTreeMap::new(), &args.output),
+        ("", "jsonl") if args.input.is_dir() => bag_to_jsonl(&args.input, &args.output),
         ("jsonl", "") => {
             let Some(path) = &args.spec else {
                 eprintln!(
@@ -87,11 +102,15 @@ pub fn run(args: Args) -> ExitCode {
                     "warning: --no-foxglove and --compression apply to MCAP recordings, not to a rosbag2 bag"
                 );
             }
-            to_rosbag2(&args.input, &args.output, &spec, path.parent().unwrap_or(Path::new("")))
+            let split = kpl_mcap::rosbag2::Split {
+                max_bytes: args.max_bag_size.filter(|b| *b > 0),
+                max_duration: args.max_bag_duration.filter(|d| *d > 0),
+            };
+            to_rosbag2(&args.input, &args.output, &spec, path.parent().unwrap_or(Path::new("")), split)
         }
         (from, to) => {
             eprintln!(
-                "error: kpl convert goes from .jsonl to .mcap, from .mcap to .jsonl, or from .jsonl to a rosbag2 bag (a folder: no extension), not from `.{from}` to `.{to}`"
+                "error: kpl convert goes from .jsonl to .mcap, from .mcap or a rosbag2 bag (a folder) to .jsonl, or from .jsonl to a rosbag2 bag (a folder: no extension), not from `.{from}` to `.{to}`"
             );
             return ExitCode::from(2);
         }
@@ -244,6 +263,7 @@ fn to_rosbag2(
     output: &Path,
     spec: &kpl_semantic::hir::Spec,
     dir: &Path,
+    split: kpl_mcap::rosbag2::Split,
 ) -> Result<Converted, String> {
     use kpl_mcap::rosbag2::{BagWriter, publications};
     let mut publications = publications(spec, dir)?;
@@ -251,7 +271,7 @@ fn to_rosbag2(
         return Err("the spec has no ros2.publish sink: a bag holds the ROS 2 topics a spec publishes".into());
     }
     let mut samples = RecordingSamples::open(input)?;
-    let mut bag = BagWriter::create(output).map_err(|e| e.to_string())?;
+    let mut bag = BagWriter::create_split(output, split).map_err(|e| e.to_string())?;
     let mut topics = Vec::new();
     for p in &publications {
         topics.push(bag.add_topic(&p.topic, &p.schema, p.qos).map_err(|e| e.to_string())?);
@@ -303,8 +323,28 @@ fn to_rosbag2(
     Ok(converted)
 }
 
-fn to_jsonl(input: &Path, output: &Path) -> Result<Converted, String> {
-    let mut reader = Reader::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
+/// A rosbag2 bag (its folder: `metadata.yaml` and its MCAP files, in order) into JSON lines, each
+/// channel's `ros2msg` definition checked against the type hash that `metadata.yaml` records for
+/// its topic.
+fn bag_to_jsonl(bag: &Path, output: &Path) -> Result<Converted, String> {
+    let files = kpl_mcap::rosbag2::bag_files(bag)
+        .map_err(|e| format!("cannot read the bag {}: {e}", bag.display()))?;
+    let hashes = kpl_mcap::rosbag2::recorded_hashes(bag)?;
+    to_jsonl(&files, hashes, output)
+}
+
+/// MCAP files (a bag's, in order, with the type hashes its `metadata.yaml` records) into one
+/// JSON lines recording.
+fn to_jsonl(
+    inputs: &[PathBuf],
+    hashes: BTreeMap<String, String>,
+    output: &Path,
+) -> Result<Converted, String> {
+    let mut readers = Vec::new();
+    for input in inputs {
+        let reader = Reader::open(input).map_err(|e| format!("cannot read {}: {e}", input.display()))?;
+        readers.push(reader.recorded_hashes(hashes.clone()));
+    }
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     }
@@ -312,17 +352,19 @@ fn to_jsonl(input: &Path, output: &Path) -> Result<Converted, String> {
     let mut out = BufWriter::new(File::create(output).map_err(write_error)?);
     let mut filter = StreamFilter::new("");
     let mut converted = Converted { samples: 0, skipped: 0 };
-    while let Some(event) = reader.next_raw(&mut filter) {
-        match event {
-            RawEvent::Message { stream, valid, available, value, .. } => {
-                let line = SampleLine { stream: stream.to_string(), valid, available, value };
-                let text = serde_json::to_string(&line).map_err(|e| e.to_string())?;
-                writeln!(out, "{text}").map_err(write_error)?;
-                converted.samples += 1;
-            }
-            RawEvent::Malformed { location, error } => {
-                skip(&location, &error);
-                converted.skipped += 1;
+    for mut reader in readers {
+        while let Some(event) = reader.next_raw(&mut filter) {
+            match event {
+                RawEvent::Message { stream, valid, available, value, .. } => {
+                    let line = SampleLine { stream: stream.to_string(), valid, available, value };
+                    let text = serde_json::to_string(&line).map_err(|e| e.to_string())?;
+                    writeln!(out, "{text}").map_err(write_error)?;
+                    converted.samples += 1;
+                }
+                RawEvent::Malformed { location, error } => {
+                    skip(&location, &error);
+                    converted.skipped += 1;
+                }
             }
         }
     }
