@@ -410,6 +410,8 @@ impl LinkProcess {
                     };
                     let state = StateIn { time: cx.time, from: &p_record, inputs: extra };
                     let result = self.compute(&state, previous.as_deref(), &to_type, &symbol, memory);
+                    // Let go of the last state, so that the new one is written into its place.
+                    drop(previous);
                     match result {
                         Ok(record) => {
                             o.set_state(record, cx.time, origin);

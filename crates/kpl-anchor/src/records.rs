@@ -57,18 +57,16 @@ pub fn fit(value: &Value, ty: &ValueType) -> Option<Value> {
 /// A record of type `to` with id `symbol`: each field is taken from `source` when it has a
 /// field of that name that fits, else from `previous` (the object's last state), else the default.
 pub fn fill(to: &RecordType, symbol: &Arc<str>, source: &Record, previous: Option<&Record>) -> Record {
-    let fields = to
-        .fields
-        .iter()
-        .map(|field| {
-            let value = source
-                .get(&field.name)
-                .and_then(|v| fit(v, &field.ty))
-                .or_else(|| previous.and_then(|p| p.get(&field.name)).and_then(|v| fit(v, &field.ty)))
-                .unwrap_or_else(|| default_value(&field.ty));
-            (field.name.clone(), value)
-        })
-        .collect();
+    // Room for the status attributes the engine adds to an object's state.
+    let mut fields = Vec::with_capacity(to.fields.len() + 2);
+    fields.extend(to.fields.iter().map(|field| {
+        let value = source
+            .get(&field.name)
+            .and_then(|v| fit(v, &field.ty))
+            .or_else(|| previous.and_then(|p| p.get(&field.name)).and_then(|v| fit(v, &field.ty)))
+            .unwrap_or_else(|| default_value(&field.ty));
+        (field.name.clone(), value)
+    }));
     Record { id: Some(symbol.clone()), fields }
 }
 

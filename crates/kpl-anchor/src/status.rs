@@ -59,6 +59,12 @@ pub fn with_status(mut record: Record, status: ObjectStatus) -> Record {
     record
 }
 
+/// Sets the status attributes of `record` to `status` in place: what [`with_status`] gives.
+pub fn set_status(record: &mut Record, status: ObjectStatus) {
+    record.fields.retain(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE);
+    push_status(&mut record.fields, status);
+}
+
 /// A copy of `record` with its status attributes set to `status`: [`with_status`] of a clone,
 /// made in one allocation (an object's state is copied so at every step).
 pub fn with_status_of(record: &Record, status: ObjectStatus) -> Record {
@@ -68,6 +74,43 @@ pub fn with_status_of(record: &Record, status: ObjectStatus) -> Record {
     );
     push_status(&mut fields, status);
     Record { id: record.id.clone(), fields }
+}
+
+/// Sets `target` to [`with_status_of`]`(record, status)` in place, without allocating, when
+/// nothing else holds `target` and it has that record's layout (the same attribute names in the
+/// same order: an object's state from one step to the next); returns false, leaving `target` as
+/// it was, otherwise. The record is equal to the one [`with_status_of`] makes.
+pub fn write_status_of(target: &mut Arc<Record>, record: &Record, status: ObjectStatus) -> bool {
+    let Some(target) = Arc::get_mut(target) else { return false };
+    let with_since = status.predicted_since.is_some() && !status.measured;
+    let n_status = 1 + usize::from(with_since);
+    let Some(n_own) = target.fields.len().checked_sub(n_status) else { return false };
+    let same_name = |a: &Arc<str>, b: &Arc<str>| Arc::ptr_eq(a, b) || **a == **b;
+    let mut own = record.fields.iter().filter(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE);
+    for (name, _) in &target.fields[..n_own] {
+        match own.next() {
+            Some((theirs, _)) if same_name(name, theirs) => {}
+            _ => return false,
+        }
+    }
+    if own.next().is_some()
+        || &*target.fields[n_own].0 != MEASURED
+        || (with_since && &*target.fields[n_own + 1].0 != PREDICTED_SINCE)
+    {
+        return false;
+    }
+    let own = record.fields.iter().filter(|(name, _)| &**name != MEASURED && &**name != PREDICTED_SINCE);
+    for ((_, value), (_, new)) in target.fields.iter_mut().zip(own) {
+        value.clone_from(new);
+    }
+    target.fields[n_own].1 = Value::Bool(status.measured);
+    if let Some(since) = status.predicted_since.filter(|_| with_since) {
+        target.fields[n_own + 1].1 = Value::Int(since);
+    }
+    if target.id != record.id {
+        target.id.clone_from(&record.id);
+    }
+    true
 }
 
 /// The names of the status attributes, made once: every state's record shares them.
@@ -125,5 +168,59 @@ mod tests {
         let held = held(&Value::Record(Arc::new(measured)), 9);
         assert!(!is_measured(&held));
         assert_eq!(held.as_record().unwrap().get(PREDICTED_SINCE), Some(&Value::Int(9)));
+    }
+
+    fn arb_status() -> impl proptest::strategy::Strategy<Value = ObjectStatus> {
+        use proptest::prelude::*;
+        (any::<bool>(), proptest::option::of(0..1000i64))
+            .prop_map(|(measured, predicted_since)| ObjectStatus { measured, predicted_since })
+    }
+
+    fn arb_record() -> impl proptest::strategy::Strategy<Value = Record> {
+        use proptest::prelude::*;
+        let names = prop_oneof![
+            Just("pos"),
+            Just("vel"),
+            Just("size"),
+            Just(MEASURED),
+            Just(PREDICTED_SINCE),
+            Just(LIKELIHOOD)
+        ];
+        (
+            proptest::option::of(prop_oneof![Just("vp1"), Just("vp2")]),
+            proptest::collection::vec((names, -5..5i64), 0..5),
+        )
+            .prop_map(|(id, fields)| Record {
+                id: id.map(Arc::from),
+                fields: fields.into_iter().map(|(n, v)| (Arc::from(n), Value::Int(v))).collect(),
+            })
+    }
+
+    proptest::proptest! {
+        /// Written in place or not, the state is the record `with_status_of` makes; in place
+        /// exactly when the layouts agree and nothing else holds the target.
+        #[test]
+        fn writing_in_place_is_with_status_of(
+            old in arb_record(),
+            old_status in arb_status(),
+            new in arb_record(),
+            status in arb_status(),
+            shared in proptest::prelude::any::<bool>(),
+        ) {
+            let mut target = Arc::new(with_status_of(&old, old_status));
+            let keep = shared.then(|| target.clone());
+            let before = (*target).clone();
+            let expected = with_status_of(&new, status);
+            let names = |r: &Record| r.fields.iter().map(|(n, _)| n.to_string()).collect::<Vec<_>>();
+            let same_layout = names(&before) == names(&expected);
+            let written = write_status_of(&mut target, &new, status);
+            proptest::prop_assert_eq!(written, same_layout && !shared);
+            if written {
+                proptest::prop_assert_eq!(&*target, &expected);
+            } else {
+                proptest::prop_assert_eq!(&*target, &before);
+            }
+            drop(keep);
+        }
     }
 }

@@ -14,7 +14,7 @@ use kpl_core::{Record, Time, Value};
 
 use crate::predict::PredictionStart;
 use crate::stateful::UnitMemory;
-use crate::status::{ObjectStatus, with_status, with_status_of};
+use crate::status::{ObjectStatus, set_status, with_status, with_status_of, write_status_of};
 
 /// Index of a link specification in the engine.
 pub type LinkId = u32;
@@ -144,7 +144,15 @@ impl Object {
     pub fn set_state(&mut self, record: Record, time: Time, origin: StateOrigin) {
         self.state_time = time;
         self.note_origin(time, origin);
-        self.value = Value::Record(Arc::new(with_status(record, self.status())));
+        let record = with_status(record, self.status());
+        // Into the last state's allocation when nothing else holds it.
+        if let Value::Record(state) = &mut self.value
+            && let Some(state) = Arc::get_mut(state)
+        {
+            *state = record;
+            return;
+        }
+        self.value = Value::Record(Arc::new(record));
     }
 
     /// Sets the state from a value that is a record (anything else is kept as it is: an
@@ -154,7 +162,14 @@ impl Object {
             Value::Record(record) => {
                 self.state_time = time;
                 self.note_origin(time, origin);
-                self.value = Value::Record(Arc::new(with_status_of(record, self.status())));
+                let status = self.status();
+                // In place when the last state is not held elsewhere (no allocation per step).
+                if let Value::Record(state) = &mut self.value
+                    && write_status_of(state, record, status)
+                {
+                    return;
+                }
+                self.value = Value::Record(Arc::new(with_status_of(record, status)));
             }
             other => {
                 self.state_time = time;
@@ -171,8 +186,12 @@ impl Object {
             return;
         }
         self.note_origin(time, StateOrigin { measured: false, predicted: self.predicted });
-        if let Value::Record(record) = &self.value {
-            self.value = Value::Record(Arc::new(with_status_of(record, self.status())));
+        let status = self.status();
+        if let Value::Record(record) = &mut self.value {
+            match Arc::get_mut(record) {
+                Some(record) => set_status(record, status),
+                None => *record = Arc::new(with_status_of(record, status)),
+            }
         }
     }
 

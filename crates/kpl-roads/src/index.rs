@@ -32,11 +32,16 @@ impl GridBuilder {
     /// A grid covering `lo..hi` with cells of about `cell` metres (coarser if that would make
     /// too many cells).
     pub fn new(lo: Point, hi: Point, cell: f64) -> GridBuilder {
+        GridBuilder::with_max_cells(lo, hi, cell, MAX_CELLS)
+    }
+
+    /// [`GridBuilder::new`] with at most about `max_cells` cells.
+    pub fn with_max_cells(lo: Point, hi: Point, cell: f64, max_cells: f64) -> GridBuilder {
         let width = (hi[0] - lo[0]).max(1.0);
         let height = (hi[1] - lo[1]).max(1.0);
         let mut cell = cell.max(1.0);
-        if (width / cell) * (height / cell) > MAX_CELLS {
-            cell = (width * height / MAX_CELLS).sqrt();
+        if (width / cell) * (height / cell) > max_cells {
+            cell = (width * height / max_cells).sqrt();
         }
         let nx = (width / cell).ceil() as usize + 1;
         let ny = (height / cell).ceil() as usize + 1;

@@ -50,6 +50,14 @@ pub const LANE_CHANGE_PENALTY_M: f64 = 1.0;
 pub const DISCONTINUITY_PENALTY_M: f64 = 2.0;
 /// Side of a spatial-grid cell.
 const GRID_CELL_M: f64 = 15.0;
+/// What a snap searches beyond the cost of the lane it was on (see [`RoadNetwork::snap`]): far
+/// above the rounding of distances, so the segment that cost was found on is always among those
+/// searched.
+const SNAP_BOUND_MARGIN_M: f64 = 0.01;
+/// Side of a cell of the fine lane grid (used by searches no wider than a cell).
+const FINE_GRID_CELL_M: f64 = 3.0;
+/// Most cells the fine lane grid may have (4 MB of offsets); bigger networks get coarser cells.
+const FINE_GRID_MAX_CELLS: f64 = 1.0e6;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NodeKind {
@@ -233,9 +241,15 @@ pub struct RoadNetwork {
     road_segments: Vec<(RoadId, u32)>,
     road_grid: Grid,
     crossing_grid: Grid,
-    /// `(lane, segment)` per item of `lane_grid`.
+    /// `(lane, segment)` per item of `lane_grid`, lane by lane.
     lane_segments: Vec<LaneSegment>,
+    /// The segments of lane `l` are `lane_segments[lane_segment_start[l]..lane_segment_start[l + 1]]`.
+    lane_segment_start: Vec<u32>,
     lane_grid: Grid,
+    /// The same items in cells of [`FINE_GRID_CELL_M`], for searches that short (a snap bounded
+    /// by the lane an object was on, a lane-centre lookup): a 15 m cell at a junction holds
+    /// dozens of connector segments.
+    fine_lane_grid: Grid,
     max_half_lane_width_m: f64,
     /// Road lanes where traffic enters the map (no predecessor but U-turns).
     entry_lanes: Vec<LaneId>,
@@ -320,15 +334,21 @@ impl RoadNetwork {
             }
         }
         let mut lane_segments = Vec::new();
+        let mut lane_segment_start = Vec::with_capacity(lanes.len() + 1);
         let mut lane_grid = GridBuilder::new(bounds.0, bounds.1, GRID_CELL_M);
+        let mut fine_lane_grid =
+            GridBuilder::with_max_cells(bounds.0, bounds.1, FINE_GRID_CELL_M, FINE_GRID_MAX_CELLS);
         for lane in &lanes {
+            lane_segment_start.push(lane_segments.len() as u32);
             for s in 0..lane.path.n_segments() {
                 let (a, b, _) = lane.path.segment(s);
                 lane_grid.insert_segment(lane_segments.len() as u32, a, b, 0.0);
+                fine_lane_grid.insert_segment(lane_segments.len() as u32, a, b, 0.0);
                 let direction = geom::unit(geom::heading_of(geom::sub(b, a)));
                 lane_segments.push(LaneSegment { lane: lane.id, segment: s as u32, a, b, direction });
             }
         }
+        lane_segment_start.push(lane_segments.len() as u32);
         for lane in &mut lanes {
             lane.successors.sort_unstable();
             lane.successors.dedup();
@@ -380,7 +400,9 @@ impl RoadNetwork {
             road_grid: road_grid.build(),
             crossing_grid: crossing_grid.build(),
             lane_segments,
+            lane_segment_start,
             lane_grid: lane_grid.build(),
+            fine_lane_grid: fine_lane_grid.build(),
             max_half_lane_width_m,
             entry_lanes,
             road_lane_cumulative,
@@ -550,19 +572,67 @@ impl RoadNetwork {
     /// its `lateral_m` is within the tolerance, looking only that far (a point that an earlier
     /// snap put on a lane centre is found in the cell it is in).
     pub fn lane_centre_at(&self, pos: Point, tolerance_m: f64) -> Option<LaneId> {
-        let snapped = self.snap_within(pos, &SnapHint::default(), tolerance_m.min(self.snap_radius_m))?;
-        (snapped.lateral_m.abs() < tolerance_m).then_some(snapped.lane)
+        let radius_m = tolerance_m.min(self.snap_radius_m);
+        let (lane, s) = self.nearest_segment(pos, &SnapHint::default(), radius_m, true)?;
+        // The lateral offset `snap_within` would give, without the rest of the lane position.
+        let lateral_m = self.lanes[lane.0 as usize].path.project_on(pos, s as usize).lateral;
+        (lateral_m.abs() < tolerance_m).then_some(lane)
     }
 
     /// [`RoadNetwork::snap`] among the lanes within `radius_m` (at most the snap radius).
     fn snap_within(&self, pos: Point, hint: &SnapHint, radius_m: f64) -> Option<LanePosition> {
+        self.snap_search(pos, hint, radius_m, true)
+    }
+
+    /// [`RoadNetwork::snap_within`], searching the grid only as far as the previous lane's cost
+    /// when `bounded` (the same answer: the tests hold the two to it).
+    fn snap_search(&self, pos: Point, hint: &SnapHint, radius_m: f64, bounded: bool) -> Option<LanePosition> {
+        let (lane_id, s) = self.nearest_segment(pos, hint, radius_m, bounded)?;
+        let lane = &self.lanes[lane_id.0 as usize];
+        let projection = lane.path.project_on(pos, s as usize);
+        let mut position = self.lane_position(lane_id, projection.offset);
+        position.point = projection.point;
+        position.lateral_m = projection.lateral;
+        Some(position)
+    }
+
+    /// The lane and segment [`RoadNetwork::snap_search`] snaps to.
+    fn nearest_segment(
+        &self,
+        pos: Point,
+        hint: &SnapHint,
+        radius_m: f64,
+        bounded: bool,
+    ) -> Option<(LaneId, u32)> {
         let radius_m = radius_m.min(self.snap_radius_m);
         let mut best: Option<(f64, LaneId, u32)> = None;
         let wanted = hint.heading.filter(|h| h.is_finite()).map(geom::unit);
         let continuity = hint.previous.and_then(|p| {
             self.continuations.get(p.0 as usize).map(|c| c.get_or_init(|| self.continuation(p)))
         });
-        self.lane_grid.for_each_near(pos, radius_m, |item| {
+        let cost = |segment: &LaneSegment, d: f64| {
+            let heading_penalty = match wanted {
+                // (1 - cos(heading difference)) / 2: 0 when aligned, 1 when opposite.
+                Some(u) => HEADING_PENALTY_M * (1.0 - geom::dot(u, segment.direction)) / 2.0,
+                None => 0.0,
+            };
+            d + heading_penalty + continuity.map_or(0.0, |c| c.penalty(self, segment.lane))
+        };
+        // The lane the object was on is usually where it still is: the least cost among its
+        // segments bounds the answer's cost, and so its distance, so the
+        // grid is searched only that far (plus a margin far above rounding), in the fine grid
+        // when that is short. The segments left out are too far to be chosen, and the choice
+        // among the others does not depend on the order they come in (least cost, then least
+        // lane and segment), so the answer is the full search's (a property test holds them to
+        // it).
+        let search_m = hint
+            .previous
+            .filter(|_| bounded)
+            .and_then(|p| self.bound_along(p, pos, radius_m, &cost))
+            .map_or(radius_m, |bound| (bound + SNAP_BOUND_MARGIN_M).min(radius_m));
+        let grid =
+            if bounded && search_m <= FINE_GRID_CELL_M { &self.fine_lane_grid } else { &self.lane_grid };
+        grid.for_each_near(pos, search_m, |item| {
             let segment = &self.lane_segments[item as usize];
             // Penalties are never negative, so a segment already further than the best is out.
             let limit = best.map_or(radius_m, |(cost, _, _)| (cost + 1e-12).min(radius_m));
@@ -575,13 +645,7 @@ impl RoadNetwork {
             if d > radius_m || best.is_some_and(|(cost, _, _)| d > cost + 1e-12) {
                 return;
             }
-            let heading_penalty = match wanted {
-                // (1 - cos(heading difference)) / 2: 0 when aligned, 1 when opposite.
-                Some(u) => HEADING_PENALTY_M * (1.0 - geom::dot(u, segment.direction)) / 2.0,
-                None => 0.0,
-            };
-            let continuity_penalty = continuity.map_or(0.0, |c| c.penalty(self, segment.lane));
-            let candidate = (d + heading_penalty + continuity_penalty, segment.lane, segment.segment);
+            let candidate = (cost(segment, d), segment.lane, segment.segment);
             let better = match best {
                 None => true,
                 Some(current) => {
@@ -594,13 +658,29 @@ impl RoadNetwork {
                 best = Some(candidate);
             }
         });
-        let (_, lane_id, s) = best?;
-        let lane = &self.lanes[lane_id.0 as usize];
-        let projection = lane.path.project_on(pos, s as usize);
-        let mut position = self.lane_position(lane_id, projection.offset);
-        position.point = projection.point;
-        position.lateral_m = projection.lateral;
-        Some(position)
+        best.map(|(_, lane, s)| (lane, s))
+    }
+
+    /// The least snapping cost (by `cost`) among the segments of `lane` within `radius_m` of
+    /// `pos`; `None` when none is that near.
+    fn bound_along(
+        &self,
+        lane: LaneId,
+        pos: Point,
+        radius_m: f64,
+        cost: &impl Fn(&LaneSegment, f64) -> f64,
+    ) -> Option<f64> {
+        let start = *self.lane_segment_start.get(lane.0 as usize)? as usize;
+        let end = *self.lane_segment_start.get(lane.0 as usize + 1)? as usize;
+        let mut bound: Option<f64> = None;
+        for segment in &self.lane_segments[start..end] {
+            let d = dist_to_segment(pos, segment.a, segment.b);
+            if d <= radius_m {
+                let c = cost(segment, d);
+                bound = Some(bound.map_or(c, |b| b.min(c)));
+            }
+        }
+        bound
     }
 
     /// The lanes that continue `lane`: itself, and its successors and predecessors up to three
@@ -685,6 +765,78 @@ impl Continuation {
             LANE_CHANGE_PENALTY_M
         } else {
             DISCONTINUITY_PENALTY_M
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, reason = "tests")]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::sync::LazyLock;
+
+    /// The grid town of `kpl bench anchor`, the bridge, and SUMO networks of the shipped specs
+    /// (a grid with traffic lights, and the spider's curved roads and many-armed junctions).
+    static NETWORKS: LazyLock<Vec<RoadNetwork>> = LazyLock::new(|| {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/traffic/sumo");
+        let town = crate::scenarios::GridTownSize { blocks_x: 3, blocks_y: 3, block_m: 100.0 };
+        vec![
+            RoadNetwork::build(&crate::scenarios::grid_town(town)).unwrap(),
+            RoadNetwork::build(&crate::scenarios::bridge()).unwrap(),
+            RoadNetwork::load(&root.join("tls_grid/net.xml.gz")).unwrap(),
+            RoadNetwork::load(&root.join("spider/net.xml.gz")).unwrap(),
+        ]
+    });
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        /// Snapping bounded by the previous lane's cost gives exactly what the full search of the
+        /// grid gives, for points anywhere near the network, any heading and any previous lane
+        /// (the lane a nearby point snaps to, as an object moving on; or any lane at all).
+        #[test]
+        fn bounded_snapping_is_the_full_search(
+            which in 0..4usize,
+            u in (0.0..1.0f64, 0.0..1.0f64),
+            near_lane in (proptest::bool::weighted(0.8), 0..100_000usize, 0.0..1.0f64),
+            step in (-8.0..8.0f64, -8.0..8.0f64),
+            heading in proptest::option::of(-4.0..4.0f64),
+            any_lane in proptest::option::of(0..100_000u32),
+            radius in prop_oneof![Just(None), (0.01..12.0f64).prop_map(Some)],
+        ) {
+            let net = &NETWORKS[which];
+            // Near a lane (most objects are), or anywhere in the network's bounds.
+            let p = if near_lane.0 {
+                let lane = &net.lanes()[near_lane.1 % net.lanes().len()];
+                let on = lane.path.point_at(u.0 * lane.path.length());
+                [on[0] + (u.1 - 0.5) * 8.0, on[1] + (near_lane.2 - 0.5) * 8.0]
+            } else {
+                let (lo, hi) = net.bounds();
+                [lo[0] + u.0 * (hi[0] - lo[0]), lo[1] + u.1 * (hi[1] - lo[1])]
+            };
+            let before = [p[0] - step.0, p[1] - step.1];
+            let previous = match any_lane {
+                Some(i) => Some(LaneId(i % net.lanes().len() as u32)),
+                None => net.snap(before, &SnapHint { heading, previous: None }).map(|s| s.lane),
+            };
+            let hint = SnapHint { heading, previous };
+            let radius = radius.unwrap_or(net.snap_radius_m());
+            let bounded = net.snap_search(p, &hint, radius, true);
+            let full = net.snap_search(p, &hint, radius, false);
+            prop_assert_eq!(bounded, full);
+            // The lane-centre lookup is the full snap without a hint, within the tolerance.
+            for (at, tolerance) in [(p, radius), (full.map_or(p, |s| s.point), 0.05)] {
+                let by_snap = net
+                    .snap_search(at, &SnapHint::default(), tolerance.min(net.snap_radius_m()), false)
+                    .and_then(|s| (s.lateral_m.abs() < tolerance).then_some(s.lane));
+                prop_assert_eq!(net.lane_centre_at(at, tolerance), by_snap);
+            }
+            // And on the lane's centre, where the next step starts from.
+            if let Some(s) = full {
+                let hint = SnapHint { heading, previous: Some(s.lane) };
+                prop_assert_eq!(net.snap_search(s.point, &hint, radius, true), net.snap_search(s.point, &hint, radius, false));
+            }
         }
     }
 }
