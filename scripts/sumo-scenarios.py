@@ -181,13 +181,18 @@ OVERTAKE_VTYPES = """<additional>
 """
 
 
-def overtake(s, duration):
+def two_lane_road(s, vtypes):
+    """A straight 1.5 km road, two lanes eastbound at 25 m/s, with the scenario's vehicle types."""
     s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
     s.write("edges.edg.xml", '<edges>\n'
                 '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
                 '</edges>\n')
-    s.write("vtypes.xml", OVERTAKE_VTYPES)
+    s.write("vtypes.xml", vtypes)
     s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+
+
+def overtake(s, duration):
+    two_lane_road(s, OVERTAKE_VTYPES)
     flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="500" '
              'departLane="random" departSpeed="max"/>' % duration,
              '    <flow id="speeders" type="speeder" route="r" begin="0" end="%d" vehsPerHour="150" '
@@ -399,12 +404,7 @@ def reckless(s, duration):
     minGap 0.5 m) pull back into the right lane as soon as the overtaken vehicle's secure gap
     allows, normal cars (lcKeepRight 0.3, tau 1.2 s) later. The truth (reckless_truth, written
     to truth.jsonl) is computed from the floating car data."""
-    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
-    s.write("edges.edg.xml", '<edges>\n'
-                '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
-                '</edges>\n')
-    s.write("vtypes.xml", RECKLESS_VTYPES)
-    s.netconvert("net.net.xml", "-n", "nodes.nod.xml", "-e", "edges.edg.xml", "--no-turnarounds")
+    two_lane_road(s, RECKLESS_VTYPES)
     flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="350" '
              'departLane="random" departSpeed="max"/>' % duration,
              '    <flow id="reckless" type="reckless" route="r" begin="0" end="%d" vehsPerHour="300" '
