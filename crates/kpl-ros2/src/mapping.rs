@@ -19,8 +19,9 @@
 //!
 //! The module's tests map a `MarkerArray` into percepts and cars back into one.
 
-use std::collections::HashMap;
 use std::sync::Arc;
+
+use rustc_hash::FxHashMap;
 
 use kpl_core::{Record, RecordType, Time, Value, ValueType};
 
@@ -614,7 +615,7 @@ pub struct OutMap {
     /// The header stamps the valid time goes into: from the root, and in each element.
     root_stamp: Option<Vec<usize>>,
     element_stamp: Option<Vec<usize>>,
-    numbers: HashMap<Arc<str>, i64>,
+    numbers: FxHashMap<Arc<str>, i64>,
     /// What [`OutMap::encode_into`] runs, when the mapping has one.
     plan: Option<EncodePlan>,
 }
@@ -727,7 +728,7 @@ impl OutMap {
             root_stamp.as_ref(),
             element_stamp.as_ref(),
         );
-        Ok(OutMap { schema, each, entries, root_stamp, element_stamp, numbers: HashMap::new(), plan })
+        Ok(OutMap { schema, each, entries, root_stamp, element_stamp, numbers: FxHashMap::default(), plan })
     }
 
     /// The message of one sample in CDR (with its encapsulation header), into `out` (cleared
@@ -832,7 +833,7 @@ impl OutMap {
 
 /// A number that stays with a symbol: its trailing digits (`co12` is 12), or else the next free
 /// number in order of appearance.
-pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut HashMap<Arc<str>, i64>) -> i64 {
+pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut FxHashMap<Arc<str>, i64>) -> i64 {
     if let Some(&n) = numbers.get(symbol) {
         return n;
     }
@@ -1058,6 +1059,49 @@ mod tests {
         assert_eq!(j["markers"][0]["ns"], "co12");
         assert_eq!(j["markers"][0]["header"]["frame_id"], "map");
         assert_eq!(j["markers"][0]["pose"]["orientation"]["w"], 1.0);
+    }
+
+    /// A tracker's ids come again in every message: the decode plan makes each one's symbol
+    /// once and hands out the same one after, and keeps no more than `Symbols::MAX` of them.
+    #[test]
+    fn the_decode_plan_keeps_symbols_of_ids_bounded() {
+        let defs = Definitions::builtin();
+        let schema = defs.schema_of("visualization_msgs/msg/MarkerArray").unwrap();
+        let map = markers_in(&["pos = pose.position", "size = scale.x"]).unwrap();
+        let plan = map.plan.as_ref().expect("markers.kpl's mapping has a plan");
+        let spec = OutSpec {
+            each: Some("markers".into()),
+            entries: ["id = number", "pose.position = pos", "scale.x = size"].map(String::from).to_vec(),
+        };
+        let mut out = OutMap::compile(schema.clone(), &spec, &record_list("Car", "co")).unwrap();
+        let mut message = |ids: &[u32]| {
+            let cars: Vec<Value> = ids
+                .iter()
+                .map(|i| {
+                    let fields =
+                        vec![("pos".into(), Value::vec2(1.0, 2.0)), ("size".into(), Value::Float(4.0))];
+                    Value::Record(Arc::new(Record { id: Some(format!("co{i}").into()), fields }))
+                })
+                .collect();
+            let mut bytes = Vec::new();
+            out.encode_into(0, &Value::List(cars.into()), &mut bytes).unwrap();
+            bytes
+        };
+        let symbols = |bytes: &[u8]| -> Vec<Arc<str>> {
+            let (_, Value::List(list)) = map.decode(bytes).unwrap() else { panic!("not a list") };
+            list.iter().map(|v| v.as_record().unwrap().id.clone().unwrap()).collect()
+        };
+        let first = symbols(&message(&[7, 8]));
+        let again = symbols(&message(&[8, 7]));
+        assert_eq!((&*first[0], &*first[1], &*again[0], &*again[1]), ("vp7", "vp8", "vp8", "vp7"));
+        assert!(Arc::ptr_eq(&first[0], &again[1]) && Arc::ptr_eq(&first[1], &again[0]));
+        assert_eq!(plan.symbols_held(), 2);
+        for start in (0..2 * crate::plan::Symbols::MAX as u32).step_by(100) {
+            let ids: Vec<u32> = (start..start + 100).collect();
+            let got = symbols(&message(&ids));
+            assert!(got.iter().zip(&ids).all(|(s, i)| **s == *format!("vp{i}")));
+            assert!(plan.symbols_held() <= crate::plan::Symbols::MAX);
+        }
     }
 
     #[test]

@@ -26,7 +26,9 @@
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+
+use rustc_hash::FxHashMap;
 
 use kpl_core::{Record, RecordType, Time, Value, ValueType};
 
@@ -125,8 +127,9 @@ enum EOp {
     Each(Option<usize>, Vec<EOp>),
 }
 
-/// A default field's shape, for precomputing a run of them.
-#[derive(Debug, Clone, Copy)]
+/// A field whose bytes do not depend on the sample (at its default or set by a literal entry),
+/// for precomputing a run of them.
+#[derive(Debug, Clone)]
 enum Item {
     /// Alignment and length.
     Fixed(usize, usize),
@@ -134,19 +137,32 @@ enum Item {
     Str,
     /// An empty sequence: aligned 4, count 0.
     Seq,
+    /// A primitive set by a literal entry.
+    Literal(Primitive, Leaf),
 }
 
+/// The padding before a field aligned to `align` (1, 2, 4 or 8: CDR aligns a primitive to its
+/// size) at `pos`. A mask rather than `%`: `align` is not a constant here, and two divisions per
+/// field were a tenth of the plans' time.
 fn pad(pos: usize, align: usize) -> usize {
-    (align - pos % align) % align
+    debug_assert!(align.is_power_of_two());
+    pos.wrapping_neg() & (align - 1)
 }
 
-fn precompute(items: &[Item]) -> Box<[Box<[u8]>; 8]> {
-    Box::new(std::array::from_fn(|start| {
+/// The bytes of a run of items for each start offset modulo 8; `None` if a literal does not fit
+/// its field (the tree path gives the error).
+fn precompute(items: &[Item]) -> Option<Box<[Box<[u8]>; 8]>> {
+    let mut runs: [Box<[u8]>; 8] = Default::default();
+    for (start, run) in runs.iter_mut().enumerate() {
         let mut buf = vec![0u8; start];
         for item in items {
-            let (align, bytes): (usize, &[u8]) = match *item {
+            let (align, bytes): (usize, &[u8]) = match item {
                 Item::Fixed(align, len) => {
-                    buf.resize(buf.len() + pad(buf.len(), align) + len, 0);
+                    buf.resize(buf.len() + pad(buf.len(), *align) + len, 0);
+                    continue;
+                }
+                Item::Literal(p, leaf) => {
+                    write_leaf(&mut buf, 0, *p, leaf.scalar()).ok()?;
                     continue;
                 }
                 Item::Str => (4, &[1, 0, 0, 0, 0]),
@@ -155,8 +171,9 @@ fn precompute(items: &[Item]) -> Box<[Box<[u8]>; 8]> {
             buf.resize(buf.len() + pad(buf.len(), align), 0);
             buf.extend_from_slice(bytes);
         }
-        buf.split_off(start).into_boxed_slice()
-    }))
+        *run = buf.split_off(start).into_boxed_slice();
+    }
+    Some(Box::new(runs))
 }
 
 /// Whether the struct at `index` is `builtin_interfaces/Time` (or `Duration`) as the plans read
@@ -216,16 +233,19 @@ fn leaf_primitive(schema: &Schema, start: usize, leaf: &[usize]) -> Option<Primi
 /// not cover the schema or the mapping.
 struct LayoutBuilder<'a> {
     schema: &'a Schema,
+    /// Per entry, its value when it is a literal: precomputed with the defaults around it.
+    literals: &'a [Option<Leaf>],
     /// The `each` array's path from the root, with the element's assignments.
     each: Option<(&'a [usize], &'a Assign)>,
 }
 
 impl LayoutBuilder<'_> {
-    fn flush(pending: &mut Vec<Item>, ops: &mut Vec<EOp>) {
+    fn flush(pending: &mut Vec<Item>, ops: &mut Vec<EOp>) -> Option<()> {
         if !pending.is_empty() {
-            ops.push(EOp::Default(precompute(pending)));
+            ops.push(EOp::Default(precompute(pending)?));
             pending.clear();
         }
+        Some(())
     }
 
     fn walk(
@@ -248,8 +268,11 @@ impl LayoutBuilder<'_> {
                 ArrayKind::Single => match field.base {
                     SchemaBase::Primitive(Primitive::WString(_)) => return None,
                     SchemaBase::Primitive(p) => match assign.get(prefix.as_slice()) {
+                        Some(From::Literal(k)) => {
+                            pending.push(Item::Literal(p, self.literals.get(*k)?.clone()?));
+                        }
                         Some(from) => {
-                            Self::flush(pending, ops);
+                            Self::flush(pending, ops)?;
                             ops.push(EOp::Leaf(p, *from));
                         }
                         None => pending.push(match p.size() {
@@ -280,8 +303,8 @@ impl LayoutBuilder<'_> {
                             &mut body,
                             &mut body_pending,
                         )?;
-                        Self::flush(&mut body_pending, &mut body);
-                        Self::flush(pending, ops);
+                        Self::flush(&mut body_pending, &mut body)?;
+                        Self::flush(pending, ops)?;
                         ops.push(EOp::Each(bound, body));
                     } else if assign.keys().any(|k| k.starts_with(prefix)) {
                         return None;
@@ -386,11 +409,15 @@ impl EncodePlan {
             }
             literals.push(literal);
         }
-        let builder = LayoutBuilder { schema, each: each.map(|(p, _)| (p.as_slice(), &element_assign)) };
+        let builder = LayoutBuilder {
+            schema,
+            literals: &literals,
+            each: each.map(|(p, _)| (p.as_slice(), &element_assign)),
+        };
         let mut ops = Vec::new();
         let mut pending = Vec::new();
         builder.walk(root, &mut Vec::new(), &root_assign, true, &mut ops, &mut pending)?;
-        LayoutBuilder::flush(&mut pending, &mut ops);
+        LayoutBuilder::flush(&mut pending, &mut ops)?;
         let has_each = ops.iter().any(|op| matches!(op, EOp::Each(..)));
         Some(EncodePlan { ops, literals, dynamic, float_parts, has_each })
     }
@@ -400,7 +427,7 @@ impl EncodePlan {
     pub(crate) fn encode(
         &self,
         entries: &[(Path, Source)],
-        numbers: &mut HashMap<Arc<str>, i64>,
+        numbers: &mut FxHashMap<Arc<str>, i64>,
         valid: Time,
         value: &Value,
         out: &mut Vec<u8>,
@@ -454,7 +481,7 @@ impl EncodePlan {
     fn evaluate<'v>(
         &self,
         entries: &[(Path, Source)],
-        numbers: &mut HashMap<Arc<str>, i64>,
+        numbers: &mut FxHashMap<Arc<str>, i64>,
         value: &'v Value,
         parts: &mut [[Scalar<'v>; 2]],
     ) -> Result<(), ()> {
@@ -535,18 +562,19 @@ impl Writes<'_> {
                     From::Entry(k, c) => parts[k][usize::from(c)],
                     From::Literal(k) => self.literals[k].as_ref().ok_or(())?.scalar(),
                 };
-                write_leaf(self.out, *p, leaf)
+                write_leaf(self.out, 4, *p, leaf)
             }
             EOp::Each(..) => Err(()),
         }
     }
 }
 
-/// As the codec's `write_primitive`: the same variants fit, the same ranges.
-fn write_leaf(out: &mut Vec<u8>, p: Primitive, leaf: Scalar<'_>) -> Result<(), ()> {
+/// As the codec's `write_primitive`: the same variants fit, the same ranges. `base` is where the
+/// CDR body starts in `out` (alignment counts from there).
+fn write_leaf(out: &mut Vec<u8>, base: usize, p: Primitive, leaf: Scalar<'_>) -> Result<(), ()> {
     use Primitive::*;
     let align = |out: &mut Vec<u8>, n: usize| {
-        let pad = pad(out.len() - 4, n);
+        let pad = pad(out.len() - base, n);
         out.resize(out.len() + pad, 0);
     };
     if let String(bound) = p {
@@ -768,6 +796,9 @@ pub(crate) struct DecodePlan {
     element_slots: usize,
     attributes: Vec<(Arc<str>, End, ValueType, Read)>,
     identity: Option<usize>,
+    /// The symbols made of integer identities, kept from message to message (a tracker sends the
+    /// same ids again and again).
+    symbols: Symbols,
     /// The stamp's slots (sec, nanosec), and whether they are in the root.
     stamp: Option<(bool, usize, usize)>,
     ty: Arc<RecordType>,
@@ -847,6 +878,7 @@ impl DecodePlan {
             element_slots: element_slots.index.len(),
             attributes: reads,
             identity,
+            symbols: Symbols::default(),
             stamp,
             ty: ty.clone(),
         })
@@ -865,6 +897,7 @@ impl DecodePlan {
         let mut element = vec![Scalar::Bool(false); self.element_slots];
         let mut records: Option<Vec<Value>> = None;
         let mut id = String::new();
+        let mut symbols = self.symbols.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let mut first_stamp = None;
         for op in &self.ops {
             if let DOp::Each(kind, body) = op {
@@ -879,7 +912,7 @@ impl DecodePlan {
                     {
                         first_stamp = time_of(element[sec], element[nanosec]);
                     }
-                    list.push(self.record(&element, &mut id)?);
+                    list.push(self.record(&element, &mut id, &mut symbols)?);
                 }
                 records = Some(list);
             } else {
@@ -893,12 +926,23 @@ impl DecodePlan {
         };
         let value = match records {
             Some(list) => Value::List(list.into()),
-            None => self.record(&root, &mut id)?,
+            None => self.record(&root, &mut id, &mut symbols)?,
         };
         Ok((valid, value))
     }
 
-    fn record(&self, slots: &[Scalar<'_>], id: &mut String) -> Result<Value, ()> {
+    /// How many symbols the plan keeps now.
+    #[cfg(test)]
+    pub(crate) fn symbols_held(&self) -> usize {
+        self.symbols.0.lock().map_or(0, |symbols| symbols.len())
+    }
+
+    fn record(
+        &self,
+        slots: &[Scalar<'_>],
+        id: &mut String,
+        symbols: &mut FxHashMap<Identity, Arc<str>>,
+    ) -> Result<Value, ()> {
         let mut fields = Vec::with_capacity(self.attributes.len());
         for (name, end, ty, read) in &self.attributes {
             let value = match (*read, end) {
@@ -925,19 +969,60 @@ impl DecodePlan {
         }
         let id = match self.identity {
             Some(slot) => {
-                id.clear();
-                id.push_str(&self.ty.symbol);
-                match slots[slot] {
-                    Scalar::Int(i) => write!(id, "{i}").map_err(|_| ())?,
-                    Scalar::UInt(u) => write!(id, "{u}").map_err(|_| ())?,
-                    Scalar::Str(s) => id.push_str(s),
+                let key = match slots[slot] {
+                    Scalar::Int(i) => Some(Identity::Int(i)),
+                    Scalar::UInt(u) => Some(Identity::UInt(u)),
+                    Scalar::Str(_) => None,
                     _ => return Err(()),
+                };
+                if let Some(symbol) = key.and_then(|key| symbols.get(&key)) {
+                    Some(symbol.clone())
+                } else {
+                    id.clear();
+                    id.push_str(&self.ty.symbol);
+                    match slots[slot] {
+                        Scalar::Int(i) => write!(id, "{i}").map_err(|_| ())?,
+                        Scalar::UInt(u) => write!(id, "{u}").map_err(|_| ())?,
+                        Scalar::Str(s) => id.push_str(s),
+                        _ => return Err(()),
+                    }
+                    let symbol: Arc<str> = Arc::from(id.as_str());
+                    if let Some(key) = key {
+                        if symbols.len() >= Symbols::MAX {
+                            symbols.clear();
+                        }
+                        symbols.insert(key, symbol.clone());
+                    }
+                    Some(symbol)
                 }
-                Some(Arc::from(id.as_str()))
             }
             None => None,
         };
         Ok(Value::Record(Arc::new(Record { id, fields })))
+    }
+}
+
+/// An integer identity read from a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Identity {
+    Int(i64),
+    UInt(u64),
+}
+
+/// A decode plan's symbols of integer identities. Bounded: emptied when it holds
+/// [`Symbols::MAX`], so ids that only ever grow (a long run, or a sender that makes them up)
+/// cost one symbol each time, never memory without bound.
+#[derive(Debug, Default)]
+pub(crate) struct Symbols(Mutex<FxHashMap<Identity, Arc<str>>>);
+
+impl Symbols {
+    pub(crate) const MAX: usize = 4096;
+}
+
+impl Clone for Symbols {
+    /// A clone starts empty: the cache is an optimization, not state.
+    fn clone(&self) -> Symbols {
+        Symbols::default()
     }
 }
 
@@ -1027,6 +1112,17 @@ impl<'a> Cursor<'a> {
         std::str::from_utf8(text).map_err(|_| ())
     }
 
+    /// The operations of a nested array's element (not inlined: [`Cursor::op`] is, into the
+    /// loops over a message's and an `each` element's operations, which is where the time goes).
+    #[inline(never)]
+    fn ops(&mut self, body: &[DOp], slots: &mut [Scalar<'a>]) -> Result<(), ()> {
+        for op in body {
+            self.op(op, slots)?;
+        }
+        Ok(())
+    }
+
+    #[inline(always)]
     fn op(&mut self, op: &DOp, slots: &mut [Scalar<'a>]) -> Result<(), ()> {
         match op {
             DOp::Skip(reach) => {
@@ -1060,9 +1156,7 @@ impl<'a> Cursor<'a> {
                     }
                     Elem::Ops(body) => {
                         for _ in 0..count {
-                            for op in body {
-                                self.op(op, slots)?;
-                            }
+                            self.ops(body, slots)?;
                         }
                     }
                 }
