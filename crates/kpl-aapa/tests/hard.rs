@@ -546,3 +546,52 @@ fn identity_by_place_is_what_decides_the_cases_of_identical_cones() {
     assert!(worlds.last().unwrap().has_relation("contained", "s", "a"));
     assert!(!worlds[60].notes.iter().any(|n| n.contains("inferred over")), "{:?}", worlds[60].notes);
 }
+
+/// The scene of [`a_stack_is_told_from_its_twin_by_its_contents_moving_with_it`]; every world.
+fn contents_move_with_the_stack(aapa: &Aapa) -> Vec<WorldState> {
+    // Two identical cones: `a` comes over the snitch (10..30) at x = 160, `t` stands at x = 60. From
+    // frame 35 `a` is not perceived (behind something). At frame 40 `a` slides to x = 200 unseen
+    // (40..70), and CATER reports the snitch sliding with it; at frame 42 `t` is picked up and
+    // placed at x = 20 (42..60), seen, so it is the first of the type to move. The slide is `a`'s
+    // (the snitch's own slide starts and ends with it), the pick-and-place `t`'s: the snitch stays
+    // in `a`, and is at x = 200 when `a` is seen again there (from frame 75).
+    let snitch = at(160.0, 150.0, 14.0, 14.0);
+    let cone = |x: f64, y: f64| at(x, y, 34.0, 42.0);
+    run(aapa, 90, |f| {
+        let mut percepts = vec![];
+        if f < 35 {
+            percepts.push(p("a", "cone", lerp(cone(240.0, 152.0), cone(160.0, 152.0), 10, 30, f)));
+        } else if f >= 75 {
+            percepts.push(p("a", "cone", cone(200.0, 152.0)));
+        }
+        let t = if f <= 51 {
+            lerp(cone(60.0, 152.0), cone(60.0, 112.0), 42, 51, f)
+        } else {
+            lerp(cone(60.0, 112.0), cone(20.0, 152.0), 51, 60, f)
+        };
+        percepts.push(p("t", "cone", t));
+        if f < 26 {
+            percepts.push(p("s", "snitch", snitch));
+        }
+        let actions = [
+            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
+            ends(f, 30, "_contain", &["cone", "snitch"]),
+            starts(f, 40, 70, "_slide", &["cone"]),
+            starts(f, 40, 70, "_slide", &["snitch"]),
+            starts(f, 42, 60, "_pick_place", &["cone"]),
+            ends(f, 60, "_pick_place", &["cone"]),
+            ends(f, 70, "_slide", &["cone"]),
+            ends(f, 70, "_slide", &["snitch"]),
+        ];
+        (percepts, actions.into_iter().flatten().collect())
+    })
+}
+
+#[test]
+fn a_stack_is_told_from_its_twin_by_its_contents_moving_with_it() {
+    let worlds = contents_move_with_the_stack(&cater());
+    let last = worlds.last().unwrap();
+    assert!(last.has_relation("contained", "s", "a"), "{:?}", last.relations);
+    let x = centre_of(last, "snitch")[0];
+    assert!((x - 200.0).abs() < 3.0, "the snitch is at {x:.1}, carried by `a` to 200");
+}
