@@ -930,7 +930,9 @@ impl Aapa {
                 };
                 let base = bottom_centre(&parent_box);
                 let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
-                let followed = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                // Its size too: an object under a cone that comes nearer the camera grows as the cone's
+                // box does, in width and height apart (the view from above foreshortens heights).
+                let followed = from_bottom_centre(reference, [att.size[0] * kx, att.size[1] * ky]);
                 if followed != w.anchor.bbox {
                     // Carried: the boxes seen of it before are not where it is now.
                     w.anchor.still = None;

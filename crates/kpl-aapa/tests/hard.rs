@@ -595,3 +595,35 @@ fn a_stack_is_told_from_its_twin_by_its_contents_moving_with_it() {
     let x = centre_of(last, "snitch")[0];
     assert!((x - 200.0).abs() < 3.0, "the snitch is at {x:.1}, carried by `a` to 200");
 }
+
+#[test]
+fn a_carried_object_scales_with_its_carriers_width_and_height_apart() {
+    // A cone comes over the snitch (10..30) and slides (40..70) to where its box is as wide but
+    // 10 px taller (nearer the camera, seen more from the side): the snitch under it keeps its width
+    // and grows in height by the same ratio, 52 / 42.
+    let snitch = at(160.0, 150.0, 14.0, 14.0);
+    let worlds = run(&cater(), 80, |f| {
+        let cone = if f <= 30 {
+            lerp(at(240.0, 152.0, 34.0, 42.0), at(160.0, 152.0, 34.0, 42.0), 10, 30, f)
+        } else {
+            lerp(at(160.0, 152.0, 34.0, 42.0), at(200.0, 152.0, 34.0, 52.0), 40, 70, f)
+        };
+        let mut percepts = vec![p("c", "cone", cone)];
+        if f < 26 {
+            percepts.push(p("s", "snitch", snitch));
+        }
+        let actions = [
+            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
+            ends(f, 30, "_contain", &["cone", "snitch"]),
+            starts(f, 40, 70, "_slide", &["cone"]),
+            starts(f, 40, 70, "_slide", &["snitch"]),
+            ends(f, 70, "_slide", &["cone"]),
+            ends(f, 70, "_slide", &["snitch"]),
+        ];
+        (percepts, actions.into_iter().flatten().collect())
+    });
+    let s = worlds.last().unwrap().best_of_type("snitch", 0.1).unwrap().bbox;
+    assert!((s.width() - 14.0).abs() < 0.5, "width {:.2}, the cone's width did not change", s.width());
+    let h = 14.0 * 52.0 / 42.0;
+    assert!((s.height() - h).abs() < 0.5, "height {:.2}, the cone's grew to {h:.2}", s.height());
+}
