@@ -2,7 +2,8 @@
 //! rules (`Params::cater()`): moves with other speed profiles than Blender's easing, an object
 //! turning where it stands, a false detection of the contained object's class, nested cones moved
 //! as one, a contain onto a stack that is moving, simultaneous actions on identical objects, and
-//! occlusion by several objects together. Each failed before the rule it tests was added; the
+//! occlusion by several objects together, a stack told from its twin by its contents moving with
+//! it, and a carried object's size following its carrier's width and height apart. Each failed before the rule it tests was added; the
 //! three decided by `identity_by_place` are also run with it off, as the published algorithm.
 #![allow(clippy::unwrap_used, reason = "tests")]
 
