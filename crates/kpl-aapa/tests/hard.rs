@@ -1,10 +1,11 @@
 //! The hard cases of issue 27, one per test, driven through `Aapa::step` with CATER's action
 //! rules (`Params::cater()`): moves with other speed profiles than Blender's easing, an object
 //! turning where it stands, a false detection of the contained object's class, nested cones moved
-//! as one, a contain onto a stack that is moving, simultaneous actions on identical objects, and
+//! as one, a contain onto a stack that is moving, simultaneous actions on identical objects,
 //! occlusion by several objects together, a stack told from its twin by its contents moving with
-//! it, and a carried object's size following its carrier's width and height apart. Each failed before the rule it tests was added; the
-//! three decided by `identity_by_place` are also run with it off, as the published algorithm.
+//! it, and a carried object's size following its carrier's width and height apart. Each failed
+//! before the rule it tests was added; the three decided by `identity_by_place` are also run with
+//! it off, as the published algorithm.
 #![allow(clippy::unwrap_used, reason = "tests")]
 
 use kpl_aapa::{Aapa, Action, AnchorStatus, Params, Percept, WorldState};
