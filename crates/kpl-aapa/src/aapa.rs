@@ -254,7 +254,7 @@ impl Aapa {
             .filter_map(|a| a.args.first().cloned())
             .collect();
         for action in actions {
-            self.apply_action(action, &starting, time, &mut work, &mut bindings, &mut notes);
+            self.apply_action(action, actions, &starting, time, &mut work, &mut bindings, &mut notes);
         }
         forget_stale_bindings(&mut bindings, time, &mut notes);
         if p.extensions.merge_duplicates {
@@ -334,9 +334,11 @@ impl Aapa {
     /// Applies one action event: directly when its moving object (argument 0) is known; a `started`
     /// event naming a type several anchors share opens a binding instead, and the matching
     /// `completed` event closes it.
+    #[allow(clippy::too_many_arguments, reason = "one action of the cycle, on the cycle's state")]
     fn apply_action(
         &self,
         action: &Action,
+        cycle: &[Action],
         starting: &HashSet<Symbol>,
         time: Time,
         work: &mut Vec<Work>,
@@ -379,7 +381,7 @@ impl Aapa {
             .is_some_and(|arg| !work.iter().any(|w| !w.removed && w.anchor.symbol == *arg));
         let movers = match (by_type, self.params.extensions.identity_by_place) {
             (false, _) => Vec::new(),
-            (true, true) => self.movers(action, starting, work),
+            (true, true) => self.movers(action, cycle, starting, work),
             (true, false) => action.args.first().map_or_else(Vec::new, |arg| candidates(arg, work)),
         };
         if movers.len() <= 1 {
@@ -475,7 +477,18 @@ impl Aapa {
     /// (the established ones, if any) that are not inside another, since a contained object moves
     /// only with its container; if all are inside another, those, unless the action puts its mover
     /// over something or takes it off what it holds (a contained cone is picked up by no one).
-    fn movers(&self, action: &Action, starting: &HashSet<Symbol>, work: &[Work]) -> Vec<usize> {
+    ///
+    /// Among several, an object inside one of them whose own move of the same kind starts (or ends)
+    /// in the same cycle, with the same expected end, tells which: its outermost container (CATER
+    /// records a stack's contents sliding with it), when that is one of them and no other action
+    /// of that kind on the type starts or ends with it.
+    fn movers(
+        &self,
+        action: &Action,
+        cycle: &[Action],
+        starting: &HashSet<Symbol>,
+        work: &[Work],
+    ) -> Vec<usize> {
         let Some(arg) = action.args.first() else { return Vec::new() };
         let acts_on_others = self.rules_for(action).any(|r| {
             r.effects.iter().any(|e| {
@@ -508,7 +521,13 @@ impl Aapa {
         };
         let established: Vec<usize> =
             all.iter().copied().filter(|&i| work[i].anchor.confidence >= ESTABLISHED).collect();
-        if established.is_empty() { all } else { established }
+        let all = if established.is_empty() { all } else { established };
+        if all.len() > 1
+            && let Some(container) = container_of_co_mover(action, cycle, &all, work, &index)
+        {
+            return vec![container];
+        }
+        all
     }
 
     /// Whether an action's rules attach something to its moving object (argument 0 is a parent).
@@ -911,7 +930,9 @@ impl Aapa {
                 };
                 let base = bottom_centre(&parent_box);
                 let reference = [base[0] + att.offset[0] * kx, base[1] + att.offset[1] * ky];
-                let followed = from_bottom_centre(reference, [att.size[0] * k, att.size[1] * k]);
+                // Its size too: an object under a cone that comes nearer the camera grows as the cone's
+                // box does, in width and height apart (the view from above foreshortens heights).
+                let followed = from_bottom_centre(reference, [att.size[0] * kx, att.size[1] * ky]);
                 if followed != w.anchor.bbox {
                     // Carried: the boxes seen of it before are not where it is now.
                     w.anchor.still = None;
@@ -1347,6 +1368,45 @@ fn root_of(i: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> usize {
         }
     }
     current
+}
+
+/// The one candidate (of `candidates`, the anchors `action`'s type may mean) that is the outermost
+/// container of a hidden object whose own action of the same name and phase comes in the same
+/// cycle with the same expected end: the contents of a stack move with it, and CATER records their
+/// move too. `None` if another action like `action` on its type comes with it (which of two
+/// stacks moving together holds the object is then not told), or if no candidate or several are.
+fn container_of_co_mover(
+    action: &Action,
+    cycle: &[Action],
+    candidates: &[usize],
+    work: &[Work],
+    index: &HashMap<Symbol, usize>,
+) -> Option<usize> {
+    let like = |a: &Action| {
+        a.name == action.name && a.phase == action.phase && a.expected_end == action.expected_end
+    };
+    let own_type = action.args.first()?;
+    if cycle.iter().filter(|a| like(a) && a.args.first() == Some(own_type)).count() != 1 {
+        return None;
+    }
+    let mut found: Option<usize> = None;
+    for other in cycle.iter().filter(|a| like(a) && a.args.first() != Some(own_type)) {
+        let Some(arg) = other.args.first() else { continue };
+        for i in (0..work.len()).filter(|&i| {
+            !work[i].removed
+                && (work[i].anchor.symbol == *arg || work[i].anchor.object_type == *arg)
+                && work[i].anchor.attachment.as_ref().is_some_and(|a| a.hidden)
+        }) {
+            let root = root_of(i, work, index);
+            if candidates.contains(&root) {
+                match found {
+                    Some(f) if f != root => return None,
+                    _ => found = Some(root),
+                }
+            }
+        }
+    }
+    found
 }
 
 fn is_ancestor(candidate: usize, of: usize, work: &[Work], index: &HashMap<Symbol, usize>) -> bool {

@@ -1,9 +1,11 @@
 //! The hard cases of issue 27, one per test, driven through `Aapa::step` with CATER's action
 //! rules (`Params::cater()`): moves with other speed profiles than Blender's easing, an object
 //! turning where it stands, a false detection of the contained object's class, nested cones moved
-//! as one, a contain onto a stack that is moving, simultaneous actions on identical objects, and
-//! occlusion by several objects together. Each failed before the rule it tests was added; the
-//! three decided by `identity_by_place` are also run with it off, as the published algorithm.
+//! as one, a contain onto a stack that is moving, simultaneous actions on identical objects,
+//! occlusion by several objects together, a stack told from its twin by its contents moving with
+//! it, and a carried object's size following its carrier's width and height apart. Each failed
+//! before the rule it tests was added; the three decided by `identity_by_place` are also run with
+//! it off, as the published algorithm.
 #![allow(clippy::unwrap_used, reason = "tests")]
 
 use kpl_aapa::{Aapa, Action, AnchorStatus, Params, Percept, WorldState};
@@ -545,4 +547,85 @@ fn identity_by_place_is_what_decides_the_cases_of_identical_cones() {
     let worlds = unseen_container(&aapa);
     assert!(worlds.last().unwrap().has_relation("contained", "s", "a"));
     assert!(!worlds[60].notes.iter().any(|n| n.contains("inferred over")), "{:?}", worlds[60].notes);
+}
+
+/// The scene of [`a_stack_is_told_from_its_twin_by_its_contents_moving_with_it`]; every world.
+fn contents_move_with_the_stack(aapa: &Aapa) -> Vec<WorldState> {
+    // Two identical cones: `a` comes over the snitch (10..30) at x = 160, `t` stands at x = 60. From
+    // frame 35 `a` is not perceived (behind something). At frame 40 `a` slides to x = 200 unseen
+    // (40..70), and CATER reports the snitch sliding with it; at frame 42 `t` is picked up and
+    // placed at x = 20 (42..60), seen, so it is the first of the type to move. The slide is `a`'s
+    // (the snitch's own slide starts and ends with it), the pick-and-place `t`'s: the snitch stays
+    // in `a`, and is at x = 200 when `a` is seen again there (from frame 75).
+    let snitch = at(160.0, 150.0, 14.0, 14.0);
+    let cone = |x: f64, y: f64| at(x, y, 34.0, 42.0);
+    run(aapa, 90, |f| {
+        let mut percepts = vec![];
+        if f < 35 {
+            percepts.push(p("a", "cone", lerp(cone(240.0, 152.0), cone(160.0, 152.0), 10, 30, f)));
+        } else if f >= 75 {
+            percepts.push(p("a", "cone", cone(200.0, 152.0)));
+        }
+        let t = if f <= 51 {
+            lerp(cone(60.0, 152.0), cone(60.0, 112.0), 42, 51, f)
+        } else {
+            lerp(cone(60.0, 112.0), cone(20.0, 152.0), 51, 60, f)
+        };
+        percepts.push(p("t", "cone", t));
+        if f < 26 {
+            percepts.push(p("s", "snitch", snitch));
+        }
+        let actions = [
+            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
+            ends(f, 30, "_contain", &["cone", "snitch"]),
+            starts(f, 40, 70, "_slide", &["cone"]),
+            starts(f, 40, 70, "_slide", &["snitch"]),
+            starts(f, 42, 60, "_pick_place", &["cone"]),
+            ends(f, 60, "_pick_place", &["cone"]),
+            ends(f, 70, "_slide", &["cone"]),
+            ends(f, 70, "_slide", &["snitch"]),
+        ];
+        (percepts, actions.into_iter().flatten().collect())
+    })
+}
+
+#[test]
+fn a_stack_is_told_from_its_twin_by_its_contents_moving_with_it() {
+    let worlds = contents_move_with_the_stack(&cater());
+    let last = worlds.last().unwrap();
+    assert!(last.has_relation("contained", "s", "a"), "{:?}", last.relations);
+    let x = centre_of(last, "snitch")[0];
+    assert!((x - 200.0).abs() < 3.0, "the snitch is at {x:.1}, carried by `a` to 200");
+}
+
+#[test]
+fn a_carried_object_scales_with_its_carriers_width_and_height_apart() {
+    // A cone comes over the snitch (10..30) and slides (40..70) to where its box is as wide but
+    // 10 px taller (nearer the camera, seen more from the side): the snitch under it keeps its width
+    // and grows in height by the same ratio, 52 / 42.
+    let snitch = at(160.0, 150.0, 14.0, 14.0);
+    let worlds = run(&cater(), 80, |f| {
+        let cone = if f <= 30 {
+            lerp(at(240.0, 152.0, 34.0, 42.0), at(160.0, 152.0, 34.0, 42.0), 10, 30, f)
+        } else {
+            lerp(at(160.0, 152.0, 34.0, 42.0), at(200.0, 152.0, 34.0, 52.0), 40, 70, f)
+        };
+        let mut percepts = vec![p("c", "cone", cone)];
+        if f < 26 {
+            percepts.push(p("s", "snitch", snitch));
+        }
+        let actions = [
+            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
+            ends(f, 30, "_contain", &["cone", "snitch"]),
+            starts(f, 40, 70, "_slide", &["cone"]),
+            starts(f, 40, 70, "_slide", &["snitch"]),
+            ends(f, 70, "_slide", &["cone"]),
+            ends(f, 70, "_slide", &["snitch"]),
+        ];
+        (percepts, actions.into_iter().flatten().collect())
+    });
+    let s = worlds.last().unwrap().best_of_type("snitch", 0.1).unwrap().bbox;
+    assert!((s.width() - 14.0).abs() < 0.5, "width {:.2}, the cone's width did not change", s.width());
+    let h = 14.0 * 52.0 / 42.0;
+    assert!((s.height() - h).abs() < 0.5, "height {:.2}, the cone's grew to {h:.2}", s.height());
 }
