@@ -207,10 +207,16 @@ fn the_camera_spec_anchors_georeferenced_percepts_in_world_coordinates() {
     let out = fresh_dir("camera", "grid");
     run_ok(&["run", "specs/traffic/camera_grid.kpl", "--for", "60s", "--out", out.to_str().unwrap()]);
     let s = scores(&["score", out.to_str().unwrap(), "--in-view-only"]);
-    for (stream, at_least) in [("vision_world", 0.85), ("onroad_car", 0.8)] {
+    // Measured (seed 7, 2026-11-28): IDF1 0.985 and 0.982; false positives 80 and 10 (276 and 108
+    // without the spec's negative information, which gives up objects predicted out of the image
+    // or standing unseen in plain view: docs/anchoring.md, "Through a UAV camera").
+    for (stream, at_least, most_false) in [("vision_world", 0.96, 150), ("onroad_car", 0.94, 50)] {
         let value = idf1(&s, stream);
-        eprintln!("camera_grid 60 s: {stream} IDF1 {value:.3}");
+        let scored = &s.iter().find(|(n, _)| n == stream).unwrap().1;
+        let false_positives = scored["clear"]["false_positives"].as_u64().unwrap();
+        eprintln!("camera_grid 60 s: {stream} IDF1 {value:.3}, {false_positives} false positives");
         assert!(value >= at_least, "{stream}: {value}");
+        assert!(false_positives <= most_false, "{stream}: {false_positives} false positives");
     }
     // Every world percept's true error against its covariance: inside the 2-sigma ellipse
     // (Mahalanobis 2.486, 95.45 % for a Gaussian) for most of them.

@@ -28,7 +28,8 @@
 //!   ids with probability `id_switch_prob` per frame, as an image tracker confuses crossing
 //!   objects.
 //! - **Velocity**: the box centre's velocity in pixels per second, the track's smoothed
-//!   difference of centres (a tracker's constant-velocity estimate; 0 at a track's first frame).
+//!   difference of centres (a tracker's constant-velocity estimate; 0 at a track's first frame,
+//!   the first difference at its second, then smoothed).
 //! - **False positives**: as the world tracker's (`false_positive_rate` over the whole scene,
 //!   `false_positive_on_road` of them on a road lane, the others off the roads anywhere in the
 //!   network's bounds, only those the camera sees kept), each a car-sized cuboid (4.5 m x 1.8 m x
@@ -246,6 +247,8 @@ struct Track {
     hidden: bool,
     last_centre: Option<[f64; 2]>,
     vel: [f64; 2],
+    /// Whether `vel` is a difference of centres yet (not the 0 of a track's first frame).
+    vel_known: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -500,7 +503,7 @@ impl ImageTracker {
                     _ => self.new_percept_id(),
                 };
                 let bbox = self.noisy_box(boxes[i].unwrap_or_default());
-                let vel = self.velocity(&mut track, kept, bbox.centre(), dt_s);
+                let vel = Self::velocity(&mut track, kept, bbox.centre(), dt_s);
                 track.percept = Some(id);
                 track.missed = 0;
                 track.hidden = false;
@@ -527,18 +530,21 @@ impl ImageTracker {
         PixelBox::new(cx - bw / 2.0, cy - bh / 2.0, bw, bh)
     }
 
-    /// The smoothed velocity of a track's centre, pixels per second.
-    fn velocity(&mut self, track: &mut Track, kept: bool, centre: [f64; 2], dt_s: f64) -> [f64; 2] {
-        let vel = match (kept, track.last_centre) {
+    /// The smoothed velocity of a track's centre, pixels per second: 0 at its first frame (no
+    /// difference yet), the first difference of centres at its second (not smoothed with that 0,
+    /// which would halve it and take frames to catch up), then smoothed.
+    fn velocity(track: &mut Track, kept: bool, centre: [f64; 2], dt_s: f64) -> [f64; 2] {
+        let (vel, known) = match (kept, track.last_centre) {
             (true, Some(last)) if dt_s > 0.0 => {
                 let raw = [(centre[0] - last[0]) / dt_s, (centre[1] - last[1]) / dt_s];
-                let a = VELOCITY_SMOOTHING;
-                [a * raw[0] + (1.0 - a) * track.vel[0], a * raw[1] + (1.0 - a) * track.vel[1]]
+                let a = if track.vel_known { VELOCITY_SMOOTHING } else { 1.0 };
+                ([a * raw[0] + (1.0 - a) * track.vel[0], a * raw[1] + (1.0 - a) * track.vel[1]], true)
             }
-            _ => [0.0, 0.0],
+            _ => ([0.0, 0.0], false),
         };
         track.last_centre = Some(centre);
         track.vel = vel;
+        track.vel_known = known;
         vel
     }
 
@@ -639,5 +645,26 @@ impl ImageTracker {
     /// Percept ids handed out so far.
     pub fn n_percept_ids(&self) -> u64 {
         self.next_percept - 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tracks_velocity_is_its_first_difference_at_its_second_frame_then_smoothed() {
+        let mut track = Track::default();
+        // 10 px per frame at 10 Hz: 100 px/s.
+        assert_eq!(ImageTracker::velocity(&mut track, true, [0.0, 5.0], 0.1), [0.0, 0.0]);
+        let second = ImageTracker::velocity(&mut track, true, [10.0, 5.0], 0.1);
+        assert!((second[0] - 100.0).abs() < 1e-9 && second[1].abs() < 1e-9, "{second:?}");
+        // Then smoothed: 20 px in a frame (200 px/s) moves it halfway.
+        let third = ImageTracker::velocity(&mut track, true, [30.0, 5.0], 0.1);
+        assert!((third[0] - 150.0).abs() < 1e-9, "{third:?}");
+        // A new id (not kept) starts again from nothing.
+        assert_eq!(ImageTracker::velocity(&mut track, false, [40.0, 5.0], 0.1), [0.0, 0.0]);
+        let again = ImageTracker::velocity(&mut track, true, [45.0, 5.0], 0.1);
+        assert!((again[0] - 50.0).abs() < 1e-9, "{again:?}");
     }
 }
