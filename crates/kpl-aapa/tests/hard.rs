@@ -191,6 +191,20 @@ fn ends(f: usize, at: usize, name: &str, args: &[&str]) -> Option<Action> {
     (f == at).then(|| completed(name, args))
 }
 
+/// The actions at frame `f` of a cone that contains the snitch over `contain` and then slides
+/// with it over `slide`, logged as CATER logs them (the contents' slide with its container's frames).
+fn contain_then_slide(f: usize, contain: (usize, usize), slide: (usize, usize)) -> Vec<Action> {
+    let actions = [
+        starts(f, contain.0, contain.1, "_contain", &["cone", "snitch"]),
+        ends(f, contain.1, "_contain", &["cone", "snitch"]),
+        starts(f, slide.0, slide.1, "_slide", &["cone"]),
+        starts(f, slide.0, slide.1, "_slide", &["snitch"]),
+        ends(f, slide.1, "_slide", &["cone"]),
+        ends(f, slide.1, "_slide", &["snitch"]),
+    ];
+    actions.into_iter().flatten().collect()
+}
+
 /// The scene of [`nested_cones_keep_their_contents_when_an_identical_cone_is_picked_up_unseen`]; its
 /// last world.
 fn nested_cones(aapa: &Aapa) -> WorldState {
@@ -268,15 +282,7 @@ fn late_cone(aapa: &Aapa) -> WorldState {
         if f < 26 {
             percepts.push(p("s", "snitch", snitch));
         }
-        let actions = [
-            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
-            ends(f, 30, "_contain", &["cone", "snitch"]),
-            starts(f, 40, 60, "_slide", &["cone"]),
-            starts(f, 40, 60, "_slide", &["snitch"]),
-            ends(f, 60, "_slide", &["cone"]),
-            ends(f, 60, "_slide", &["snitch"]),
-        ];
-        (percepts, actions.into_iter().flatten().collect())
+        (percepts, contain_then_slide(f, (10, 30), (40, 60)))
     });
     worlds.last().unwrap().clone()
 }
@@ -614,15 +620,7 @@ fn a_carried_object_scales_with_its_carriers_width_and_height_apart() {
         if f < 26 {
             percepts.push(p("s", "snitch", snitch));
         }
-        let actions = [
-            starts(f, 10, 30, "_contain", &["cone", "snitch"]),
-            ends(f, 30, "_contain", &["cone", "snitch"]),
-            starts(f, 40, 70, "_slide", &["cone"]),
-            starts(f, 40, 70, "_slide", &["snitch"]),
-            ends(f, 70, "_slide", &["cone"]),
-            ends(f, 70, "_slide", &["snitch"]),
-        ];
-        (percepts, actions.into_iter().flatten().collect())
+        (percepts, contain_then_slide(f, (10, 30), (40, 70)))
     });
     let s = worlds.last().unwrap().best_of_type("snitch", 0.1).unwrap().bbox;
     assert!((s.width() - 14.0).abs() < 0.5, "width {:.2}, the cone's width did not change", s.width());
