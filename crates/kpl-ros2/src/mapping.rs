@@ -19,6 +19,7 @@
 //!
 //! The module's tests map a `MarkerArray` into percepts and cars back into one.
 
+use std::hash::BuildHasher as _;
 use std::sync::Arc;
 
 use rustc_hash::FxHashMap;
@@ -831,21 +832,32 @@ impl OutMap {
     }
 }
 
-/// A number that stays with a symbol: its trailing digits (`co12` is 12), or else the next free
-/// number in order of appearance.
+/// How many symbols without trailing digits [`number_of`] remembers; later ones are numbered by
+/// their text's hash, so that the map never grows past this on any input.
+pub(crate) const NUMBERED_MAX: usize = 65_536;
+
+/// A number that stays with a symbol: its trailing digits (`co12` is 12; nothing is remembered),
+/// or else the next free number from 1,000,000 in order of appearance (the first
+/// [`NUMBERED_MAX`] such symbols), or else a number from 1,000,000 + `NUMBERED_MAX` up to
+/// `i32::MAX` (an `int32` field takes it) picked by the symbol's hash: the same in every run,
+/// shared by two symbols now and then.
 pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut FxHashMap<Arc<str>, i64>) -> i64 {
+    let digits = symbol.len() - symbol.bytes().rev().take_while(u8::is_ascii_digit).count();
+    if let Some(n) = symbol[digits..].parse::<i64>().ok().filter(|n| *n <= i64::from(i32::MAX)) {
+        return n;
+    }
     if let Some(&n) = numbers.get(symbol) {
         return n;
     }
-    let digits: String =
-        symbol.chars().rev().take_while(char::is_ascii_digit).collect::<Vec<_>>().into_iter().rev().collect();
-    let n = digits
-        .parse::<i64>()
-        .ok()
-        .filter(|n| *n <= i64::from(i32::MAX))
-        .unwrap_or_else(|| 1_000_000 + numbers.len() as i64);
-    numbers.insert(symbol.clone(), n);
-    n
+    const FIRST: i64 = 1_000_000;
+    if numbers.len() < NUMBERED_MAX {
+        let n = FIRST + numbers.len() as i64;
+        numbers.insert(symbol.clone(), n);
+        return n;
+    }
+    let hashed = FIRST + NUMBERED_MAX as i64;
+    let hash = rustc_hash::FxBuildHasher.hash_one(&**symbol);
+    hashed + (hash % (i64::from(i32::MAX) - hashed + 1) as u64) as i64
 }
 
 pub(crate) fn number_value(n: f64, end: End) -> MsgValue {
@@ -1059,6 +1071,32 @@ mod tests {
         assert_eq!(j["markers"][0]["ns"], "co12");
         assert_eq!(j["markers"][0]["header"]["frame_id"], "map");
         assert_eq!(j["markers"][0]["pose"]["orientation"]["w"], 1.0);
+    }
+
+    /// `number`: the digits of a symbol that ends in them, remembering nothing; a number of its own
+    /// for another symbol, the same every time, and no more than `NUMBERED_MAX` remembered.
+    #[test]
+    fn numbers_stay_with_symbols_in_bounded_memory() {
+        let mut numbers = FxHashMap::default();
+        let mut number = |s: &str| number_of(&Arc::from(s), &mut numbers);
+        assert_eq!(
+            (number("co12"), number("wo7"), number("7"), number("co99999999999")),
+            (12, 7, 7, 1_000_000)
+        );
+        assert_eq!((number("x"), number("co99999999999"), number("x")), (1_000_001, 1_000_000, 1_000_001));
+        let mut first = Vec::new();
+        for i in 0..NUMBERED_MAX + 100 {
+            let s = format!("car-{i}-x");
+            let n = number(&s);
+            assert!((1_000_000..=i64::from(i32::MAX)).contains(&n), "{s}: {n}");
+            assert_eq!(number(&s), n, "{s} changed its number");
+            first.push(n);
+        }
+        assert_eq!(numbers.len(), NUMBERED_MAX);
+        let again: Vec<i64> = (0..NUMBERED_MAX + 100)
+            .map(|i| number_of(&Arc::from(format!("car-{i}-x")), &mut numbers))
+            .collect();
+        assert_eq!(again, first);
     }
 
     /// A tracker's ids come again in every message: the decode plan makes each one's symbol
