@@ -800,8 +800,7 @@ impl OutMap {
                     MsgValue::Str(record.and_then(|r| r.id.as_deref()).unwrap_or_default().to_string())
                 }
                 Source::Number => {
-                    let symbol: Arc<str> = record.and_then(|r| r.id.clone()).unwrap_or_else(|| Arc::from(""));
-                    let n = number_of(&symbol, &mut self.numbers);
+                    let n = number_of(record.and_then(|r| r.id.as_deref()).unwrap_or(""), &mut self.numbers);
                     number_value(n as f64, path.end)
                 }
                 Source::Attribute(a) => {
@@ -841,7 +840,7 @@ pub(crate) const NUMBERED_MAX: usize = 65_536;
 /// [`NUMBERED_MAX`] such symbols), or else a number from 1,000,000 + `NUMBERED_MAX` up to
 /// `i32::MAX` (an `int32` field takes it) picked by the symbol's hash: the same in every run,
 /// shared by two symbols now and then.
-pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut FxHashMap<Arc<str>, i64>) -> i64 {
+pub(crate) fn number_of(symbol: &str, numbers: &mut FxHashMap<Arc<str>, i64>) -> i64 {
     let digits = symbol.len() - symbol.bytes().rev().take_while(u8::is_ascii_digit).count();
     if let Some(n) = symbol[digits..].parse::<i64>().ok().filter(|n| *n <= i64::from(i32::MAX)) {
         return n;
@@ -852,11 +851,11 @@ pub(crate) fn number_of(symbol: &Arc<str>, numbers: &mut FxHashMap<Arc<str>, i64
     const FIRST: i64 = 1_000_000;
     if numbers.len() < NUMBERED_MAX {
         let n = FIRST + numbers.len() as i64;
-        numbers.insert(symbol.clone(), n);
+        numbers.insert(Arc::from(symbol), n);
         return n;
     }
     let hashed = FIRST + NUMBERED_MAX as i64;
-    let hash = rustc_hash::FxBuildHasher.hash_one(&**symbol);
+    let hash = rustc_hash::FxBuildHasher.hash_one(symbol);
     hashed + (hash % (i64::from(i32::MAX) - hashed + 1) as u64) as i64
 }
 
@@ -1078,7 +1077,7 @@ mod tests {
     #[test]
     fn numbers_stay_with_symbols_in_bounded_memory() {
         let mut numbers = FxHashMap::default();
-        let mut number = |s: &str| number_of(&Arc::from(s), &mut numbers);
+        let mut number = |s: &str| number_of(s, &mut numbers);
         assert_eq!(
             (number("co12"), number("wo7"), number("7"), number("co99999999999")),
             (12, 7, 7, 1_000_000)
@@ -1093,9 +1092,8 @@ mod tests {
             first.push(n);
         }
         assert_eq!(numbers.len(), NUMBERED_MAX);
-        let again: Vec<i64> = (0..NUMBERED_MAX + 100)
-            .map(|i| number_of(&Arc::from(format!("car-{i}-x")), &mut numbers))
-            .collect();
+        let again: Vec<i64> =
+            (0..NUMBERED_MAX + 100).map(|i| number_of(&format!("car-{i}-x"), &mut numbers)).collect();
         assert_eq!(again, first);
     }
 

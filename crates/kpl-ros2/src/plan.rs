@@ -348,8 +348,6 @@ impl LayoutBuilder<'_> {
 #[derive(Debug, Clone)]
 pub(crate) struct EncodePlan {
     ops: Vec<EOp>,
-    /// Per entry, its value when it is a literal.
-    literals: Vec<Option<Leaf>>,
     /// The entries that are not literals: evaluated per sample.
     dynamic: Vec<usize>,
     /// Per entry, whether its parts go into float fields (a vec2's x and y).
@@ -419,7 +417,7 @@ impl EncodePlan {
         builder.walk(root, &mut Vec::new(), &root_assign, true, &mut ops, &mut pending)?;
         LayoutBuilder::flush(&mut pending, &mut ops)?;
         let has_each = ops.iter().any(|op| matches!(op, EOp::Each(..)));
-        Some(EncodePlan { ops, literals, dynamic, float_parts, has_each })
+        Some(EncodePlan { ops, dynamic, float_parts, has_each })
     }
 
     /// Writes the message of `value` at `valid` into `out` (cleared first, with the CDR header);
@@ -454,7 +452,7 @@ impl EncodePlan {
         if !self.has_each {
             self.evaluate(entries, numbers, value, &mut parts)?;
         }
-        let mut w = Writes { out, stamp, literals: &self.literals };
+        let mut w = Writes { out, stamp };
         for op in &self.ops {
             match op {
                 EOp::Each(bound, body) => {
@@ -493,10 +491,7 @@ impl EncodePlan {
                 Source::Literal(_) => return Err(()),
                 Source::Symbol => [Scalar::Str(record.and_then(|r| r.id.as_deref()).unwrap_or("")), none],
                 Source::Number => {
-                    let n = match record.and_then(|r| r.id.as_ref()) {
-                        Some(id) => number_of(id, numbers),
-                        None => number_of(&Arc::from(""), numbers),
-                    };
+                    let n = number_of(record.and_then(|r| r.id.as_deref()).unwrap_or(""), numbers);
                     [Scalar::of(&number_value(n as f64, path.end)).and_then(Scalar::owned).ok_or(())?, none]
                 }
                 Source::Attribute(a) => match (record, &**a) {
@@ -546,7 +541,6 @@ fn attribute(v: &Value, end: End, floats: [bool; 2]) -> Option<[Scalar<'_>; 2]> 
 struct Writes<'a> {
     out: &'a mut Vec<u8>,
     stamp: [Scalar<'static>; 2],
-    literals: &'a [Option<Leaf>],
 }
 
 impl Writes<'_> {
@@ -560,7 +554,8 @@ impl Writes<'_> {
                 let leaf = match *from {
                     From::Stamp(c) => self.stamp[usize::from(c)],
                     From::Entry(k, c) => parts[k][usize::from(c)],
-                    From::Literal(k) => self.literals[k].as_ref().ok_or(())?.scalar(),
+                    // Literals are in the precomputed runs (`LayoutBuilder::walk`).
+                    From::Literal(_) => return Err(()),
                 };
                 write_leaf(self.out, 4, *p, leaf)
             }
