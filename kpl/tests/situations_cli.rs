@@ -113,6 +113,31 @@ fn overtakes_and_speeding_are_recognised_with_precision_and_recall_over_0_9() {
     assert!(table.status.success());
     let text = String::from_utf8_lossy(&table.stdout);
     assert!(text.lines().any(|l| l.starts_with("overtake")), "{text}");
+    assert!(text.lines().any(|l| l.starts_with("speeding")), "{text}");
+
+    // A recording with overtakes alone (a spec with no speeding monitor, and no summary.json
+    // beside it) is not scored as a speeding recall of 0: the kind is named under the table.
+    let run = situations_run("sumo_situations", 0);
+    let only = std::env::temp_dir().join(format!("kpl-situations-cli-{}-only-overtakes", std::process::id()));
+    let _ = std::fs::remove_dir_all(&only);
+    std::fs::create_dir_all(&only).unwrap();
+    let lines: String = std::fs::read_to_string(run.join("situations.jsonl"))
+        .unwrap()
+        .lines()
+        .filter(|l| l.contains("\"stream\":\"overtake\""))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert!(!lines.is_empty());
+    std::fs::write(only.join("situations.jsonl"), lines).unwrap();
+    std::fs::copy(run.join("tracks.jsonl"), only.join("tracks.jsonl")).unwrap();
+    let traffic = format!("{OVERTAKE}/fcd.xml.gz");
+    let out = kpl(&["situations", only.to_str().unwrap(), "--traffic", &traffic]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.lines().any(|l| l.starts_with("overtake")), "{text}");
+    assert!(!text.lines().any(|l| l.starts_with("speeding")), "{text}");
+    let note = text.lines().find(|l| l.starts_with("not recognised in this recording")).unwrap_or_default();
+    assert!(note.contains("speeding (") && note.contains("no summary.json"), "{text}");
 }
 
 #[test]

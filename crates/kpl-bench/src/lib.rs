@@ -9,6 +9,8 @@
 //!   (`kpl bench runtime`).
 //! - [`situations`]: the situation monitors of `specs/traffic/sumo_situations.kpl` over N cars
 //!   (`kpl bench situations`).
+//! - [`chronicles`]: the chronicles of the shipped specs over the same cars, gated and not
+//!   (`kpl bench chronicles`).
 //! - [`python`]: a Python unit's call against a Rust unit's, in simulated time (`kpl bench python`).
 //! - [`mtl`]: the MTL engine on the Timescales properties ([`timescales`]), against R2U2 when
 //!   built with the `r2u2` feature, and DyKnow's link conditions (`kpl bench mtl`).
@@ -21,6 +23,7 @@
 #![allow(clippy::disallowed_methods)] // benchmarks time work: see the module doc
 
 pub mod anchor;
+pub mod chronicles;
 pub mod clock;
 pub mod mtl;
 pub mod python;

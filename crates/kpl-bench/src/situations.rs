@@ -49,9 +49,9 @@ const SPACING_M: f64 = 30.0;
 const PERIOD_US: Time = 100_000;
 
 /// Synthetic cars at 10 Hz (module doc).
-struct Highway {
-    cars: u32,
-    seconds: u32,
+pub(crate) struct Highway {
+    pub(crate) cars: u32,
+    pub(crate) seconds: u32,
 }
 
 impl Highway {
@@ -113,11 +113,11 @@ impl Source for Highway {
 
 /// Whether a sample is a situation reported (a `true` episode: ungated pair monitors also report
 /// the `false` ones of pairs far apart).
-fn is_situation(input: &Input<'_>) -> bool {
+pub(crate) fn is_situation(input: &Input<'_>) -> bool {
     matches!(input.trigger_value(), Some(Value::Record(r)) if r.get("verdict") == Some(&Value::Bool(true)))
 }
 
-fn registry(counted: Arc<AtomicU64>) -> Registry {
+pub(crate) fn registry(counted: Arc<AtomicU64>) -> Registry {
     let mut registry = kpl_std::registry();
     registry.add_source(
         Entry::new(EntryKind::Source, "bench.highway", "Synthetic cars on a four-lane road at 10 Hz.")

@@ -13,6 +13,7 @@
 //!   raw threshold would make flicker.
 //! - [`recognise`]: the incremental recogniser, a partial instance per candidate binding,
 //!   dropped when its deadline passes.
+//! - [`merge`]: one report per situation, where several recognitions tell of the same one.
 //!
 //! ```
 //! use kpl_chronicle::model::{Chronicle, Event, Pattern, SourceId};
@@ -41,6 +42,7 @@
 //! ```
 
 pub mod fluent;
+pub mod merge;
 pub mod model;
 pub mod recognise;
 pub mod stn;

@@ -6,7 +6,9 @@
 //! with (binding, and the minimal network's bounds against every node already matched), keeping
 //! the instance it extends, and starts a new one. An instance is dropped as soon as its deadline
 //! passes (the latest time its earliest-due open node may still occur), so an instance never lives
-//! longer than the chronicle's window. A complete instance is checked against its `hold` and
+//! longer than the chronicle's window. Instances are grouped by the objects bound to the
+//! parameters that every event binds, so an event is tried only against the instances of its own
+//! objects. A complete instance is checked against its `hold` and
 //! `never` conditions when its step is done (so every event at that instant is known), and each
 //! one that passes is a [`Recognition`] whose valid time is the step's time. Recognitions are
 //! events of the chronicle's own source for chronicles that use them, at the same step (chronicles
@@ -92,6 +94,37 @@ struct Partial<O> {
     deadline: Time,
 }
 
+/// A chronicle's partial instances, grouped by the objects bound to the parameters that every one
+/// of its events binds (for the overtake, both cars): an event can only extend the instances of its
+/// own group, so it is tried against those alone. A chronicle with no such parameter has one group.
+#[derive(Debug)]
+struct Instances<O> {
+    /// The parameters every event binds, in increasing order.
+    key_params: Vec<usize>,
+    groups: HashMap<Vec<O>, Vec<Partial<O>>>,
+    len: usize,
+}
+
+impl<O: Clone + Eq + Hash> Instances<O> {
+    fn new(compiled: &Compiled) -> Instances<O> {
+        let events = &compiled.chronicle.events;
+        let key_params: Vec<usize> =
+            (0..compiled.chronicle.params).filter(|p| events.iter().all(|e| e.args.contains(p))).collect();
+        Instances { key_params, groups: HashMap::new(), len: 0 }
+    }
+
+    /// The group of an event matching `pattern` with these arguments.
+    fn key(&self, pattern: &Pattern, args: &[O]) -> Vec<O> {
+        if self.key_params.is_empty() {
+            return Vec::new();
+        }
+        self.key_params
+            .iter()
+            .filter_map(|p| pattern.args.iter().position(|a| a == p).map(|k| args[k].clone()))
+            .collect()
+    }
+}
+
 /// The events of one fluent (or point source) on one tuple of objects within the window.
 #[derive(Debug, Default)]
 struct History {
@@ -105,7 +138,7 @@ pub struct Recogniser<O> {
     chronicles: Vec<Compiled>,
     /// Chronicle indices, each after the chronicles whose recognitions it uses.
     order: Vec<usize>,
-    partial: Vec<Vec<Partial<O>>>,
+    partial: Vec<Instances<O>>,
     logged: HashSet<SourceId>,
     log: HashMap<(SourceId, Vec<O>), History>,
     window: Time,
@@ -124,7 +157,7 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
             logged.extend(c.chronicle.nevers.iter().map(|n| n.pattern.source));
         }
         let window = chronicles.iter().map(|c| c.window).max().unwrap_or(0);
-        let partial = chronicles.iter().map(|_| Vec::new()).collect();
+        let partial = chronicles.iter().map(Instances::new).collect();
         Ok(Recogniser {
             chronicles,
             order,
@@ -181,7 +214,7 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
                 recognitions.push(Recognition { chronicle: c, binding, times, valid_time: time });
             }
         }
-        self.stats.instances = self.partial.iter().map(Vec::len).sum();
+        self.stats.instances = self.partial.iter().map(|i| i.len).sum();
         self.stats.peak_instances = self.stats.peak_instances.max(self.stats.instances);
         Ok(recognitions)
     }
@@ -214,10 +247,17 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
     /// instances it completed.
     fn step_chronicle(&mut self, c: usize, time: Time, batch: &[(Event<O>, u64)]) -> Vec<Partial<O>> {
         let compiled = &self.chronicles[c];
-        let partial = &mut self.partial[c];
-        let before = partial.len();
-        partial.retain(|p| p.deadline >= time);
-        self.stats.expired += (before - partial.len()) as u64;
+        let instances = &mut self.partial[c];
+        let before = instances.len;
+        instances.groups.retain(|_, group| {
+            group.retain(|p| p.deadline >= time);
+            !group.is_empty()
+        });
+        instances.len = instances.groups.values().map(Vec::len).sum();
+        self.stats.expired += (before - instances.len) as u64;
+        // The groups touched, in the order first touched (so that what completes comes out in an
+        // order that does not depend on hashing).
+        let mut touched: Vec<Vec<O>> = Vec::new();
         for (event, occurrence) in batch {
             for (node, pattern) in compiled.chronicle.events.iter().enumerate() {
                 if pattern.source != event.source
@@ -226,14 +266,18 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
                 {
                     continue;
                 }
-                let existing = partial.len();
+                let key = instances.key(pattern, &event.args);
+                let group = instances.groups.entry(key.clone()).or_default();
+                let existing = group.len();
+                let mut added = 0;
                 for i in 0..existing {
-                    if let Some(extended) = extend(compiled, &partial[i], node, event, *occurrence) {
-                        if partial.len() >= self.config.max_instances {
+                    if let Some(extended) = extend(compiled, &group[i], node, event, *occurrence) {
+                        if instances.len + added >= self.config.max_instances {
                             self.stats.refused += 1;
                             continue;
                         }
-                        partial.push(extended);
+                        group.push(extended);
+                        added += 1;
                     }
                 }
                 let fresh = Partial {
@@ -244,19 +288,31 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
                     deadline: Time::MAX,
                 };
                 if let Some(started) = extend(compiled, &fresh, node, event, *occurrence) {
-                    if partial.len() >= self.config.max_instances {
+                    if instances.len + added >= self.config.max_instances {
                         self.stats.refused += 1;
                     } else {
-                        partial.push(started);
+                        group.push(started);
+                        added += 1;
                     }
+                }
+                instances.len += added;
+                if added > 0 && !touched.contains(&key) {
+                    touched.push(key);
                 }
             }
         }
         let mut done = Vec::new();
-        let mut i = 0;
-        while i < partial.len() {
-            if partial[i].open == 0 { done.push(partial.swap_remove(i)) } else { i += 1 }
+        for key in touched {
+            let Some(group) = instances.groups.get_mut(&key) else { continue };
+            let mut i = 0;
+            while i < group.len() {
+                if group[i].open == 0 { done.push(group.swap_remove(i)) } else { i += 1 }
+            }
+            if group.is_empty() {
+                instances.groups.remove(&key);
+            }
         }
+        instances.len -= done.len();
         done
     }
 
@@ -300,13 +356,15 @@ fn extend<O: Clone + Eq>(
         return None;
     }
     let pattern: &Pattern = &compiled.chronicle.events[node];
-    let mut binding = instance.binding.clone();
-    for (param, object) in pattern.args.iter().zip(&event.args) {
-        match &binding[*param] {
-            Some(bound) if bound != object => return None,
-            Some(_) => {}
-            None => binding[*param] = Some(object.clone()),
-        }
+    // The binding and the network are checked before anything is copied: most instances an event
+    // is tried against are about other objects.
+    let bound_elsewhere = pattern.args.iter().zip(&event.args).enumerate().any(|(k, (param, object))| {
+        // Bound by the instance, or by an earlier argument of this event (a parameter twice).
+        let earlier = pattern.args[..k].iter().position(|p| p == param).map(|j| &event.args[j]);
+        instance.binding[*param].as_ref().or(earlier).is_some_and(|bound| bound != object)
+    });
+    if bound_elsewhere {
+        return None;
     }
     let consistent = instance
         .times
@@ -315,6 +373,10 @@ fn extend<O: Clone + Eq>(
         .all(|(m, t)| t.is_none_or(|t| compiled.minimal.allows(m, node, event.time.saturating_sub(t))));
     if !consistent {
         return None;
+    }
+    let mut binding = instance.binding.clone();
+    for (param, object) in pattern.args.iter().zip(&event.args) {
+        binding[*param].get_or_insert_with(|| object.clone());
     }
     let mut times = instance.times.clone();
     times[node] = Some(event.time);

@@ -4,7 +4,10 @@
 //! chronicle, carries one sample per recognition: `{PARAM: SYMBOL, ..., verdict: true, start: µs,
 //! end: µs, times: [µs, ...]}` (the objects bound to the parameters, the time of its first and
 //! last event, the time of each event in the order written), at the valid time of its last event.
-//! A sink records it like a monitor's episodes, and `kpl situations` scores it like them.
+//! A sink records it like a monitor's episodes, and `kpl situations` scores it like them. A
+//! recognition of a binding whose first event comes before the end of one already sent for that
+//! binding tells of the same situation (a relation flickered) and is not sent
+//! (`kpl_chronicle::merge`; the summary counts them).
 //!
 //! The process is synchronized over the object streams of its parameters' types (and of those of
 //! the chronicles it uses, which it recognises itself, at the same instants, so that a chronicle
@@ -16,20 +19,43 @@
 //! (a missing attribute) is false and counted as an error of the process. Deadlines pass with the
 //! states' valid times: the recogniser is stepped at every state, with or without events.
 //!
+//! Gating: a predicate over two objects is evaluated for every pair of distinct present objects
+//! only when nothing bounds where it can matter. Otherwise only for some pairs, which gives the
+//! events of ungated evaluation wherever a recognition can use them:
+//! - *Own gate*: the predicate's formula is false beyond a distance (`kpl_mtl::gate`, `Horizon::Now`,
+//!   as a pair monitor's: `close(a, b, 50.0)` or `xydist(a, b) < 10.0` among its top-level
+//!   conjuncts; with hysteresis, ENTER's). It is evaluated for the pairs within that distance,
+//!   found with a grid, and for the pairs true at the previous state; every other pair is false.
+//! - *A chronicle's gate*: a `hold` over the same two parameters whose own predicate has an own
+//!   gate and whose `from` and `to` events come first and last in every instance (by the minimal
+//!   network) keeps every event of every recognition within that distance, so the chronicle's
+//!   other predicates over those two parameters (not hysteresis fluents, not holds' own) are
+//!   evaluated only for the pairs within it. A pair's value beyond it is not known and no event is
+//!   given there; a pair that comes within it is also evaluated on the previous state's objects,
+//!   so its change at that state is exact.
+//!
+//! Positions are the objects' `pos`; an object without a finite one is within no gate (as for
+//! monitors). `kpl bench chronicles` measures gating against evaluating every pair, and checks
+//! that both recognise the same.
+//!
 //! Memory: the recogniser keeps at most `max_instances` (10,000) partial instances per chronicle
 //! (refusals are counted in the run's summary) and the events of the last window for its
-//! conditions; this adapter keeps one bit per predicate and tuple of present objects (`n^k` for
-//! `n` objects and a predicate over `k` parameters). Monitors' verdicts as events are not fed yet
-//! (`kpl check` says so with W0205): such an event never occurs.
+//! conditions; this adapter keeps, per predicate, the tuples true at the previous state (with a
+//! chronicle's gate, every pair evaluated there) and, with a chronicle's gate, the previous
+//! state's objects. Monitors' verdicts as events are not fed yet (`kpl check` says so with W0205):
+//! such an event never occurs.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
 use kpl_chronicle::fluent;
-use kpl_chronicle::model::{Chronicle, Event, Hold, Never, Pattern, SourceId};
+use kpl_chronicle::merge::Merge;
+use kpl_chronicle::model::{Chronicle, Compiled, Event, Hold, Never, Pattern, SourceId};
 use kpl_chronicle::recognise::{Config, Recogniser, Recognition};
 use kpl_core::{Record, Time, TimeUnit, Value, ValueType};
-use kpl_mtl::{Context, Formula, Progressor, SlotState};
+use kpl_mtl::gate::{GateGrid, Horizon, PairGate};
+
+use kpl_mtl::{Context, Formula, Progressor, SlotId, SlotState};
 use kpl_runtime::Registry;
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::{BuildContext, BuildError};
@@ -38,7 +64,7 @@ use kpl_semantic::hir::{self, HYSTERESIS};
 
 /// Chronicle recognisers are built by this adapter.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.set_chronicle_processes(|ctx| Ok(Box::new(SyncUnit(build(ctx)?))));
+    registry.set_chronicle_processes(|ctx| process(ctx, true));
 }
 
 /// A predicate over some parameters of a chronicle, evaluated for tuples of objects.
@@ -49,14 +75,36 @@ struct Predicate {
     leave: Option<Progressor>,
     /// Per position: the slot the object goes into and the object type of the parameter.
     slots: Vec<(usize, String)>,
-    slot_count: usize,
-    /// The value of each tuple of present objects at the previous state.
+    /// The chronicle parameters it is over (indices, in order).
+    args: Vec<usize>,
+    /// Which tuples are evaluated ([`Gate`]).
+    gate: Gate,
+    /// The state an evaluation reads (its slots overwritten for each tuple).
+    scratch: SlotState,
+    /// The tuples that were true at the previous state (with [`Gate::Chronicle`]: every tuple
+    /// evaluated there, with its value).
     last: HashMap<Vec<Arc<str>>, bool>,
+}
+
+/// Which tuples of a predicate over two objects are evaluated at a state (module doc, "Gating").
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Gate {
+    /// Every tuple.
+    None,
+    /// The pairs within this distance (and those true at the previous state): beyond it the
+    /// predicate is false (`kpl_mtl::gate`, read off its formula).
+    Own(f64),
+    /// The pairs within this distance: beyond it the predicate's value matters to no
+    /// recognition, since every recognition holds a predicate gated so from its first event to
+    /// its last.
+    Chronicle(f64),
 }
 
 /// Numbers event sources and compiles the predicates of a set of chronicles.
 struct Builder<'a> {
     registry: &'a Registry,
+    /// Whether predicates are gated (module doc); off, every tuple is evaluated.
+    gated: bool,
     predicates: Vec<Predicate>,
     next: u32,
     /// Chronicle name -> the source of its recognitions.
@@ -83,17 +131,25 @@ impl Builder<'_> {
             .iter()
             .map(|&a| (ctx.declare_value(&c.params[a].0) as usize, c.params[a].1.clone()))
             .collect();
-        let mut compile = |expr: &kpl_syntax::ast::Expr| {
-            Formula::from_ast(expr, &mut ctx).map(|f| Progressor::new(Arc::new(f))).map_err(|errors| {
+        // The gate of ENTER (of the whole predicate without hysteresis): false beyond it.
+        let mut gate = None;
+        let mut compile = |expr: &kpl_syntax::ast::Expr, gated: bool| {
+            let error = |errors: Vec<kpl_mtl::CompileError>| {
                 let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
                 format!("chronicle `{}`: {}", c.name, messages.join("; "))
-            })
+            };
+            let mtl = kpl_mtl::lower(expr, &mut ctx).map_err(error)?;
+            if gated && let [a, b] = slots.as_slice() {
+                gate = PairGate::new(&ctx, a.0 as SlotId, b.0 as SlotId).distance(&mtl, Horizon::Now);
+            }
+            let formula = Formula::new(&mtl, &ctx).map_err(|e| format!("chronicle `{}`: {e}", c.name))?;
+            Ok::<_, String>(Progressor::new(Arc::new(formula)))
         };
         let (progressor, leave) = match &expr.kind {
             kpl_syntax::ast::ExprKind::Call { func, args } if func.name == HYSTERESIS && args.len() == 2 => {
-                (compile(&args[0])?, Some(compile(&args[1])?))
+                (compile(&args[0], true)?, Some(compile(&args[1], false)?))
             }
-            _ => (compile(expr)?, None),
+            _ => (compile(expr, true)?, None),
         };
         let source = self.fresh();
         self.predicates.push(Predicate {
@@ -101,7 +157,9 @@ impl Builder<'_> {
             progressor,
             leave,
             slots,
-            slot_count: ctx.slot_names().len(),
+            args: args.to_vec(),
+            scratch: SlotState { values: vec![None; ctx.slot_names().len()], objects: Vec::new() },
+            gate: if self.gated { gate.map_or(Gate::None, Gate::Own) } else { Gate::None },
             last: HashMap::new(),
         });
         Ok(source)
@@ -192,23 +250,71 @@ fn closure<'s>(spec: &'s hir::Spec, name: &str) -> Result<Vec<&'s hir::Chronicle
     Ok(out)
 }
 
-fn build(ctx: &mut BuildContext<'_>) -> Result<ChronicleUnit, BuildError> {
+/// Gives the ungated predicates of a chronicle over two parameters the gate of a `hold` over the
+/// same two that spans every event (module doc, "Gating"). Hysteresis fluents keep no gate (their
+/// value depends on states that were not evaluated), nor do the holds' own predicates (a hold reads
+/// a fluent's value, which must be known before its `from` event).
+fn gate_by_holds(model: &Compiled, predicates: &mut [Predicate]) {
+    let chronicle = &model.chronicle;
+    let nodes = chronicle.events.len();
+    let spans = |from: usize, to: usize| {
+        (0..nodes).all(|k| {
+            model.minimal.lower(from, k).is_some_and(|lo| lo >= 0)
+                && model.minimal.lower(k, to).is_some_and(|lo| lo >= 0)
+        })
+    };
+    let hold_sources: HashSet<SourceId> = chronicle.holds.iter().map(|h| h.source).collect();
+    let mut radius: Option<(f64, [usize; 2])> = None;
+    for hold in chronicle.holds.iter().filter(|h| spans(h.from, h.to)) {
+        let Some(p) = predicates.iter().find(|p| p.source == hold.source) else { continue };
+        if let (Gate::Own(r), [a, b]) = (p.gate, p.args.as_slice())
+            && radius.is_none_or(|(best, _)| r < best)
+        {
+            radius = Some((r, [*a, *b]));
+        }
+    }
+    let Some((r, pair)) = radius else { return };
+    for p in predicates.iter_mut() {
+        if p.gate == Gate::None && p.leave.is_none() && !hold_sources.contains(&p.source) && p.args == pair {
+            p.gate = Gate::Chronicle(r);
+        }
+    }
+}
+
+/// Builds the recogniser process of a chronicle; `gated: false` evaluates every tuple of objects
+/// (the baseline of `kpl bench chronicles`).
+pub fn process(
+    ctx: &mut BuildContext<'_>,
+    gated: bool,
+) -> Result<Box<dyn kpl_runtime::process::AsyncUnit>, BuildError> {
+    Ok(Box::new(SyncUnit(build(ctx, gated)?)))
+}
+
+fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, BuildError> {
     let hir::ProcessKind::Chronicle(name) = &ctx.process.kind else {
         return Err(ctx.error("planned as a chronicle, but it is not one"));
     };
     let chronicles = closure(ctx.spec, name).map_err(|e| ctx.error(e))?;
     let mut builder = Builder {
         registry: ctx.registry,
+        gated,
         predicates: Vec::new(),
         next: 0,
         chronicle_sources: BTreeMap::new(),
     };
     let mut compiled = Vec::new();
     for c in &chronicles {
-        let model = builder.chronicle(c).map_err(|e| ctx.error(e))?;
-        compiled.push(model.compile().map_err(|e| ctx.error(e.to_string()))?);
+        let first = builder.predicates.len();
+        let model = builder
+            .chronicle(c)
+            .map_err(|e| ctx.error(e))?
+            .compile()
+            .map_err(|e| ctx.error(e.to_string()))?;
+        gate_by_holds(&model, &mut builder.predicates[first..]);
+        compiled.push(model);
     }
     let own = compiled.len() - 1;
+    let window = compiled.iter().map(|c| c.window).max().unwrap_or(0);
     let recogniser = Recogniser::new(compiled, Config::default()).map_err(|e| ctx.error(e.to_string()))?;
     // Which inputs carry objects of which type.
     let input_types: Vec<Option<String>> = ctx
@@ -248,6 +354,8 @@ fn build(ctx: &mut BuildContext<'_>) -> Result<ChronicleUnit, BuildError> {
         feeds,
         stats: ctx.stats.clone(),
         undecided_warned: false,
+        previous: None,
+        merge: Merge::new(window),
     })
 }
 
@@ -261,6 +369,11 @@ struct ChronicleUnit {
     feeds: BTreeMap<String, Vec<usize>>,
     stats: Arc<ProcessStats>,
     undecided_warned: bool,
+    /// The previous state's valid time and objects by type and symbol, kept when a predicate has a
+    /// chronicle's gate (a pair that comes within it is evaluated on them too).
+    previous: Option<(Time, BTreeMap<String, HashMap<Arc<str>, Value>>)>,
+    /// One output sample per situation (`kpl_chronicle::merge`).
+    merge: Merge<Arc<str>>,
 }
 
 /// The present objects of one type (those with a symbol, each symbol once).
@@ -295,48 +408,57 @@ impl ChronicleUnit {
     fn events(&mut self, valid: Time, objects: &BTreeMap<String, Objects<'_>>) -> Vec<Event<Arc<str>>> {
         let mut events = Vec::new();
         let mut undecided = 0u64;
+        let previous = self.previous.take();
+        let present: BTreeMap<&str, HashSet<&str>> =
+            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(id, _)| &**id).collect())).collect();
         for p in &mut self.predicates {
             let domains: Vec<&[(Arc<str>, &Value)]> =
                 p.slots.iter().map(|(_, ty)| objects.get(ty).map_or(&[][..], Vec::as_slice)).collect();
-            let mut now: HashMap<Vec<Arc<str>>, bool> = HashMap::with_capacity(p.last.len());
-            let mut state = SlotState { values: vec![None; p.slot_count], objects: Vec::new() };
-            for_each_tuple(&domains, &mut |tuple: &[usize]| {
-                let ids: Vec<Arc<str>> = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0.clone()).collect();
-                for ((slot, _), (&k, d)) in p.slots.iter().zip(tuple.iter().zip(&domains)) {
-                    state.values[*slot] = Some(d[k].1.clone());
-                }
-                let mut eval = |progressor: &mut Progressor| {
-                    progressor.reset();
-                    match progressor.step(valid, &state) {
-                        Ok(Some(v)) => v,
-                        Ok(None) => {
-                            undecided += 1;
-                            false
-                        }
-                        Err(e) => {
-                            self.stats.error(format!("at {valid}: {e}"));
-                            false
-                        }
-                    }
-                };
-                let enter = eval(&mut p.progressor);
-                let value = match &mut p.leave {
-                    None => enter,
-                    Some(leave) => {
-                        let previous = p.last.get(&ids).copied().unwrap_or(false);
-                        fluent::step(previous, enter, eval(leave))
-                    }
-                };
-                now.insert(ids, value);
-            });
+            let tuples = candidates(p, &domains);
+            let mut now: HashMap<Vec<Arc<str>>, bool> = HashMap::with_capacity(tuples.len());
             let mut changes: Vec<(Vec<Arc<str>>, bool)> = Vec::new();
-            for (ids, &value) in &now {
-                if p.last.get(ids).copied().unwrap_or(false) != value {
+            for tuple in tuples {
+                let ids: Vec<Arc<str>> = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0.clone()).collect();
+                let before = match p.last.get(&ids) {
+                    Some(&value) => value,
+                    // Not evaluated at the previous state: beyond an own gate (or absent) it was
+                    // false; beyond a chronicle's gate it was not known, so it is evaluated now
+                    // on the previous state's objects.
+                    None => match (p.gate, &previous) {
+                        (Gate::Chronicle(_), Some((t, before))) => {
+                            let items: Option<Vec<&Value>> = ids
+                                .iter()
+                                .zip(&p.slots)
+                                .map(|(id, (_, ty))| before.get(ty).and_then(|m| m.get(id)))
+                                .collect();
+                            items.is_some_and(|items| evaluate(p, *t, &items, &mut undecided, &self.stats).0)
+                        }
+                        _ => false,
+                    },
+                };
+                let items: Vec<&Value> = tuple.iter().zip(&domains).map(|(&k, d)| d[k].1).collect();
+                let (enter, leave) = evaluate(p, valid, &items, &mut undecided, &self.stats);
+                let value = match leave {
+                    None => enter,
+                    Some(leave) => fluent::step(before, enter, leave),
+                };
+                if value != before {
                     changes.push((ids.clone(), value));
                 }
+                if value || p.gate.keeps_false() {
+                    now.insert(ids, value);
+                }
             }
+            // True at the previous state, not evaluated now: gone (false), or beyond a
+            // chronicle's gate (not known, and no recognition needs it).
+            let present = |ids: &[Arc<str>]| {
+                ids.iter()
+                    .zip(&p.slots)
+                    .all(|(id, (_, ty))| present.get(ty.as_str()).is_some_and(|o| o.contains(&**id)))
+            };
             for (ids, &value) in &p.last {
-                if value && !now.contains_key(ids) {
+                if value && !now.contains_key(ids) && !(matches!(p.gate, Gate::Chronicle(_)) && present(ids))
+                {
                     changes.push((ids.clone(), false));
                 }
             }
@@ -348,6 +470,13 @@ impl ChronicleUnit {
                 time: valid,
             }));
             p.last = now;
+        }
+        if self.predicates.iter().any(|p| matches!(p.gate, Gate::Chronicle(_))) {
+            let kept = objects
+                .iter()
+                .map(|(ty, o)| (ty.clone(), o.iter().map(|(id, v)| (id.clone(), (*v).clone())).collect()))
+                .collect();
+            self.previous = Some((valid, kept));
         }
         if undecided > 0 && !self.undecided_warned {
             self.undecided_warned = true;
@@ -374,11 +503,103 @@ impl ChronicleUnit {
     fn report(&self) {
         let s = self.recogniser.stats();
         self.stats.result("recognitions", s.recognitions);
+        self.stats
+            .result("recognitions merged into an earlier one of the same situation", self.merge.merged());
         self.stats.result("partial instances at most", s.peak_instances as u64);
         self.stats.result("partial instances expired", s.expired);
         self.stats.result("instances refused (max_instances reached)", s.refused);
         self.stats.result("complete instances failing a hold/never condition", s.failed_conditions);
     }
+}
+
+impl Gate {
+    /// Whether the tuples evaluated false are kept for the next state: beyond a chronicle's gate
+    /// a tuple's value is not known, so "not kept" cannot mean false.
+    fn keeps_false(self) -> bool {
+        matches!(self, Gate::Chronicle(_))
+    }
+}
+
+/// ENTER's value (the predicate's) for these objects at `valid`, and LEAVE's with hysteresis. A
+/// predicate that one state does not decide, or that fails, is false.
+fn evaluate(
+    p: &mut Predicate,
+    valid: Time,
+    items: &[&Value],
+    undecided: &mut u64,
+    stats: &ProcessStats,
+) -> (bool, Option<bool>) {
+    for ((slot, _), item) in p.slots.iter().zip(items) {
+        p.scratch.values[*slot] = Some((*item).clone());
+    }
+    let state = &p.scratch;
+    let mut eval = |progressor: &mut Progressor| {
+        progressor.reset();
+        match progressor.step(valid, state) {
+            Ok(Some(v)) => v,
+            Ok(None) => {
+                *undecided += 1;
+                false
+            }
+            Err(e) => {
+                stats.error(format!("at {valid}: {e}"));
+                false
+            }
+        }
+    };
+    let enter = eval(&mut p.progressor);
+    let leave = p.leave.as_mut().map(&mut eval);
+    (enter, leave)
+}
+
+/// The tuples of objects (indices into `domains`, one per slot) to evaluate `p` for at this state
+/// (module doc, "Gating"): every tuple of distinct objects, or with a gate over two slots the
+/// pairs within it (found with a grid; an object without a finite `pos` is within no gate) and,
+/// for an own gate, the pairs that were true at the previous state.
+fn candidates(p: &Predicate, domains: &[&[(Arc<str>, &Value)]]) -> Vec<Vec<usize>> {
+    let mut out = Vec::new();
+    let radius = match p.gate {
+        Gate::Own(r) | Gate::Chronicle(r) => Some(r),
+        Gate::None => None,
+    };
+    let (Some(radius), [da, db]) = (radius, domains) else {
+        for_each_tuple(domains, &mut |t| out.push(t.to_vec()));
+        return out;
+    };
+    let pos = |v: &Value| match v {
+        Value::Record(r) => {
+            r.get("pos").and_then(Value::as_vec2).filter(|q| q[0].is_finite() && q[1].is_finite())
+        }
+        _ => None,
+    };
+    let mut grid = GateGrid::new(radius);
+    for (j, (_, v)) in db.iter().enumerate() {
+        if let Some(q) = pos(v) {
+            grid.insert(j, 0, q);
+        }
+    }
+    grid.finish();
+    let mut near = Vec::new();
+    for (i, (id, v)) in da.iter().enumerate() {
+        let Some(q) = pos(v) else { continue };
+        grid.near(Some(q), &mut near);
+        out.extend(near.iter().filter(|&&j| db[j].0 != *id).map(|&j| vec![i, j]));
+    }
+    if matches!(p.gate, Gate::Own(_)) && !p.last.is_empty() {
+        let index = |d: &[(Arc<str>, &Value)]| -> HashMap<Arc<str>, usize> {
+            d.iter().enumerate().map(|(k, (id, _))| (id.clone(), k)).collect()
+        };
+        let (ia, ib) = (index(da), index(db));
+        let within: HashSet<(usize, usize)> = out.iter().map(|t| (t[0], t[1])).collect();
+        for (ids, _) in p.last.iter().filter(|(_, v)| **v) {
+            if let (Some(&i), Some(&j)) = (ia.get(&ids[0]), ib.get(&ids[1]))
+                && !within.contains(&(i, j))
+            {
+                out.push(vec![i, j]);
+            }
+        }
+    }
+    out
 }
 
 /// Calls `f` with every tuple of indices into `domains` whose objects are distinct.
@@ -413,7 +634,9 @@ impl Unit for ChronicleUnit {
         match self.recogniser.step(input.valid, events) {
             Ok(found) => {
                 for r in found.iter().filter(|r| r.chronicle == self.own) {
-                    out.emit_at(r.valid_time, self.recognition(r));
+                    if self.merge.admit(r) {
+                        out.emit_at(r.valid_time, self.recognition(r));
+                    }
                 }
             }
             Err(late) => self.stats.error(late.to_string()),

@@ -20,7 +20,7 @@
 mod aapa;
 pub mod anchor;
 mod camera;
-mod chronicle;
+pub mod chronicle;
 pub mod driver;
 pub mod python;
 pub mod registry;

@@ -4,13 +4,16 @@
 //! tracker, and every recognition it recorded is what the pure
 //! recogniser (`kpl-chronicle`) gives on the events computed here, independently of the adapter,
 //! from the recorded cars: the spec's predicates written out in Rust over the traffic relations'
-//! implementations, a tuple's first value a change from false, a tuple that is gone false.
+//! implementations, a tuple's first value a change from false, a tuple that is gone false, for
+//! every pair of cars (the adapter gates pairs by distance: that must change nothing), and the
+//! recognitions of one situation merged as the adapter merges them.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use kpl_chronicle::merge::Merge;
 use kpl_chronicle::model::{Chronicle, Event, Hold, Pattern, SourceId};
 use kpl_chronicle::recognise::{Config, Recogniser};
 use kpl_chronicle::stn::Constraint;
@@ -132,6 +135,7 @@ fn expected(
     let relations = Relations::new();
     let mut recogniser: Recogniser<Arc<str>> =
         Recogniser::new(vec![model.compile().unwrap()], Config::default()).unwrap();
+    let mut merge = Merge::new(recogniser.chronicles()[0].window);
     let mut previous: Vec<BTreeMap<(String, String), bool>> = vec![BTreeMap::new(); 4];
     let mut found = BTreeSet::new();
     let mut events_total = 0;
@@ -173,7 +177,10 @@ fn expected(
         }
         events_total += events.len();
         for r in recogniser.step(*valid, events).unwrap() {
-            found.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
+            // One report per situation, as the adapter sends them (`kpl_chronicle::merge`).
+            if merge.admit(&r) {
+                found.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
+            }
         }
     }
     (found, events_total)

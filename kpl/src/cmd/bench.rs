@@ -19,6 +19,9 @@ pub enum Command {
     /// The situation monitors of specs/traffic/sumo_situations.kpl over 100 to 4,000 cars, with and
     /// without gating of pairs.
     Situations(kpl_bench::situations::Args),
+    /// The chronicles of the shipped specs (sumo_chronicles.kpl, sumo_reckless.kpl) over 100 to
+    /// 2,000 cars, with and without gating of pairs.
+    Chronicles(kpl_bench::chronicles::Args),
     /// A call to a trivial Python unit against a trivial Rust unit, for a float and a list of
     /// 1,000 floats, in simulated time.
     Python(kpl_bench::python::Args),
@@ -37,6 +40,7 @@ pub fn run(command: Command) -> ExitCode {
         Command::Anchor(args) => kpl_bench::anchor::run(&args, out),
         Command::Runtime(args) => kpl_bench::runtime::run(&args, out),
         Command::Situations(args) => kpl_bench::situations::run(&args, out),
+        Command::Chronicles(args) => kpl_bench::chronicles::run(&args, out),
         Command::Python(args) => kpl_bench::python::run(&args, out),
         Command::Zenoh(args) => return crate::transport::bench(args),
         Command::Ros2(args) => return crate::transport::bench_ros2(args),

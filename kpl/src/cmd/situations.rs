@@ -186,7 +186,15 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
     let text = match args.format {
         Format::Table => {
             let left_out = matched.recognised.iter().filter(|r| r.left_out).count();
-            table(&matched.scores, true_situations.entering.len(), left_out, &params, &truth_kinds)
+            let kinds: Vec<&str> = recognised.iter().map(|r| r.kind.as_str()).collect();
+            let streams = run_streams(&args.paths, &kinds);
+            let (shown, absent): (Vec<KindScore>, Vec<KindScore>) =
+                matched.scores.iter().cloned().partition(|s| {
+                    s.recognised > 0 || streams.as_ref().is_some_and(|names| names.contains(&s.kind))
+                });
+            let mut text = table(&shown, true_situations.entering.len(), left_out, &params, &truth_kinds);
+            text.push_str(&not_in_run(&absent, streams.is_some()));
+            text
         }
         Format::Json => {
             let truth: Vec<TrueItem<'_>> = truth
@@ -324,6 +332,45 @@ fn jsonl_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
     }
     out.sort();
     Ok(out)
+}
+
+/// The stream names of the run that made the recording, from its `summary.json` (in a recording
+/// directory or the one above it, where `kpl run --out DIR` writes it), if that summary names
+/// every stream whose situations are recorded (else it is another run's, or there is none).
+fn run_streams(paths: &[PathBuf], recorded: &[&str]) -> Option<std::collections::BTreeSet<String>> {
+    const SUMMARY_LIMIT: usize = 64 << 20;
+    for path in paths.iter().filter(|p| p.is_dir()) {
+        for dir in [Some(path.as_path()), path.parent()].into_iter().flatten() {
+            let Ok(bytes) = kpl_core::read::read_file(&dir.join("summary.json"), SUMMARY_LIMIT) else {
+                continue;
+            };
+            let Ok(json) = serde_json::from_slice::<serde_json::Value>(&bytes) else { continue };
+            let names: std::collections::BTreeSet<String> = json["streams"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|s| s["stream"].as_str().map(str::to_string))
+                .collect();
+            if recorded.iter().all(|k| names.contains(*k)) {
+                return Some(names);
+            }
+        }
+    }
+    None
+}
+
+/// The line under the table for the kinds with true situations that the run recognised none of
+/// and had no stream for (a spec without that monitor or chronicle): they are not scored as a
+/// recall of 0.
+fn not_in_run(absent: &[KindScore], known: bool) -> String {
+    let with_truth: Vec<String> =
+        absent.iter().filter(|s| s.truth > 0).map(|s| format!("{} ({} true)", s.kind, s.truth)).collect();
+    if with_truth.is_empty() {
+        return String::new();
+    }
+    let why =
+        if known { "the run has no stream of these kinds" } else { "no summary.json of this run names them" };
+    format!("not recognised in this recording, not scored ({why}): {}\n", with_truth.join(", "))
 }
 
 fn table(
