@@ -257,3 +257,64 @@ fn the_camera_spec_anchors_georeferenced_percepts_in_world_coordinates() {
     );
     assert!(total > 1000 && fraction > 0.8, "{fraction}");
 }
+
+#[test]
+fn a_vehicle_entering_the_image_has_its_world_object_and_car_at_its_percepts_second_frame() {
+    // A percept moving in from outside the image (by its velocity it was out of it a second ago)
+    // is a world object, an on-road object and a car at once (camera_*.kpl's establish
+    // conditions): nothing else can be where it came from. Before, the world object waited half a
+    // second of motion and each level above it 200 ms (seed 7, 60 s: 0 of 20 entries; after: 16).
+    let out = fresh_dir("camera", "highway_entry");
+    run_ok(&["run", "specs/traffic/camera_highway.kpl", "--for", "60s", "--out", out.to_str().unwrap()]);
+    let samples = lines(&out.join("camera_highway/tracks.jsonl"));
+    let mut frames: std::collections::BTreeMap<i64, std::collections::HashMap<&str, &Value>> =
+        std::collections::BTreeMap::new();
+    for s in &samples {
+        frames
+            .entry(s["valid"].as_i64().unwrap())
+            .or_default()
+            .insert(s["stream"].as_str().unwrap(), &s["value"]);
+    }
+    let times: Vec<i64> = frames.keys().copied().collect();
+    // Each vehicle that enters the image during the run: the frame of its first percept.
+    let (mut in_view, mut first_percept) =
+        (std::collections::HashMap::new(), std::collections::HashMap::new());
+    for (k, t) in times.iter().enumerate() {
+        let Some(truth) = frames[t].get("uav.truth") else { continue };
+        for v in truth.as_array().unwrap() {
+            let id = v["id"].as_str().unwrap();
+            let now = v["in_view"].as_bool().unwrap();
+            if now && in_view.get(id) == Some(&false) {
+                first_percept.entry(id).or_insert(None);
+            }
+            in_view.insert(id, now);
+            if let Some(first @ None) = first_percept.get_mut(id)
+                && !v["seen_as"].as_str().unwrap().is_empty()
+            {
+                *first = Some(k);
+            }
+        }
+    }
+    let xy = |v: &Value| [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()];
+    for link in ["vision_world", "onroad_car"] {
+        let (mut found, mut entries) = (0, 0);
+        for (id, first) in &first_percept {
+            let Some(next) = first.and_then(|k| times.get(k + 1)) else { continue };
+            let Some(truth) = frames[next].get("uav.truth") else { continue };
+            let car = truth.as_array().unwrap().iter().find(|v| v["id"] == *id).unwrap();
+            let at = xy(&car["pos"]);
+            entries += 1;
+            let objects = frames[next].get(link).and_then(|v| v.as_array()).cloned().unwrap_or_default();
+            if objects.iter().any(|o| {
+                let p = xy(&o["pos"]);
+                (p[0] - at[0]).hypot(p[1] - at[1]) < 3.0
+            }) {
+                found += 1;
+            }
+        }
+        eprintln!(
+            "camera_highway 60 s: {link}: {found} of {entries} entering vehicles at their percept's second frame"
+        );
+        assert!(entries >= 10 && found * 10 >= entries * 7, "{link}: {found} of {entries}");
+    }
+}
