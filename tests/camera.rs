@@ -261,6 +261,7 @@ fn the_camera_spec_anchors_georeferenced_percepts_in_world_coordinates() {
 
 #[test]
 fn a_vehicle_entering_the_image_has_its_world_object_and_car_at_its_percepts_second_frame() {
+    use std::collections::{BTreeMap, HashMap};
     // A percept moving in from outside the image (by its velocity it was out of it a second ago)
     // is a world object, an on-road object and a car at once (camera_*.kpl's establish
     // conditions): nothing else can be where it came from. Before, the world object waited half a
@@ -268,8 +269,7 @@ fn a_vehicle_entering_the_image_has_its_world_object_and_car_at_its_percepts_sec
     let out = fresh_dir("camera", "highway_entry");
     run_ok(&["run", "specs/traffic/camera_highway.kpl", "--for", "60s", "--out", out.to_str().unwrap()]);
     let samples = lines(&out.join("camera_highway/tracks.jsonl"));
-    let mut frames: std::collections::BTreeMap<i64, std::collections::HashMap<&str, &Value>> =
-        std::collections::BTreeMap::new();
+    let mut frames: BTreeMap<i64, HashMap<&str, &Value>> = BTreeMap::new();
     for s in &samples {
         frames
             .entry(s["valid"].as_i64().unwrap())
@@ -278,8 +278,8 @@ fn a_vehicle_entering_the_image_has_its_world_object_and_car_at_its_percepts_sec
     }
     let times: Vec<i64> = frames.keys().copied().collect();
     // Each vehicle that enters the image during the run: the frame of its first percept.
-    let (mut in_view, mut first_percept) =
-        (std::collections::HashMap::new(), std::collections::HashMap::new());
+    let mut in_view: HashMap<&str, bool> = HashMap::new();
+    let mut first_percept: HashMap<&str, Option<usize>> = HashMap::new();
     for (k, t) in times.iter().enumerate() {
         let Some(truth) = frames[t].get("uav.truth") else { continue };
         for v in truth.as_array().unwrap() {
@@ -289,8 +289,10 @@ fn a_vehicle_entering_the_image_has_its_world_object_and_car_at_its_percepts_sec
                 first_percept.entry(id).or_insert(None);
             }
             in_view.insert(id, now);
-            if let Some(first @ None) = first_percept.get_mut(id)
-                && !v["seen_as"].as_str().unwrap().is_empty()
+            let seen = !v["seen_as"].as_str().unwrap().is_empty();
+            if let Some(first) = first_percept.get_mut(id)
+                && first.is_none()
+                && seen
             {
                 *first = Some(k);
             }
