@@ -50,6 +50,10 @@ Scenarios:
   reckless  overtake's road (600 s) with cars, trucks and reckless drivers (aggressive lane-change
             parameters); truth.jsonl: the reckless cut-ins, computed here from the floating car
             data (reckless_truth), which `kpl situations` reads beside the traffic file.
+  weaving   a straight 3 km road, two lanes one way at 25 m/s (300 s), with SUMO's sublane model
+            (lateral resolution 0.8 m): sober cars, trucks and drunk drivers whose lateral
+            position wanders across the lane marking and whose speed swings; truth.jsonl: the
+            weaving, computed here from the floating car data's posLat (weaving_truth).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -528,8 +532,8 @@ def reckless_truth(folder):
 
 
 # Weaving (probable drunk driving): SUMO's sublane model (lateral resolution 0.8 m) with
-# `drunk` drivers whose lateral position wanders (SL2015's lcSigma 1.0: they drift across the
-# lane marking and back every few seconds, at up to 1.5 m/s sideways) and whose speed swings
+# `drunk` drivers whose lateral position wanders (SL2015's lcSigma 1.5: they drift across the
+# lane marking and back every 5 to 20 s, at up to 2.5 m/s sideways) and whose speed swings
 # (sigma 0.9, speedDev 0.1), beside sober cars (lcSigma 0: they keep to their lane's centre and
 # change lanes to overtake) and trucks.
 WEAVING_VTYPES = """<additional>
@@ -568,7 +572,7 @@ def weaving(s, duration):
 # departure to the last return); a sober overtake is two (out and back). Overlapping weaving
 # windows of one vehicle are one situation, from its first departure to its last return.
 # Samples within SETTLE_S of a vehicle's appearance are left out (the tracker has not anchored it).
-WEAVE_OUT_M = 1.0
+WEAVE_OUT_M = 1.3
 WEAVE_IN_M = 0.5
 WEAVE_COUNT = 3
 WEAVE_WINDOW_S = 30.0
