@@ -50,6 +50,10 @@ Scenarios:
   reckless  overtake's road (600 s) with cars, trucks and reckless drivers (aggressive lane-change
             parameters); truth.jsonl: the reckless cut-ins, computed here from the floating car
             data (reckless_truth), which `kpl situations` reads beside the traffic file.
+  weaving   a straight 3 km road, two lanes one way at 25 m/s (300 s), with SUMO's sublane model
+            (lateral resolution 0.8 m): sober cars, trucks and drunk drivers whose lateral
+            position wanders across the lane marking and whose speed swings; truth.jsonl: the
+            weaving, computed here from the floating car data's posLat (weaving_truth).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -112,13 +116,20 @@ class Sumo:
              "-b", "0", "-e", str(duration), "-p", str(period), "--seed", str(self.seed),
              ] + list(options), self.work)
 
-    def simulate(self, net, routes, fcd, duration, additional=None):
+    def simulate(self, net, routes, fcd, duration, additional=None, lateral_resolution=None):
+        """Runs SUMO. With `lateral_resolution` (metres) SUMO's sublane model is on: lane changes
+        take time (the vehicle moves sideways at most its `maxSpeedLat`), a vehicle's `lane` is
+        the one its centre is on, and the floating car data also has `posLat` (the centre's
+        offset from the lane's centre line, positive to the left)."""
+        attributes = "x,y,angle,type,speed,lane,pos" + (",posLat" if lateral_resolution else "")
         cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
                "--step-length", str(STEP_LENGTH_S), "--seed", str(self.seed), "--no-step-log", "--no-warnings",
                "--fcd-output", fcd, "--device.fcd.period", str(FCD_PERIOD_S),
-               "--fcd-output.attributes", "x,y,angle,type,speed,lane,pos"]
+               "--fcd-output.attributes", attributes]
         if additional:
             cmd += ["--additional-files", additional]
+        if lateral_resolution:
+            cmd += ["--lateral-resolution", str(lateral_resolution)]
         run(cmd, self.work)
 
 
@@ -181,9 +192,10 @@ OVERTAKE_VTYPES = """<additional>
 """
 
 
-def two_lane_road(s, vtypes):
-    """A straight 1.5 km road, two lanes eastbound at 25 m/s, with the scenario's vehicle types."""
-    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="1500" y="0"/>\n</nodes>\n')
+def two_lane_road(s, vtypes, length_m=1500):
+    """A straight road (1.5 km unless said), two lanes eastbound at 25 m/s, with the scenario's
+    vehicle types."""
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="east" x="%d" y="0"/>\n</nodes>\n' % length_m)
     s.write("edges.edg.xml", '<edges>\n'
                 '    <edge id="eastbound" from="west" to="east" numLanes="2" speed="25.0"/>\n'
                 '</edges>\n')
@@ -413,7 +425,9 @@ def reckless(s, duration):
              'departLane="0" departSpeed="max"/>' % duration]
     s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
     # Lane changes take one simulation step (SUMO's default): with `--lanechange.duration 1.5`
-    # the reckless drivers kept headways of 1.1 s or more (docs/situations.md#reckless-overtakes).
+    # the reckless drivers kept headways of 1.1 s or more, with the sublane model (lateral
+    # resolution 0.8 m, SL2015) 0.74 s or more, spread evenly across the 1 s threshold
+    # (docs/situations.md#reckless-overtakes).
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
 
@@ -517,8 +531,102 @@ def reckless_truth(folder):
     return "truth.jsonl: %s" % ", ".join("%d %s" % (n, k) for k, n in sorted(counts.items()))
 
 
+# Weaving (probable drunk driving): SUMO's sublane model (lateral resolution 0.8 m) with
+# `drunk` drivers whose lateral position wanders (SL2015's lcSigma 1.5: they drift across the
+# lane marking and back every 5 to 20 s, at up to 2.5 m/s sideways) and whose speed swings
+# (sigma 0.9, speedDev 0.1), beside sober cars (lcSigma 0: they keep to their lane's centre and
+# change lanes to overtake) and trucks.
+WEAVING_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.05" lcSpeedGain="2" laneChangeModel="SL2015"/>
+    <vType id="drunk" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.1" sigma="0.9" lcSigma="1.5" maxSpeedLat="2.5" laneChangeModel="SL2015" latAlignment="arbitrary"/>
+    <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="17" speedFactor="1.0" speedDev="0.03" laneChangeModel="SL2015"/>
+</additional>
+"""
+WEAVING_LATERAL_RESOLUTION_M = 0.8
+WEAVING_ROAD_M = 3000
+
+
+def weaving(s, duration):
+    """Weaving drivers among sober ones on `overtake`'s road (WEAVING_VTYPES); the truth
+    (weaving_truth, written to truth.jsonl) is computed from the floating car data's `posLat`."""
+    two_lane_road(s, WEAVING_VTYPES, length_m=WEAVING_ROAD_M)
+    flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="500" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="drunk" type="drunk" route="r" begin="0" end="%d" vehsPerHour="90" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="trucks" type="truck" route="r" begin="0" end="%d" vehsPerHour="100" '
+             'departLane="0" departSpeed="max"/>' % duration]
+    s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml",
+               lateral_resolution=WEAVING_LATERAL_RESOLUTION_M)
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+# The truth of weaving, from SUMO's floating car data alone (`posLat`: the centre's offset from
+# its lane's centre line; not from KPL's relations): a vehicle *departs* its lane when its centre
+# comes more than WEAVE_OUT_M from the lane's centre line (on a 3.2 m lane, a 1.8 m wide car is
+# then 0.3 m over the marking; a lane change is a departure too: SUMO switches `lane` as the
+# centre crosses the marking, and the offset stays over WEAVE_OUT_M on the other side) and
+# *returns* when its centre is again within WEAVE_IN_M of a lane's centre line. It weaves when
+# WEAVE_COUNT departures and returns follow one another within WEAVE_WINDOW_S (the first
+# departure to the last return); a sober overtake is two (out and back). Overlapping weaving
+# windows of one vehicle are one situation, from its first departure to its last return.
+# Samples within SETTLE_S of a vehicle's appearance are left out (the tracker has not anchored it).
+WEAVE_OUT_M = 1.3
+WEAVE_IN_M = 0.5
+WEAVE_COUNT = 3
+WEAVE_WINDOW_S = 30.0
+
+
+def weaving_truth(folder):
+    """Writes truth.jsonl in a scenario folder: one line per weaving situation (comment above),
+    `kind` weaving, `objects` [vehicle], `start` and `end` in seconds from the recording's first
+    time, `departures` (how many in it)."""
+    with gzip.open(os.path.join(folder, "fcd.xml.gz"), "rt") as f:
+        text = f.read()
+    origin = None
+    series = {}  # vehicle -> [(time, |posLat|)]
+    for block in re.finditer(r'<timestep time="([^"]*)"(.*?)</timestep>', text, re.S):
+        time = float(block.group(1))
+        origin = time if origin is None else origin
+        for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
+            a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
+            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"]))))
+    lines = []
+    for vehicle, samples in series.items():
+        first = samples[0][0]
+        swings = []  # (departure, return)
+        out = None
+        for time, offset in samples:
+            if time - first < SETTLE_S:
+                continue
+            if out is None and offset > WEAVE_OUT_M:
+                out = time
+            elif out is not None and offset < WEAVE_IN_M:
+                swings.append((out, time))
+                out = None
+        episodes = []
+        for i in range(len(swings) - WEAVE_COUNT + 1):
+            start, end = swings[i][0], swings[i + WEAVE_COUNT - 1][1]
+            if end - start > WEAVE_WINDOW_S:
+                continue
+            if episodes and start <= episodes[-1][1]:
+                episodes[-1][1] = end
+                episodes[-1][2] += 1
+            else:
+                episodes.append([start, end, WEAVE_COUNT])
+        for start, end, count in episodes:
+            lines.append({"kind": "weaving", "objects": [vehicle], "start": round(start - origin, 3),
+                          "end": round(end - origin, 3), "departures": count})
+    lines.sort(key=lambda line: (line["start"], line["objects"]))
+    with open(os.path.join(folder, "truth.jsonl"), "w") as f:
+        for line in lines:
+            f.write(json.dumps(line) + "\n")
+    return "truth.jsonl: %d weaving, by %d vehicles" % (len(lines), len({l["objects"][0] for l in lines}))
+
+
 # The scenarios whose truth is computed here (truth.jsonl), not by kpl situations.
-TRUTHS = {"reckless": reckless_truth}
+TRUTHS = {"reckless": reckless_truth, "weaving": weaving_truth}
 
 # The scenarios with occluders (and whether they get a horizontal bridge too).
 OCCLUDED = {"grid": True, "random": True, "highway": False}
@@ -526,9 +634,11 @@ OCCLUDED = {"grid": True, "random": True, "highway": False}
 
 SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
              "motorway": motorway, "wrong_way": wrong_way, "town400": town400,
-             "tls_grid": tls_grid, "spider": spider, "reckless": reckless}
+             "tls_grid": tls_grid, "spider": spider, "reckless": reckless,
+             "weaving": weaving}
 DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
-              "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240, "reckless": 600}
+              "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240, "reckless": 600,
+              "weaving": 300}
 
 
 def main():
