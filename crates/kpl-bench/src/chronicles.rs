@@ -1,5 +1,5 @@
 //! `kpl bench chronicles`: every chronicle of the shipped specs (`specs/traffic/sumo_chronicles.kpl`,
-//! `sumo_reckless.kpl`), as the specs write them, over the synthetic traffic of
+//! `sumo_reckless.kpl`, `sumo_weaving.kpl`), as the specs write them, over the synthetic traffic of
 //! `kpl bench situations` (N cars on a four-lane road at 10 Hz, faster lanes passing slower ones),
 //! run on the simulated clock (one thread, so one core): how many cars are recognised faster than
 //! real time with the adapter's gating (`crates/kpl-std/src/chronicle.rs`, "Gating") and, as the
@@ -35,10 +35,15 @@ pub struct Args {
 }
 
 /// The shipped specs whose chronicles are measured; the object types come from the first.
-pub const SPEC_PATHS: [&str; 2] = ["specs/traffic/sumo_chronicles.kpl", "specs/traffic/sumo_reckless.kpl"];
-const SHIPPED: [&str; 2] = [
+pub const SPEC_PATHS: [&str; 3] = [
+    "specs/traffic/sumo_chronicles.kpl",
+    "specs/traffic/sumo_reckless.kpl",
+    "specs/traffic/sumo_weaving.kpl",
+];
+const SHIPPED: [&str; 3] = [
     include_str!("../../../specs/traffic/sumo_chronicles.kpl"),
     include_str!("../../../specs/traffic/sumo_reckless.kpl"),
+    include_str!("../../../specs/traffic/sumo_weaving.kpl"),
 ];
 
 /// The spec of a run: the object types of the first shipped spec, every chronicle of the shipped

@@ -19,7 +19,7 @@ pub enum Command {
     /// The situation monitors of specs/traffic/sumo_situations.kpl over 100 to 4,000 cars, with and
     /// without gating of pairs.
     Situations(kpl_bench::situations::Args),
-    /// The chronicles of the shipped specs (sumo_chronicles.kpl, sumo_reckless.kpl) over 100 to
+    /// The chronicles of the shipped specs (sumo_chronicles, sumo_reckless, sumo_weaving) over 100 to
     /// 2,000 cars, with and without gating of pairs.
     Chronicles(kpl_bench::chronicles::Args),
     /// A call to a trivial Python unit against a trivial Rust unit, for a float and a list of
