@@ -345,7 +345,7 @@ fn run_streams(paths: &[PathBuf], recorded: &[&str]) -> Option<std::collections:
                 continue;
             };
             let Ok(json) = serde_json::from_slice::<serde_json::Value>(&bytes) else { continue };
-            let names: std::collections::BTreeSet<String> = json["streams"]
+            let names: std::collections::BTreeSet<String> = json["summary"]["streams"]
                 .as_array()
                 .into_iter()
                 .flatten()
