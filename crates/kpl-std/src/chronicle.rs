@@ -371,10 +371,13 @@ struct ChronicleUnit {
     undecided_warned: bool,
     /// The previous state's valid time and objects by type and symbol, kept when a predicate has a
     /// chronicle's gate (a pair that comes within it is evaluated on them too).
-    previous: Option<(Time, BTreeMap<String, HashMap<Arc<str>, Value>>)>,
+    previous: Option<(Time, ObjectsBySymbol)>,
     /// One output sample per situation (`kpl_chronicle::merge`).
     merge: Merge<Arc<str>>,
 }
+
+/// Objects by type and symbol.
+type ObjectsBySymbol = BTreeMap<String, HashMap<Arc<str>, Value>>;
 
 /// The present objects of one type (those with a symbol, each symbol once).
 type Objects<'v> = Vec<(Arc<str>, &'v Value)>;

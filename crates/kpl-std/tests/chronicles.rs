@@ -1,5 +1,6 @@
 //! Chronicles on the runtime, as `kpl run specs/traffic/sumo_chronicles.kpl` (and
-//! `sumo_reckless.kpl`) run them: the spec's `overtake` (`reckless_overtake`) chronicle is
+//! `sumo_reckless.kpl`, `sumo_weaving.kpl`) run them: the spec's `overtake` (`reckless_overtake`,
+//! `weaving`) chronicle is
 //! recognised over the cars that anchoring makes of recorded SUMO traffic seen by the simulated
 //! tracker, and every recognition it recorded is what the pure
 //! recogniser (`kpl-chronicle`) gives on the events computed here, independently of the adapter,
@@ -189,6 +190,11 @@ fn expected(
 /// Runs `SPEC.kpl` for `seconds` and returns the car snapshots its chronicle saw and the
 /// recognitions of `stream` it recorded (binding, event times, valid time).
 fn run_spec(spec_name: &str, stream: &str, seconds: Time) -> (Snapshots, Recognised) {
+    run_spec_with(spec_name, stream, seconds, &["a", "b"])
+}
+
+/// [`run_spec`] for a chronicle whose parameters are `params`.
+fn run_spec_with(spec_name: &str, stream: &str, seconds: Time, params: &[&str]) -> (Snapshots, Recognised) {
     let registry = kpl_std::registry();
     let text = std::fs::read_to_string(traffic_dir().join(format!("{spec_name}.kpl"))).unwrap();
     let spec = kpl_std::check_text(&text).unwrap();
@@ -232,8 +238,7 @@ fn run_spec(spec_name: &str, stream: &str, seconds: Time) -> (Snapshots, Recogni
             value["times"].as_array().unwrap().iter().map(|t| t.as_i64().unwrap()).collect();
         assert_eq!(value["end"].as_i64(), Some(*valid));
         assert_eq!(value["start"].as_i64(), times.iter().copied().min());
-        let binding =
-            vec![value["a"].as_str().unwrap().to_string(), value["b"].as_str().unwrap().to_string()];
+        let binding: Vec<String> = params.iter().map(|p| value[*p].as_str().unwrap().to_string()).collect();
         got.insert((binding, times, *valid));
     }
     assert_eq!(got.len(), recorded.len(), "a recognition recorded twice");
@@ -303,4 +308,73 @@ fn hysteresis_keeps_a_jittering_relation_from_flickering() {
     }
     assert_eq!(recorded.len(), 12);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `weaving(c)` of sumo_weaving.kpl for the pure recogniser: source 0 is the fluent
+/// `hysteresis(abs(c.lane_offset) > 1.3, abs(c.lane_offset) < 0.5)`; out1, in1, out2, in2, out3,
+/// in3 alternate its becoming true and false, each at least 1 s after the one before, all within
+/// 30 s.
+fn weaving_model() -> Chronicle {
+    let c = |later, earlier, lo| Constraint { later, earlier, lo: Some(lo), hi: Some(30 * S) };
+    let event = |value| Pattern { source: SourceId(0), args: vec![0], value };
+    Chronicle {
+        name: "weaving".into(),
+        source: SourceId(1),
+        params: 1,
+        events: vec![event(true), event(false), event(true), event(false), event(true), event(false)],
+        constraints: vec![c(1, 0, S), c(2, 1, S), c(3, 2, S), c(4, 3, S), c(5, 4, S), c(5, 0, 0)],
+        holds: vec![],
+        nevers: vec![],
+    }
+}
+
+/// The weaving of sumo_weaving.kpl on the first 120 s of its traffic (the truth of
+/// scripts/sumo-scenarios.py has two drunk drivers weaving in them): the recognitions recorded
+/// are those of the pure recogniser on the fluent computed here from each recorded car's
+/// `lane_offset` (a car that is gone is out of the fluent).
+#[test]
+fn the_weaving_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+    let (snapshots, got) = run_spec_with("sumo_weaving", "weaving", 120, &["c"]);
+    let mut recogniser: Recogniser<Arc<str>> =
+        Recogniser::new(vec![weaving_model().compile().unwrap()], Config::default()).unwrap();
+    let mut out: BTreeMap<String, bool> = BTreeMap::new();
+    let mut want = BTreeSet::new();
+    let mut events_total = 0;
+    for (valid, cars) in &snapshots {
+        let mut now = BTreeMap::new();
+        for (id, car) in cars {
+            let offset = Relations::num(car, "lane_offset").abs();
+            let was = out.get(id).copied().unwrap_or(false);
+            now.insert(id.clone(), if was { offset >= 0.5 } else { offset > 1.3 });
+        }
+        let mut changes: Vec<(String, bool)> = Vec::new();
+        for (id, &value) in &now {
+            if out.get(id).copied().unwrap_or(false) != value {
+                changes.push((id.clone(), value));
+            }
+        }
+        for (id, &value) in &out {
+            if value && !now.contains_key(id) {
+                changes.push((id.clone(), false));
+            }
+        }
+        changes.sort();
+        let events: Vec<Event<Arc<str>>> = changes
+            .into_iter()
+            .map(|(id, value)| Event {
+                source: SourceId(0),
+                args: vec![Arc::from(id.as_str())],
+                value,
+                time: *valid,
+            })
+            .collect();
+        events_total += events.len();
+        for r in recogniser.step(*valid, events).unwrap() {
+            want.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
+        }
+        out = now;
+    }
+    assert!(events_total > 20, "only {events_total} events");
+    assert!(!want.is_empty(), "the scenario's weaving");
+    assert_eq!(got, want);
 }
