@@ -10,10 +10,8 @@
 use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
 
 use clap::Args as ClapArgs;
-use kpl_runtime::{ClockKind, RunConfig};
 
 use crate::BenchError;
 use crate::clock::CpuClock;
@@ -93,12 +91,7 @@ fn run_once(cars: u32, seconds: u32, gated: bool) -> Result<Timed, String> {
     let counted = Arc::new(AtomicU64::new(0));
     let mut registry = crate::situations::registry(counted.clone());
     registry.set_chronicle_processes(move |ctx| kpl_std::chronicle::process(ctx, gated));
-    let spec = kpl_semantic::check_text(&spec_text(cars, seconds)?, registry.signatures())
-        .map_err(|e| e.to_string())?;
-    let config = RunConfig { clock: ClockKind::Sim, ..RunConfig::default() };
-    let (start, clock) = (Instant::now(), CpuClock::start());
-    let report = kpl_runtime::run(&spec, &registry, &config, None).map_err(|e| e.to_string())?;
-    let (cpu, wall) = (clock.seconds(), start.elapsed().as_secs_f64());
+    let (cpu, wall, report) = crate::situations::timed_run(&spec_text(cars, seconds)?, &registry)?;
     if let Some(failure) = report.failures.first() {
         return Err(failure.clone());
     }
@@ -158,18 +151,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
         } else {
             None
         };
-        let cell = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or_else(|| "-".to_string(), f);
+        let [base, factor, ratio] = crate::situations::baseline_cells(seconds, gated.cpu, ungated);
         writeln!(
             out,
-            "{n:>6} {:>12.2} {speed:>10.2} {:>10.2} {:>12} {:>10} {:>8} {:>12} {:>10} {:>9}",
-            gated.cpu,
-            gated.wall,
-            cell(ungated, &|w| format!("{w:.2}")),
-            cell(ungated, &|w| format!("{:.2}", f64::from(seconds) / w)),
-            cell(ungated, &|w| format!("{:.1}", w / gated.cpu)),
-            gated.recognitions,
-            gated.peak,
-            gated.refused,
+            "{n:>6} {:>12.2} {speed:>10.2} {:>10.2} {base:>12} {factor:>10} {ratio:>8} {:>12} {:>10} {:>9}",
+            gated.cpu, gated.wall, gated.recognitions, gated.peak, gated.refused,
         )?;
     }
     match largest {
@@ -185,6 +171,7 @@ mod tests {
     use std::sync::Mutex;
 
     use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
+    use kpl_runtime::{ClockKind, RunConfig};
     use kpl_semantic::registry::{Entry, EntryKind, TypeReq};
 
     use super::*;

@@ -207,13 +207,32 @@ struct Timed {
 fn run_once(cars: u32, seconds: u32, gated: bool) -> Result<Timed, String> {
     let counted = Arc::new(AtomicU64::new(0));
     let registry = registry(counted.clone());
-    let spec = kpl_semantic::check_text(&spec_text(cars, seconds, gated)?, registry.signatures())
-        .map_err(|e| e.to_string())?;
+    let (cpu, wall, _) = timed_run(&spec_text(cars, seconds, gated)?, &registry)?;
+    Ok(Timed { cpu, wall, reports: counted.load(Ordering::Relaxed) })
+}
+
+/// Checks `text` and runs it on the simulated clock: the CPU seconds of the runtime's thread, the
+/// wall seconds, and the run's report.
+pub(crate) fn timed_run(
+    text: &str,
+    registry: &Registry,
+) -> Result<(f64, f64, kpl_runtime::RunReport), String> {
+    let spec = kpl_semantic::check_text(text, registry.signatures()).map_err(|e| e.to_string())?;
     let config = RunConfig { clock: ClockKind::Sim, ..RunConfig::default() };
     let (start, clock) = (Instant::now(), CpuClock::start());
-    kpl_runtime::run(&spec, &registry, &config, None).map_err(|e| e.to_string())?;
-    let (cpu, wall) = (clock.seconds(), start.elapsed().as_secs_f64());
-    Ok(Timed { cpu, wall, reports: counted.load(Ordering::Relaxed) })
+    let report = kpl_runtime::run(&spec, registry, &config, None).map_err(|e| e.to_string())?;
+    Ok((clock.seconds(), start.elapsed().as_secs_f64(), report))
+}
+
+/// The baseline's three columns (CPU seconds, real-time factor, baseline / gated), or dashes when
+/// the baseline was not run.
+pub(crate) fn baseline_cells(seconds: u32, gated_cpu: f64, baseline_cpu: Option<f64>) -> [String; 3] {
+    match baseline_cpu {
+        Some(w) => {
+            [format!("{w:.2}"), format!("{:.2}", f64::from(seconds) / w), format!("{:.1}", w / gated_cpu)]
+        }
+        None => ["-".to_string(), "-".to_string(), "-".to_string()],
+    }
 }
 
 /// Runs the benchmark and writes its table to `out`.
@@ -250,15 +269,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
         } else {
             None
         };
-        let cell = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or_else(|| "-".to_string(), f);
+        let [base, factor, ratio] = baseline_cells(seconds, gated.cpu, ungated);
         writeln!(
             out,
-            "{n:>6} {:>12.2} {speed:>10.2} {:>10.2} {:>12} {:>10} {:>8} {reports:>10}",
-            gated.cpu,
-            gated.wall,
-            cell(ungated, &|w| format!("{w:.2}")),
-            cell(ungated, &|w| format!("{:.2}", f64::from(seconds) / w)),
-            cell(ungated, &|w| format!("{:.1}", w / gated.cpu)),
+            "{n:>6} {:>12.2} {speed:>10.2} {:>10.2} {base:>12} {factor:>10} {ratio:>8} {reports:>10}",
+            gated.cpu, gated.wall,
         )?;
     }
     match largest {

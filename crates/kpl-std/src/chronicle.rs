@@ -412,8 +412,13 @@ impl ChronicleUnit {
         let mut events = Vec::new();
         let mut undecided = 0u64;
         let previous = self.previous.take();
-        let present: BTreeMap<&str, HashSet<&str>> =
-            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(id, _)| &**id).collect())).collect();
+        // What only a chronicle's gate needs, made only then (this runs at every state).
+        let keep_previous = self.predicates.iter().any(|p| p.gate.unknown_beyond());
+        let present: BTreeMap<&str, HashSet<&str>> = if keep_previous {
+            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(id, _)| &**id).collect())).collect()
+        } else {
+            BTreeMap::new()
+        };
         for p in &mut self.predicates {
             let domains: Vec<&[(Arc<str>, &Value)]> =
                 p.slots.iter().map(|(_, ty)| objects.get(ty).map_or(&[][..], Vec::as_slice)).collect();
@@ -448,7 +453,7 @@ impl ChronicleUnit {
                 if value != before {
                     changes.push((ids.clone(), value));
                 }
-                if value || p.gate.keeps_false() {
+                if value || p.gate.unknown_beyond() {
                     now.insert(ids, value);
                 }
             }
@@ -460,8 +465,7 @@ impl ChronicleUnit {
                     .all(|(id, (_, ty))| present.get(ty.as_str()).is_some_and(|o| o.contains(&**id)))
             };
             for (ids, &value) in &p.last {
-                if value && !now.contains_key(ids) && !(matches!(p.gate, Gate::Chronicle(_)) && present(ids))
-                {
+                if value && !now.contains_key(ids) && !(p.gate.unknown_beyond() && present(ids)) {
                     changes.push((ids.clone(), false));
                 }
             }
@@ -474,7 +478,7 @@ impl ChronicleUnit {
             }));
             p.last = now;
         }
-        if self.predicates.iter().any(|p| matches!(p.gate, Gate::Chronicle(_))) {
+        if keep_previous {
             let kept = objects
                 .iter()
                 .map(|(ty, o)| (ty.clone(), o.iter().map(|(id, v)| (id.clone(), (*v).clone())).collect()))
@@ -516,9 +520,10 @@ impl ChronicleUnit {
 }
 
 impl Gate {
-    /// Whether the tuples evaluated false are kept for the next state: beyond a chronicle's gate
-    /// a tuple's value is not known, so "not kept" cannot mean false.
-    fn keeps_false(self) -> bool {
+    /// Whether a tuple's value beyond the gate is not known (a chronicle's gate): then the tuples
+    /// evaluated false are kept for the next state ("not kept" cannot mean false), a tuple that
+    /// leaves the gate gives no event, and the previous state's objects are kept.
+    fn unknown_beyond(self) -> bool {
         matches!(self, Gate::Chronicle(_))
     }
 }
