@@ -532,11 +532,13 @@ impl ImageTracker {
 
     /// The smoothed velocity of a track's centre, pixels per second: 0 at its first frame (no
     /// difference yet), the first difference of centres at its second (not smoothed with that 0,
-    /// which would halve it and take frames to catch up), then smoothed.
+    /// which would halve it and take frames to catch up), then smoothed. `dt_s` is the time
+    /// since the last frame; the last centre is older by the frames the track missed since.
     fn velocity(track: &mut Track, kept: bool, centre: [f64; 2], dt_s: f64) -> [f64; 2] {
+        let since = dt_s * f64::from(track.missed.saturating_add(1));
         let (vel, known) = match (kept, track.last_centre) {
-            (true, Some(last)) if dt_s > 0.0 => {
-                let raw = [(centre[0] - last[0]) / dt_s, (centre[1] - last[1]) / dt_s];
+            (true, Some(last)) if since > 0.0 => {
+                let raw = [(centre[0] - last[0]) / since, (centre[1] - last[1]) / since];
                 let a = if track.vel_known { VELOCITY_SMOOTHING } else { 1.0 };
                 ([a * raw[0] + (1.0 - a) * track.vel[0], a * raw[1] + (1.0 - a) * track.vel[1]], true)
             }
@@ -666,5 +668,15 @@ mod tests {
         assert_eq!(ImageTracker::velocity(&mut track, false, [40.0, 5.0], 0.1), [0.0, 0.0]);
         let again = ImageTracker::velocity(&mut track, true, [45.0, 5.0], 0.1);
         assert!((again[0] - 50.0).abs() < 1e-9, "{again:?}");
+    }
+
+    #[test]
+    fn a_missed_frame_does_not_double_the_velocity_after_it() {
+        let mut track = Track::default();
+        ImageTracker::velocity(&mut track, true, [0.0, 5.0], 0.1);
+        // One frame missed (as `observe` counts it), then seen 20 px on: still 100 px/s.
+        track.missed = 1;
+        let after = ImageTracker::velocity(&mut track, true, [20.0, 5.0], 0.1);
+        assert!((after[0] - 100.0).abs() < 1e-9 && after[1].abs() < 1e-9, "{after:?}");
     }
 }

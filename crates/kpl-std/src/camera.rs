@@ -7,7 +7,9 @@
 //!   the ground plane: `pos`, `vel` (from the percept's pixel velocity, the ground point now and
 //!   where its pixel was a moment ago under the previous pose), `size` (the box's longer side on
 //!   the ground) and `pos_cov` (`[σ_xx, σ_xy, σ_yy]`, m², propagated from the pixel noise and the
-//!   pose noise; `anchor.kalman` weighs the percept by it). Its `camera` port gives, per state,
+//!   pose noise; `anchor.kalman` weighs the percept by it) and `border_px` (how far the box is
+//!   from the image's nearest border, pixels: 0 or less when clipped there, as a vehicle's box is
+//!   while it moves into the image; a spec declares it to use it). Its `camera` port gives, per state,
 //!   the camera as a record (pose and intrinsics) for the camera functions.
 //! - `camera.homography(percepts, ...)`: a fixed camera calibrated from point pairs (pixel and
 //!   ground point, at least four): the homography is estimated when the unit is built, its
@@ -229,6 +231,17 @@ impl Georeference {
         }
     }
 
+    /// How far a percept is from the image's nearest border, pixels: the box's nearest side (0 or
+    /// less for a box the detector clipped at the border, as boxes of vehicles moving into the
+    /// image are), or the point's distance.
+    fn border_px(&self, point: &ImagePoint) -> f64 {
+        let (w, h) = (self.intrinsics.width, self.intrinsics.height);
+        match point {
+            ImagePoint::Box(b) => b.left.min(b.top).min(w - b.right()).min(h - b.bottom()),
+            ImagePoint::Point(p) => p[0].min(p[1]).min(w - p[0]).min(h - p[1]),
+        }
+    }
+
     /// The world percept of one image percept.
     fn world(
         &self,
@@ -272,6 +285,7 @@ impl Georeference {
             ("vel", Value::Vec2(vel)),
             ("size", Value::Float(size)),
             ("pos_cov", list(&estimate.cov_entries())),
+            ("border_px", Value::Float(self.border_px(point))),
         ];
         if let Some(score) = r.get("score") {
             fields.push(("score", score.clone()));
