@@ -42,11 +42,16 @@
 //! (refusals are counted in the run's summary) and the events of the last window for its
 //! conditions; this adapter keeps, per predicate, the tuples true at the previous state (with a
 //! chronicle's gate, every pair evaluated there) and, with a chronicle's gate, the previous
-//! state's objects. Monitors' verdicts as events are not fed yet (`kpl check` says so with W0205):
+//! state's objects. Tuples are kept as numbers of objects ([`Numbers`]: a symbol has one while
+//! it is present at consecutive states), so memory follows the objects present, not every object
+//! the run has seen. Monitors' verdicts as events are not fed yet (`kpl check` says so with W0205):
 //! such an event never occurs.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashSet};
 use std::sync::Arc;
+
+use rustc_hash::{FxHashMap, FxHashSet};
+use smallvec::SmallVec;
 
 use kpl_chronicle::fluent;
 use kpl_chronicle::merge::Merge;
@@ -83,7 +88,56 @@ struct Predicate {
     scratch: SlotState,
     /// The tuples that were true at the previous state (with [`Gate::Chronicle`]: every tuple
     /// evaluated there, with its value).
-    last: HashMap<Vec<Arc<str>>, bool>,
+    last: FxHashMap<Key, bool>,
+}
+
+/// A present object's number ([`Numbers`]).
+type Num = u64;
+
+/// A tuple of objects by their numbers, one per slot (inline for up to two).
+type Key = SmallVec<[Num; 2]>;
+
+/// Numbers for the symbols of the present objects. A symbol keeps its number while it is present
+/// at consecutive states; one absent at a state is forgotten and gets a new number should it come
+/// back. Numbers are never reused, so the previous state's tuples (`Predicate::last`) never take
+/// one object for another, and what is kept is bounded by the objects of two states.
+#[derive(Default)]
+struct Numbers {
+    now: FxHashMap<Arc<str>, Num>,
+    before: FxHashMap<Arc<str>, Num>,
+    /// Number -> symbol, for this state's and the previous state's objects.
+    names_now: FxHashMap<Num, Arc<str>>,
+    names_before: FxHashMap<Num, Arc<str>>,
+    next: Num,
+}
+
+impl Numbers {
+    /// Starts a state: this state's numbers become the previous state's.
+    fn begin(&mut self) {
+        std::mem::swap(&mut self.now, &mut self.before);
+        std::mem::swap(&mut self.names_now, &mut self.names_before);
+        self.now.clear();
+        self.names_now.clear();
+    }
+
+    /// The number of a symbol present at this state.
+    fn number(&mut self, symbol: &Arc<str>) -> Num {
+        if let Some(&n) = self.now.get(symbol) {
+            return n;
+        }
+        let n = self.before.get(symbol).copied().unwrap_or_else(|| {
+            self.next += 1;
+            self.next
+        });
+        self.now.insert(symbol.clone(), n);
+        self.names_now.insert(n, symbol.clone());
+        n
+    }
+
+    /// The symbol of a number of this state or the previous one.
+    fn name(&self, n: Num) -> Option<&Arc<str>> {
+        self.names_now.get(&n).or_else(|| self.names_before.get(&n))
+    }
 }
 
 /// Which tuples of a predicate over two objects are evaluated at a state (module doc, "Gating").
@@ -160,7 +214,7 @@ impl Builder<'_> {
             args: args.to_vec(),
             scratch: SlotState { values: vec![None; ctx.slot_names().len()], objects: Vec::new() },
             gate: if self.gated { gate.map_or(Gate::None, Gate::Own) } else { Gate::None },
-            last: HashMap::new(),
+            last: FxHashMap::default(),
         });
         Ok(source)
     }
@@ -355,6 +409,7 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
         stats: ctx.stats.clone(),
         undecided_warned: false,
         previous: None,
+        numbers: Numbers::default(),
         merge: Merge::new(window),
     })
 }
@@ -371,34 +426,37 @@ struct ChronicleUnit {
     undecided_warned: bool,
     /// The previous state's valid time and objects by type and symbol, kept when a predicate has a
     /// chronicle's gate (a pair that comes within it is evaluated on them too).
-    previous: Option<(Time, ObjectsBySymbol)>,
+    previous: Option<(Time, ObjectsByNumber)>,
+    numbers: Numbers,
     /// One output sample per situation (`kpl_chronicle::merge`).
     merge: Merge<Arc<str>>,
 }
 
-/// Objects by type and symbol.
-type ObjectsBySymbol = BTreeMap<String, HashMap<Arc<str>, Value>>;
+/// Objects by type and number.
+type ObjectsByNumber = BTreeMap<String, FxHashMap<Num, Value>>;
 
-/// The present objects of one type (those with a symbol, each symbol once).
-type Objects<'v> = Vec<(Arc<str>, &'v Value)>;
+/// The present objects of one type (those with a symbol, each symbol once), with their numbers.
+type Objects<'v> = Vec<(Num, &'v Value)>;
 
 impl ChronicleUnit {
     fn objects<'v>(
-        &self,
+        &mut self,
         values: &'v [Option<kpl_runtime::sample::Sample>],
     ) -> BTreeMap<String, Objects<'v>> {
+        self.numbers.begin();
         let mut out = BTreeMap::new();
         for (ty, inputs) in &self.feeds {
             let mut objects: Objects<'v> = Vec::new();
-            let mut seen: HashSet<&'v str> = HashSet::new();
+            let mut seen: FxHashSet<Num> = FxHashSet::default();
             for &i in inputs {
                 let Some(sample) = values.get(i).and_then(Option::as_ref) else { continue };
                 let Value::List(items) = &sample.value else { continue };
                 for item in items.iter() {
                     let Value::Record(record) = item else { continue };
                     let Some(id) = &record.id else { continue };
-                    if seen.insert(id) {
-                        objects.push((id.clone(), item));
+                    let n = self.numbers.number(id);
+                    if seen.insert(n) {
+                        objects.push((n, item));
                     }
                 }
             }
@@ -414,63 +472,78 @@ impl ChronicleUnit {
         let previous = self.previous.take();
         // What only a chronicle's gate needs, made only then (this runs at every state).
         let keep_previous = self.predicates.iter().any(|p| p.gate.unknown_beyond());
-        let present: BTreeMap<&str, HashSet<&str>> = if keep_previous {
-            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(id, _)| &**id).collect())).collect()
+        let present: BTreeMap<&str, FxHashSet<Num>> = if keep_previous {
+            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(n, _)| *n).collect())).collect()
         } else {
             BTreeMap::new()
         };
+        let mut tuples = Vec::new();
         for p in &mut self.predicates {
-            let domains: Vec<&[(Arc<str>, &Value)]> =
+            let domains: Vec<&[(Num, &Value)]> =
                 p.slots.iter().map(|(_, ty)| objects.get(ty).map_or(&[][..], Vec::as_slice)).collect();
-            let tuples = candidates(p, &domains);
-            let mut now: HashMap<Vec<Arc<str>>, bool> = HashMap::with_capacity(tuples.len());
-            let mut changes: Vec<(Vec<Arc<str>>, bool)> = Vec::new();
-            for tuple in tuples {
-                let ids: Vec<Arc<str>> = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0.clone()).collect();
-                let before = match p.last.get(&ids) {
+            let arity = domains.len();
+            let count = candidates(p, &domains, &mut tuples);
+            let mut now: FxHashMap<Key, bool> =
+                FxHashMap::with_capacity_and_hasher(count, Default::default());
+            let mut changes: Vec<(Key, bool)> = Vec::new();
+            let mut items: Vec<&Value> = Vec::with_capacity(arity);
+            for t in 0..count {
+                let tuple = &tuples[t * arity..(t + 1) * arity];
+                let key: Key = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0).collect();
+                let before = match p.last.get(&key) {
                     Some(&value) => value,
                     // Not evaluated at the previous state: beyond an own gate (or absent) it was
                     // false; beyond a chronicle's gate it was not known, so it is evaluated now
                     // on the previous state's objects.
                     None => match (p.gate, &previous) {
                         (Gate::Chronicle(_), Some((t, before))) => {
-                            let items: Option<Vec<&Value>> = ids
+                            let items: Option<Vec<&Value>> = key
                                 .iter()
                                 .zip(&p.slots)
-                                .map(|(id, (_, ty))| before.get(ty).and_then(|m| m.get(id)))
+                                .map(|(n, (_, ty))| before.get(ty).and_then(|m| m.get(n)))
                                 .collect();
                             items.is_some_and(|items| evaluate(p, *t, &items, &mut undecided, &self.stats).0)
                         }
                         _ => false,
                     },
                 };
-                let items: Vec<&Value> = tuple.iter().zip(&domains).map(|(&k, d)| d[k].1).collect();
+                items.clear();
+                items.extend(tuple.iter().zip(&domains).map(|(&k, d)| d[k].1));
                 let (enter, leave) = evaluate(p, valid, &items, &mut undecided, &self.stats);
                 let value = match leave {
                     None => enter,
                     Some(leave) => fluent::step(before, enter, leave),
                 };
                 if value != before {
-                    changes.push((ids.clone(), value));
+                    changes.push((key.clone(), value));
                 }
                 if value || p.gate.unknown_beyond() {
-                    now.insert(ids, value);
+                    now.insert(key, value);
                 }
             }
             // True at the previous state, not evaluated now: gone (false), or beyond a
             // chronicle's gate (not known, and no recognition needs it).
-            let present = |ids: &[Arc<str>]| {
-                ids.iter()
+            let present = |key: &Key| {
+                key.iter()
                     .zip(&p.slots)
-                    .all(|(id, (_, ty))| present.get(ty.as_str()).is_some_and(|o| o.contains(&**id)))
+                    .all(|(n, (_, ty))| present.get(ty.as_str()).is_some_and(|o| o.contains(n)))
             };
-            for (ids, &value) in &p.last {
-                if value && !now.contains_key(ids) && !(p.gate.unknown_beyond() && present(ids)) {
-                    changes.push((ids.clone(), false));
+            for (key, &value) in &p.last {
+                if value && !now.contains_key(key) && !(p.gate.unknown_beyond() && present(key)) {
+                    changes.push((key.clone(), false));
                 }
             }
-            changes.sort();
-            events.extend(changes.into_iter().map(|(args, value)| Event {
+            // By the objects' symbols, as the events of one state have always been ordered.
+            let numbers = &self.numbers;
+            let mut named: Vec<(Vec<Arc<str>>, bool)> = changes
+                .into_iter()
+                .filter_map(|(key, value)| {
+                    let args: Option<Vec<Arc<str>>> = key.iter().map(|&n| numbers.name(n).cloned()).collect();
+                    args.map(|args| (args, value))
+                })
+                .collect();
+            named.sort();
+            events.extend(named.into_iter().map(|(args, value)| Event {
                 source: p.source,
                 args,
                 value,
@@ -481,7 +554,7 @@ impl ChronicleUnit {
         if keep_previous {
             let kept = objects
                 .iter()
-                .map(|(ty, o)| (ty.clone(), o.iter().map(|(id, v)| (id.clone(), (*v).clone())).collect()))
+                .map(|(ty, o)| (ty.clone(), o.iter().map(|(n, v)| (*n, (*v).clone())).collect()))
                 .collect();
             self.previous = Some((valid, kept));
         }
@@ -560,19 +633,25 @@ fn evaluate(
     (enter, leave)
 }
 
-/// The tuples of objects (indices into `domains`, one per slot) to evaluate `p` for at this state
-/// (module doc, "Gating"): every tuple of distinct objects, or with a gate over two slots the
-/// pairs within it (found with a grid; an object without a finite `pos` is within no gate) and,
-/// for an own gate, the pairs that were true at the previous state.
-fn candidates(p: &Predicate, domains: &[&[(Arc<str>, &Value)]]) -> Vec<Vec<usize>> {
-    let mut out = Vec::new();
+/// The tuples of objects (indices into `domains`, one per slot, one tuple after the other in
+/// `out`) to evaluate `p` for at this state (module doc, "Gating"): every tuple of distinct
+/// objects, or with a gate over two slots the pairs within it (found with a grid; an object
+/// without a finite `pos` is within no gate) and, for an own gate, the pairs that were true at the
+/// previous state. Returns the number of tuples (a predicate over no object has one, the empty
+/// tuple).
+fn candidates(p: &Predicate, domains: &[&[(Num, &Value)]], out: &mut Vec<usize>) -> usize {
+    out.clear();
     let radius = match p.gate {
         Gate::Own(r) | Gate::Chronicle(r) => Some(r),
         Gate::None => None,
     };
     let (Some(radius), [da, db]) = (radius, domains) else {
-        for_each_tuple(domains, &mut |t| out.push(t.to_vec()));
-        return out;
+        let mut count = 0;
+        for_each_tuple(domains, &mut |t| {
+            out.extend_from_slice(t);
+            count += 1;
+        });
+        return count;
     };
     let pos = |v: &Value| match v {
         Value::Record(r) => {
@@ -588,39 +667,41 @@ fn candidates(p: &Predicate, domains: &[&[(Arc<str>, &Value)]]) -> Vec<Vec<usize
     }
     grid.finish();
     let mut near = Vec::new();
-    for (i, (id, v)) in da.iter().enumerate() {
+    for (i, (n, v)) in da.iter().enumerate() {
         let Some(q) = pos(v) else { continue };
         grid.near(Some(q), &mut near);
-        out.extend(near.iter().filter(|&&j| db[j].0 != *id).map(|&j| vec![i, j]));
+        for &j in near.iter().filter(|&&j| db[j].0 != *n) {
+            out.extend_from_slice(&[i, j]);
+        }
     }
     if matches!(p.gate, Gate::Own(_)) && !p.last.is_empty() {
-        let index = |d: &[(Arc<str>, &Value)]| -> HashMap<Arc<str>, usize> {
-            d.iter().enumerate().map(|(k, (id, _))| (id.clone(), k)).collect()
+        let index = |d: &[(Num, &Value)]| -> FxHashMap<Num, usize> {
+            d.iter().enumerate().map(|(k, (n, _))| (*n, k)).collect()
         };
         let (ia, ib) = (index(da), index(db));
-        let within: HashSet<(usize, usize)> = out.iter().map(|t| (t[0], t[1])).collect();
-        for (ids, _) in p.last.iter().filter(|(_, v)| **v) {
-            if let (Some(&i), Some(&j)) = (ia.get(&ids[0]), ib.get(&ids[1]))
+        let within: FxHashSet<(usize, usize)> = out.chunks(2).map(|t| (t[0], t[1])).collect();
+        for (key, _) in p.last.iter().filter(|(_, v)| **v) {
+            if let (Some(&i), Some(&j)) = (ia.get(&key[0]), ib.get(&key[1]))
                 && !within.contains(&(i, j))
             {
-                out.push(vec![i, j]);
+                out.extend_from_slice(&[i, j]);
             }
         }
     }
-    out
+    out.len() / 2
 }
 
 /// Calls `f` with every tuple of indices into `domains` whose objects are distinct.
-fn for_each_tuple(domains: &[&[(Arc<str>, &Value)]], f: &mut dyn FnMut(&[usize])) {
-    fn go(domains: &[&[(Arc<str>, &Value)]], tuple: &mut Vec<usize>, f: &mut dyn FnMut(&[usize])) {
+fn for_each_tuple(domains: &[&[(Num, &Value)]], f: &mut dyn FnMut(&[usize])) {
+    fn go(domains: &[&[(Num, &Value)]], tuple: &mut Vec<usize>, f: &mut dyn FnMut(&[usize])) {
         let depth = tuple.len();
         if depth == domains.len() {
             f(tuple);
             return;
         }
         for k in 0..domains[depth].len() {
-            let id = &domains[depth][k].0;
-            if tuple.iter().enumerate().any(|(d, &j)| domains[d][j].0 == *id) {
+            let n = domains[depth][k].0;
+            if tuple.iter().enumerate().any(|(d, &j)| domains[d][j].0 == n) {
                 continue;
             }
             tuple.push(k);
