@@ -48,8 +48,8 @@ Scenarios:
   spider    a spider network (6 arms, 3 circles), one lane each way at 50 km/h; random trips of
             which every second one ends inside the map (the vehicle leaves where its route ends).
   reckless  overtake's road (600 s) with cars, trucks and reckless drivers whose cut-ins after an
-            overtake are made with TraCI (CutIns): the reckless drivers' at 0.2 to 0.6 s of
-            headway, the cars' at 1.5 s or more; truth.jsonl: the reckless cut-ins, computed here
+            overtake are made with TraCI (CutIns): the reckless drivers' at about 0.2 to 0.7 s
+            of headway, the cars' at 1.5 s or more; truth.jsonl: the reckless cut-ins, computed here
             from the floating car data (reckless_truth), which `kpl situations` reads beside the
             traffic file.
   weaving   a straight 3 km road, two lanes one way at 25 m/s (300 s), with SUMO's sublane model
