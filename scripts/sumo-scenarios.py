@@ -8,8 +8,8 @@ car data (fcd.xml.gz: every vehicle's front-bumper position, compass angle, type
 position along the lane,
 every 0.5 s) and, where the traffic uses vehicle types of its own, their definitions (vtypes.xml).
 Everything is seeded, so the same SUMO release makes the same traffic (only the files' "generated
-on" comments differ); `--seed` makes other traffic on the same network (a scenario one did not
-tune on).
+on" comments differ, and in `reckless` the TraCI port in the floating car data's header);
+`--seed` makes other traffic on the same network (a scenario one did not tune on).
 
 The grid, the random network and the highway also get occluders (occluders.json, the tracker's
 `occluders_file`): bridges across the main roads, each as wide as a vehicle at the scenario's
@@ -47,9 +47,11 @@ Scenarios:
             side at red lights, some cars over the limit): issue 24's traffic made elsewhere.
   spider    a spider network (6 arms, 3 circles), one lane each way at 50 km/h; random trips of
             which every second one ends inside the map (the vehicle leaves where its route ends).
-  reckless  overtake's road (600 s) with cars, trucks and reckless drivers (aggressive lane-change
-            parameters); truth.jsonl: the reckless cut-ins, computed here from the floating car
-            data (reckless_truth), which `kpl situations` reads beside the traffic file.
+  reckless  overtake's road (600 s) with cars, trucks and reckless drivers whose cut-ins after an
+            overtake are made with TraCI (CutIns): the reckless drivers' at about 0.2 to 0.7 s
+            of headway, the cars' at 1.5 s or more; truth.jsonl: the reckless cut-ins, computed here
+            from the floating car data (reckless_truth), which `kpl situations` reads beside the
+            traffic file.
   weaving   a straight 3 km road, two lanes one way at 25 m/s (300 s), with SUMO's sublane model
             (lateral resolution 0.8 m): sober cars, trucks and drunk drivers whose lateral
             position wanders across the lane marking and whose speed swings; truth.jsonl: the
@@ -62,6 +64,7 @@ import argparse
 import gzip
 import json
 import os
+import random
 import re
 import shutil
 import subprocess
@@ -116,11 +119,14 @@ class Sumo:
              "-b", "0", "-e", str(duration), "-p", str(period), "--seed", str(self.seed),
              ] + list(options), self.work)
 
-    def simulate(self, net, routes, fcd, duration, additional=None, lateral_resolution=None):
+    def simulate(self, net, routes, fcd, duration, additional=None, lateral_resolution=None, control=None,
+                 lane_change_duration=None):
         """Runs SUMO. With `lateral_resolution` (metres) SUMO's sublane model is on: lane changes
         take time (the vehicle moves sideways at most its `maxSpeedLat`), a vehicle's `lane` is
         the one its centre is on, and the floating car data also has `posLat` (the centre's
-        offset from the lane's centre line, positive to the left)."""
+        offset from the lane's centre line, positive to the left). With `control` SUMO runs
+        under TraCI (its Python API, in the eclipse-sumo package's tools) and `control(traci,
+        time)` is called after every step, `time` the simulation's time in seconds."""
         attributes = "x,y,angle,type,speed,lane,pos" + (",posLat" if lateral_resolution else "")
         cmd = [self.tool("sumo"), "-n", net, "-r", routes, "--begin", "0", "--end", str(duration),
                "--step-length", str(STEP_LENGTH_S), "--seed", str(self.seed), "--no-step-log", "--no-warnings",
@@ -130,7 +136,24 @@ class Sumo:
             cmd += ["--additional-files", additional]
         if lateral_resolution:
             cmd += ["--lateral-resolution", str(lateral_resolution)]
-        run(cmd, self.work)
+        if lane_change_duration:
+            cmd += ["--lanechange.duration", str(lane_change_duration)]
+        if control is None:
+            run(cmd, self.work)
+            return
+        sys.path.append(os.path.join(self.home, "tools"))
+        import traci  # shipped in the eclipse-sumo package's tools
+        os.environ["SUMO_HOME"] = self.home
+        cwd = os.getcwd()
+        os.chdir(self.work)
+        try:
+            traci.start(cmd, stdout=subprocess.DEVNULL)
+            for step in range(1, int(round(duration / STEP_LENGTH_S)) + 1):
+                traci.simulationStep()
+                control(traci, round(step * STEP_LENGTH_S, 3))
+            traci.close()
+        finally:
+            os.chdir(cwd)
 
 
 def gzip_to(src, dst):
@@ -404,18 +427,25 @@ def spider(s, duration):
 
 RECKLESS_VTYPES = """<additional>
     <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.04" lcSpeedGain="2" lcKeepRight="0.3" lcAssertive="1" tau="1.2" minGap="2.5"/>
-    <vType id="reckless" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.3" speedDev="0.03" lcSpeedGain="1" lcKeepRight="20" lcAssertive="10" lcCooperative="0" tau="0.4" minGap="0.5"/>
+    <vType id="reckless" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.2" speedDev="0.03" lcSpeedGain="1" lcKeepRight="20" lcAssertive="10" lcCooperative="0" tau="0.4" minGap="0.5"/>
     <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="17" speedFactor="1.0" speedDev="0.03" tau="1.0" minGap="2.5"/>
 </additional>
 """
+# Lane changes take 1 s (SUMO's default: one step, which the tracker's interpolation between
+# samples 0.5 s apart turns into a 6.4 m/s sideways jump that its estimate follows more than a
+# second late). The reckless drivers' speed factor is 1.2 (30 m/s; 1.3 before TraCI made their
+# cut-ins): 13 m/s faster than a truck, their headway to it grows by 0.38 s from one sample to the
+# next, not 0.46 s.
+RECKLESS_LANE_CHANGE_S = 1.0
 
 
 def reckless(s, duration):
-    """Overtakes on `overtake`'s road, some of them reckless: `reckless` drivers (SUMO's lane
-    change model made aggressive: lcAssertive 10, lcKeepRight 20, lcCooperative 0, tau 0.4 s,
-    minGap 0.5 m) pull back into the right lane as soon as the overtaken vehicle's secure gap
-    allows, normal cars (lcKeepRight 0.3, tau 1.2 s) later. The truth (reckless_truth, written
-    to truth.jsonl) is computed from the floating car data."""
+    """Overtakes on `overtake`'s road, some of them reckless. Cars and `reckless` drivers
+    overtake as SUMO's lane-change model has them (to the left lane for speed), but pull back
+    into the right lane only when CutIns (under TraCI) makes them: the reckless drivers in front
+    of the vehicle they passed at a headway drawn from RECKLESS_CUT_S, the cars at one drawn
+    from SAFE_CUT_S. The truth (reckless_truth, written to truth.jsonl) is computed from the
+    floating car data."""
     two_lane_road(s, RECKLESS_VTYPES)
     flows = ['    <flow id="cars" type="car" route="r" begin="0" end="%d" vehsPerHour="350" '
              'departLane="random" departSpeed="max"/>' % duration,
@@ -424,12 +454,138 @@ def reckless(s, duration):
              '    <flow id="trucks" type="truck" route="r" begin="0" end="%d" vehsPerHour="250" '
              'departLane="0" departSpeed="max"/>' % duration]
     s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
-    # Lane changes take one simulation step (SUMO's default): with `--lanechange.duration 1.5`
-    # the reckless drivers kept headways of 1.1 s or more, with the sublane model (lateral
-    # resolution 0.8 m, SL2015) 0.74 s or more, spread evenly across the 1 s threshold
-    # (docs/situations.md#reckless-overtakes).
-    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml")
+    # Left to SUMO, lane changes took one simulation step and the reckless drivers' headways
+    # spread evenly across the 1 s threshold (with `--lanechange.duration 1.5` 1.1 s or more,
+    # with the sublane model 0.74 s or more; docs/situations.md#reckless-overtakes): CutIns
+    # makes the cut-ins instead.
+    s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml",
+               lane_change_duration=RECKLESS_LANE_CHANGE_S,
+               control=CutIns(s.seed, vtype_lengths(os.path.join(s.work, "vtypes.xml"))))
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+# The cut-ins of the `reckless` scenario, made with TraCI (SUMO's LC2013 lane-change model, not
+# the sublane one: under SL2015 the cut-ins TraCI asked for were mostly not made). Lane changes
+# take RECKLESS_LANE_CHANGE_S (`--lanechange.duration`): the vehicle moves sideways over that
+# time, and SUMO puts it on the new lane (the floating car data's `lane`) half-way, when its
+# centre is on the marking, where a camera sees it change lanes. A car or reckless driver on
+# the left lane makes no lane changes of its own (lane change mode LEFT_LANE_MODE: it went there
+# to overtake, as SUMO's model has it); it pulls back in front of the vehicle `b` it passed (the
+# nearest on the right lane behind its back) when the headway it leaves (the gap from b's front
+# to its back over b's speed) reaches the one drawn for that pair, RECKLESS_CUT_S for reckless
+# drivers (the sample nearest it, within RECKLESS_CUT_MIN_S to RECKLESS_CUT_MAX_S), SAFE_CUT_S
+# for cars, and the room in front of it on the right lane is at least CUT_ROOM_S of its speed
+# (RECKLESS_ROOM_M for reckless drivers). A reckless driver that missed its window (the room in
+# front was short) cuts in as a car would, at a safe headway; one with nobody behind it on the
+# right lane pulls in when the room in front is CUT_FREE_ROOM_S of its speed. Changes start so
+# that the centre crosses the marking at a floating-car-data sample (every FCD_PERIOD_S): the
+# truth sees the headway the change was made at (it grows by the speed difference until the next
+# sample otherwise). No cut-in starts beside a vehicle or within CHANGING_NEAR_M of one changing
+# lanes, and `b` makes no lane change of its own until CUT_HOLD_S after the cut-in (SUMO's `b`
+# would pull out into the cutter's way, not knowing of it). A vehicle back on the right lane
+# gets SUMO's default lane change mode again (it may overtake again).
+RECKLESS_CUT_S = (0.25, 0.45)
+RECKLESS_CUT_MIN_S = 0.2
+RECKLESS_CUT_MAX_S = 0.6
+SAFE_CUT_S = (1.5, 2.5)
+CUT_ROOM_S = 1.0
+CUT_FREE_ROOM_S = 4.0
+RECKLESS_ROOM_M = 5.0
+CUT_RETRY_S = 3.0  # before asking again, if the cut-in was not made
+LEFT_LANE_MODE = 0  # only TraCI's changes, made regardless of the others
+DEFAULT_LANE_MODE = 0b011001010101  # SUMO's default
+HELD_LANE_MODE = 0b000100000000  # no changes of its own
+CUT_HOLD_S = 1.0
+CHANGING_NEAR_M = 40.0
+
+
+class CutIns:
+    def __init__(self, seed, lengths):
+        self.rng = random.Random(seed)
+        self.lengths = lengths
+        self.targets = {}  # (a, b) -> the headways a cuts in at in front of b
+        self.modes = {}
+        self.cutting = {}  # vehicle -> the time it was told to cut in
+        self.held = {}  # vehicle -> until when it keeps its lane (one cuts in in front of it)
+
+    def __call__(self, traci, time):
+        import traci.constants as tc
+        for v in traci.simulation.getDepartedIDList():
+            traci.vehicle.subscribe(v, [tc.VAR_LANE_INDEX, tc.VAR_LANEPOSITION, tc.VAR_SPEED, tc.VAR_TYPE,
+                                         tc.VAR_LANEPOSITION_LAT])
+        state = traci.vehicle.getAllSubscriptionResults()
+        right = []
+        # The vehicles changing lanes now (SUMO moves them sideways over RECKLESS_LANE_CHANGE_S).
+        changing = [(v, r[tc.VAR_LANEPOSITION]) for v, r in state.items() if abs(r[tc.VAR_LANEPOSITION_LAT]) > 0.01]
+        for v, r in state.items():
+            if r[tc.VAR_LANE_INDEX] == 0:
+                front = r[tc.VAR_LANEPOSITION]
+                right.append((front, front - self.lengths.get(r[tc.VAR_TYPE], 5.0), r[tc.VAR_SPEED], v))
+        for a, r in state.items():
+            vtype = r[tc.VAR_TYPE]
+            lane = r[tc.VAR_LANE_INDEX]
+            if self.held.get(a, -1.0) >= time:
+                mode = HELD_LANE_MODE
+            elif vtype in ("car", "reckless") and lane == 1:
+                mode = LEFT_LANE_MODE
+            else:
+                mode = DEFAULT_LANE_MODE
+            if self.modes.get(a, DEFAULT_LANE_MODE) != mode:
+                traci.vehicle.setLaneChangeMode(a, mode)
+                self.modes[a] = mode
+            if vtype not in ("car", "reckless"):
+                continue
+            if lane != 1:
+                self.cutting.pop(a, None)
+                continue
+            if a in self.cutting and time - self.cutting[a] < CUT_RETRY_S:
+                continue
+            # Where a and the right lane's vehicles will be when a's centre crosses the marking
+            # (SUMO moves it to the new lane then): half the lane change after the next step.
+            ahead = RECKLESS_LANE_CHANGE_S / 2 - STEP_LENGTH_S
+            crossing = (time + ahead) / FCD_PERIOD_S
+            if abs(crossing - round(crossing)) > 1e-6:
+                continue  # it would cross between two samples
+            speed_a = r[tc.VAR_SPEED]
+            front_a = r[tc.VAR_LANEPOSITION] + speed_a * ahead
+            back_a = front_a - self.lengths.get(vtype, 5.0)
+            behind = None  # the nearest right-lane vehicle behind a's back
+            room = float("inf")  # from a's front to the back of the nearest one in front
+            blocked = False
+            for front_v, back_v, speed_v, v in right:
+                front_v += speed_v * ahead
+                back_v += speed_v * ahead
+                if front_v < back_a:
+                    if behind is None or front_v > behind[0]:
+                        behind = (front_v, speed_v, v)
+                elif back_v > front_a:
+                    room = min(room, back_v - front_a)
+                else:
+                    blocked = True
+            if blocked or any(abs(pos - r[tc.VAR_LANEPOSITION]) < CHANGING_NEAR_M for v, pos in changing if v != a):
+                continue  # beside one, or near one changing lanes (wait until it has)
+            if behind is None:
+                cut = room >= CUT_FREE_ROOM_S * speed_a  # not back behind the one it is to pass
+            else:
+                front_b, speed_b, b = behind
+                headway = (back_a - front_b) / max(speed_b, 0.1)
+                key = (a, b)
+                if key not in self.targets:
+                    self.targets[key] = (self.rng.uniform(*RECKLESS_CUT_S) if vtype == "reckless" else None,
+                                         self.rng.uniform(*SAFE_CUT_S))
+                reckless_at, safe_at = self.targets[key]
+                # The headway grows by this much from one sample to the next: cut in at the
+                # sample nearest the one drawn.
+                growth = max(speed_a - speed_b, 0.0) * FCD_PERIOD_S / max(speed_b, 0.1)
+                cut = ((reckless_at is not None and reckless_at - growth / 2 <= headway
+                        and RECKLESS_CUT_MIN_S <= headway <= RECKLESS_CUT_MAX_S and room >= RECKLESS_ROOM_M)
+                       or (headway >= safe_at and room >= CUT_ROOM_S * speed_a))
+            if cut:
+                traci.vehicle.changeLane(a, 0, 2 * STEP_LENGTH_S)
+                if behind is not None:
+                    # b does not pull out into a's way while a cuts in (SUMO would not know).
+                    self.held[behind[2]] = time + RECKLESS_LANE_CHANGE_S + CUT_HOLD_S
+                self.cutting[a] = time
 
 
 # The truth of the reckless overtake, from SUMO's floating car data alone (not from KPL's
@@ -525,10 +681,11 @@ def reckless_truth(folder):
         for line in lines:
             if line["kind"] == "reckless_overtake":
                 f.write(json.dumps(line) + "\n")
-    counts = {}
+    headways = {}
     for line in lines:
-        counts[line["kind"]] = counts.get(line["kind"], 0) + 1
-    return "truth.jsonl: %s" % ", ".join("%d %s" % (n, k) for k, n in sorted(counts.items()))
+        headways.setdefault(line["kind"], []).append(line["headway_s"])
+    return "truth.jsonl: %s" % ", ".join("%d %s (headways %.2f-%.2f s)" % (len(h), k, min(h), max(h))
+                                         for k, h in sorted(headways.items()))
 
 
 # Weaving (probable drunk driving): SUMO's sublane model (lateral resolution 0.8 m) with

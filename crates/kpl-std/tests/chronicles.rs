@@ -87,6 +87,10 @@ impl Relations {
             && Self::num(a, "speed") > 4.0
             && Self::num(b, "speed") > 4.0
     }
+    /// `abs(b.lane_offset) < 1.2`: the car keeps to its lane (it is not changing lanes).
+    fn in_lane(b: &Value) -> bool {
+        Self::num(b, "lane_offset").abs() < 1.2
+    }
     /// `close(a, b, 50.0)`
     fn close(&self, a: &Value, b: &Value) -> bool {
         self.call("close", &[a.clone(), b.clone(), Value::Float(50.0)])
@@ -106,8 +110,9 @@ impl Relations {
 
 /// The `overtake` chronicle of sumo_chronicles.kpl (within 60 s) or `reckless_overtake` of
 /// sumo_reckless.kpl (within 30 s), for the pure recogniser: sources 0 to 3 are the predicates
-/// `back`, `side`, `front` (`cut`) and the hold's `close`.
-fn overtake_model(name: &str, within: Time) -> Chronicle {
+/// `back`, `side`, `front` (`cut`) and the hold's `close`; with `b_holds_lane`, source 5 is
+/// the reckless overtake's second hold, `b`'s [`Relations::in_lane`] from `side` to `cut`.
+fn overtake_model(name: &str, within: Time, b_holds_lane: bool) -> Chronicle {
     let c = |later, earlier| Constraint { later, earlier, lo: Some(0), hi: Some(within) };
     let event = |source| Pattern { source: SourceId(source), args: vec![0, 1], value: true };
     Chronicle {
@@ -116,7 +121,10 @@ fn overtake_model(name: &str, within: Time) -> Chronicle {
         params: 2,
         events: vec![event(0), event(1), event(2)],
         constraints: vec![c(1, 0), c(2, 1), c(2, 0)],
-        holds: vec![Hold { source: SourceId(3), args: vec![0, 1], from: 0, to: 2 }],
+        holds: [Hold { source: SourceId(3), args: vec![0, 1], from: 0, to: 2 }]
+            .into_iter()
+            .chain(b_holds_lane.then(|| Hold { source: SourceId(5), args: vec![1], from: 1, to: 2 }))
+            .collect(),
         nevers: vec![],
     }
 }
@@ -127,17 +135,20 @@ type Recognised = BTreeSet<(Vec<String>, Vec<Time>, Time)>;
 type Snapshots = Vec<(Time, Vec<(String, Value)>)>;
 
 /// The recognitions the pure recogniser gives on the events of the recorded car snapshots, with
-/// `third` as the predicate of the third event (`front` or `cut`).
+/// `third` as the predicate of the third event (`front` or `cut`) and, with `single`, a predicate
+/// of one car as source 5.
 fn expected(
     snapshots: &[(Time, Vec<(String, Value)>)],
     model: Chronicle,
     third: fn(&Relations, &Value, &Value) -> bool,
+    single: Option<fn(&Value) -> bool>,
 ) -> (Recognised, usize) {
     let relations = Relations::new();
     let mut recogniser: Recogniser<Arc<str>> =
         Recogniser::new(vec![model.compile().unwrap()], Config::default()).unwrap();
     let mut merge = Merge::new(recogniser.chronicles()[0].window);
     let mut previous: Vec<BTreeMap<(String, String), bool>> = vec![BTreeMap::new(); 4];
+    let mut previous_single: BTreeMap<String, bool> = BTreeMap::new();
     let mut found = BTreeSet::new();
     let mut events_total = 0;
     for (valid, cars) in snapshots {
@@ -175,6 +186,31 @@ fn expected(
                 events.push(Event { source: SourceId(source as u32), args, value, time: *valid });
             }
             *last = now;
+        }
+        if let Some(single) = single {
+            let now: BTreeMap<String, bool> =
+                cars.iter().map(|(id, car)| (id.clone(), single(car))).collect();
+            let mut changes: Vec<(String, bool)> = now
+                .iter()
+                .filter(|(id, value)| previous_single.get(*id).copied().unwrap_or(false) != **value)
+                .map(|(id, value)| (id.clone(), *value))
+                .collect();
+            changes.extend(
+                previous_single
+                    .iter()
+                    .filter(|(id, value)| **value && !now.contains_key(*id))
+                    .map(|(id, _)| (id.clone(), false)),
+            );
+            changes.sort();
+            for (id, value) in changes {
+                events.push(Event {
+                    source: SourceId(5),
+                    args: vec![Arc::from(id.as_str())],
+                    value,
+                    time: *valid,
+                });
+            }
+            previous_single = now;
         }
         events_total += events.len();
         for r in recogniser.step(*valid, events).unwrap() {
@@ -249,21 +285,92 @@ fn run_spec_with(spec_name: &str, stream: &str, seconds: Time, params: &[&str]) 
 #[test]
 fn the_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     let (snapshots, got) = run_spec("sumo_chronicles", "overtake", 90);
-    let (want, events) = expected(&snapshots, overtake_model("overtake", 60 * S), Relations::front);
+    let (want, events) =
+        expected(&snapshots, overtake_model("overtake", 60 * S, false), Relations::front, None);
     assert!(events > 100, "only {events} events");
     assert!(want.len() >= 3, "the scenario's overtakes: {want:?}");
     assert_eq!(got, want);
 }
 
 /// The reckless overtake of sumo_reckless.kpl on the first 90 s of its traffic (the truth of
-/// scripts/sumo-scenarios.py has one reckless cut-in in them, at 56 s; the spec recognises it).
+/// scripts/sumo-scenarios.py has 12 reckless cut-ins in them). Its second hold (`b` keeps to its
+/// lane from `side` to `cut`) is in the model: without it in the spec, the recognitions differ.
 #[test]
 fn the_reckless_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     let (snapshots, got) = run_spec("sumo_reckless", "reckless_overtake", 90);
-    let (want, events) = expected(&snapshots, overtake_model("reckless_overtake", 30 * S), Relations::cut);
+    let model = overtake_model("reckless_overtake", 30 * S, true);
+    let (want, events) = expected(&snapshots, model, Relations::cut, Some(Relations::in_lane));
     assert!(events > 100, "only {events} events");
     assert!(!want.is_empty(), "the scenario's reckless overtake: {want:?}");
     assert_eq!(got, want);
+}
+
+/// The reckless overtake of sumo_reckless.kpl as the spec writes it, on two hand-made pairs at
+/// 10 Hz: on road 0, `a1` (25 m/s, 20 m behind) passes `b1` (17 m/s) on the left lane and cuts
+/// in at 4.2 s, 9.1 m in front of `b1` (0.54 s at its speed); on road 1, `a2` and `b2` drive
+/// the same but `b2` pulls out behind `a2` at 4.2 s (its lane offset swings through the lane
+/// marking) and `a2` stays in its lane. Only the first is a cut-in: `b` keeps to its lane from
+/// `side` to `cut` (`abs(b.lane_offset) < 1.2`).
+#[test]
+fn the_reckless_overtake_is_the_cutters_lane_change_not_the_overtaken_ones() {
+    let dir = fresh_dir("reckless-lane-change");
+    let shipped = std::fs::read_to_string(traffic_dir().join("sumo_reckless.kpl")).unwrap();
+    let start = shipped.find("chronicle reckless_overtake").unwrap();
+    let chronicle = &shipped[start..start + shipped[start..].find("\n}\n").unwrap() + 3];
+    let car = |id: &str, road: i64, lane: i64, lane_pos: f64, offset: f64, speed: f64| {
+        let y = 1000.0 * road as f64 - 1.6 - 3.2 * (1 - lane) as f64 + offset;
+        format!(
+            "{{\"id\": \"{id}\", \"pos\": [{lane_pos}, {y}], \"vel\": [{speed}, 0.0], \"size\": 4.5, \"measured\": true, \
+             \"road\": {road}, \"lane\": \"r{road}_{lane}\", \"lane_offset\": {offset}, \"lane_pos\": {lane_pos}, \"speed\": {speed}}}"
+        )
+    };
+    let mut data = String::new();
+    for k in 0..80 {
+        let t = k as f64 / 10.0;
+        let (pos_a, pos_b) = (-20.0 + 25.0 * t, 17.0 * t);
+        let cut = k >= 42;
+        // b2's centre from its lane's centre: out towards the marking, then in on the other side.
+        let b2_offset = match k {
+            38..=41 => 0.4 * (k - 37) as f64,
+            42..=45 => -(1.6 - 0.4 * (k - 41) as f64),
+            _ => 0.0,
+        };
+        let cars = [
+            car("a1", 0, if cut { 0 } else { 1 }, pos_a, 0.0, 25.0),
+            car("b1", 0, 0, pos_b, 0.0, 17.0),
+            car("a2", 1, 1, pos_a, 0.0, 25.0),
+            car("b2", 1, if cut { 1 } else { 0 }, pos_b, b2_offset, 17.0),
+        ];
+        data.push_str(&format!(
+            "{{\"stream\": \"cars\", \"valid\": {}, \"value\": [{}]}}\n",
+            k * S / 10,
+            cars.join(", ")
+        ));
+    }
+    std::fs::write(dir.join("cars.jsonl"), data).unwrap();
+    let text = format!(
+        "type Car symbol co {{ pos: vec2, vel: vec2, size: float, road: int, lane: string, lane_offset: float, lane_pos: float, speed: float }}\n\
+         source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n{chronicle}\n\
+         sink out = file.jsonl(reckless_overtake, path: \"out.jsonl\")\n"
+    );
+    let spec = kpl_std::check_text(&text).unwrap();
+    let config = RunConfig {
+        out_dir: dir.clone(),
+        spec_dir: dir.clone(),
+        spec_name: "reckless_lane_change".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let recorded = read_samples(&dir.join("out.jsonl"));
+    let pairs: Vec<(String, String, Time)> = recorded
+        .iter()
+        .map(|(_, valid, v)| {
+            (v["a"].as_str().unwrap().to_string(), v["b"].as_str().unwrap().to_string(), *valid)
+        })
+        .collect();
+    assert_eq!(pairs, [("a1".to_string(), "b1".to_string(), 42 * S / 10)], "{recorded:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Hysteresis in a chronicle's predicate, end to end: two cars whose distance jitters around
