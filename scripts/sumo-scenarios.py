@@ -524,15 +524,7 @@ class CutIns:
         for a, r in state.items():
             vtype = r[tc.VAR_TYPE]
             lane = r[tc.VAR_LANE_INDEX]
-            if self.held.get(a, -1.0) >= time:
-                mode = HELD_LANE_MODE
-            elif vtype in ("car", "reckless") and lane == 1:
-                mode = LEFT_LANE_MODE
-            else:
-                mode = DEFAULT_LANE_MODE
-            if self.modes.get(a, DEFAULT_LANE_MODE) != mode:
-                traci.vehicle.setLaneChangeMode(a, mode)
-                self.modes[a] = mode
+            self.set_mode(traci, a, vtype, lane, time)
             if vtype not in ("car", "reckless"):
                 continue
             if lane != 1:
@@ -549,43 +541,69 @@ class CutIns:
             speed_a = r[tc.VAR_SPEED]
             front_a = r[tc.VAR_LANEPOSITION] + speed_a * ahead
             back_a = front_a - self.lengths.get(vtype, 5.0)
-            behind = None  # the nearest right-lane vehicle behind a's back
-            room = float("inf")  # from a's front to the back of the nearest one in front
-            blocked = False
-            for front_v, back_v, speed_v, v in right:
-                front_v += speed_v * ahead
-                back_v += speed_v * ahead
-                if front_v < back_a:
-                    if behind is None or front_v > behind[0]:
-                        behind = (front_v, speed_v, v)
-                elif back_v > front_a:
-                    room = min(room, back_v - front_a)
-                else:
-                    blocked = True
+            behind, room, blocked = surroundings(right, front_a, back_a, ahead)
             if blocked or any(abs(pos - r[tc.VAR_LANEPOSITION]) < CHANGING_NEAR_M for v, pos in changing if v != a):
                 continue  # beside one, or near one changing lanes (wait until it has)
-            if behind is None:
-                cut = room >= CUT_FREE_ROOM_S * speed_a  # not back behind the one it is to pass
-            else:
-                front_b, speed_b, b = behind
-                headway = (back_a - front_b) / max(speed_b, 0.1)
-                key = (a, b)
-                if key not in self.targets:
-                    self.targets[key] = (self.rng.uniform(*RECKLESS_CUT_S) if vtype == "reckless" else None,
-                                         self.rng.uniform(*SAFE_CUT_S))
-                reckless_at, safe_at = self.targets[key]
-                # The headway grows by this much from one sample to the next: cut in at the
-                # sample nearest the one drawn.
-                growth = max(speed_a - speed_b, 0.0) * FCD_PERIOD_S / max(speed_b, 0.1)
-                cut = ((reckless_at is not None and reckless_at - growth / 2 <= headway
-                        and RECKLESS_CUT_MIN_S <= headway <= RECKLESS_CUT_MAX_S and room >= RECKLESS_ROOM_M)
-                       or (headway >= safe_at and room >= CUT_ROOM_S * speed_a))
-            if cut:
+            if self.cuts_in(a, vtype, speed_a, back_a, behind, room):
                 traci.vehicle.changeLane(a, 0, 2 * STEP_LENGTH_S)
                 if behind is not None:
                     # b does not pull out into a's way while a cuts in (SUMO would not know).
                     self.held[behind[2]] = time + RECKLESS_LANE_CHANGE_S + CUT_HOLD_S
                 self.cutting[a] = time
+
+    def set_mode(self, traci, a, vtype, lane, time):
+        """Gives `a` its lane change mode: none of its own while one cuts in in front of it, only
+        TraCI's on the left lane (a car or reckless driver), SUMO's default otherwise."""
+        if self.held.get(a, -1.0) >= time:
+            mode = HELD_LANE_MODE
+        elif vtype in ("car", "reckless") and lane == 1:
+            mode = LEFT_LANE_MODE
+        else:
+            mode = DEFAULT_LANE_MODE
+        if self.modes.get(a, DEFAULT_LANE_MODE) != mode:
+            traci.vehicle.setLaneChangeMode(a, mode)
+            self.modes[a] = mode
+
+    def cuts_in(self, a, vtype, speed_a, back_a, behind, room):
+        """Whether `a` (on the left lane, `back_a` its back when its centre crosses the marking)
+        pulls back in now, in front of `behind` (front, speed, id; None: nobody) with `room`
+        metres in front of it."""
+        if behind is None:
+            return room >= CUT_FREE_ROOM_S * speed_a  # not back behind the one it is to pass
+        front_b, speed_b, b = behind
+        headway = (back_a - front_b) / max(speed_b, 0.1)
+        key = (a, b)
+        if key not in self.targets:
+            self.targets[key] = (self.rng.uniform(*RECKLESS_CUT_S) if vtype == "reckless" else None,
+                                 self.rng.uniform(*SAFE_CUT_S))
+        reckless_at, safe_at = self.targets[key]
+        # The headway grows by this much from one sample to the next: cut in at the sample nearest
+        # the one drawn.
+        growth = max(speed_a - speed_b, 0.0) * FCD_PERIOD_S / max(speed_b, 0.1)
+        return ((reckless_at is not None and reckless_at - growth / 2 <= headway
+                 and RECKLESS_CUT_MIN_S <= headway <= RECKLESS_CUT_MAX_S and room >= RECKLESS_ROOM_M)
+                or (headway >= safe_at and room >= CUT_ROOM_S * speed_a))
+
+
+def surroundings(right, front_a, back_a, ahead):
+    """The right lane around a vehicle on the left lane whose front and back will be at `front_a`
+    and `back_a` in `ahead` seconds, each right-lane vehicle (front, back, speed, id) moved on as
+    far: the nearest one behind its back (front, speed, id; None), the room from its front to the
+    back of the nearest one in front (metres), and whether one is beside it."""
+    behind = None
+    room = float("inf")
+    blocked = False
+    for front_v, back_v, speed_v, v in right:
+        front_v += speed_v * ahead
+        back_v += speed_v * ahead
+        if front_v < back_a:
+            if behind is None or front_v > behind[0]:
+                behind = (front_v, speed_v, v)
+        elif back_v > front_a:
+            room = min(room, back_v - front_a)
+        else:
+            blocked = True
+    return behind, room, blocked
 
 
 # The truth of the reckless overtake, from SUMO's floating car data alone (not from KPL's

@@ -109,6 +109,13 @@ impl PixelBox {
         PixelBox { left: self.left + d[0], top: self.top + d[1], ..*self }
     }
 
+    /// How far the box is from the nearest border of an image `width` by `height`, pixels: its
+    /// nearest side's distance, 0 or less for a box at or over the border (one the detector
+    /// clipped there). A point is a box of no size.
+    pub fn border_distance(&self, width: f64, height: f64) -> f64 {
+        self.left.min(self.top).min(width - self.right()).min(height - self.bottom())
+    }
+
     /// The part inside an image `width` by `height` (`None` when nothing is).
     pub fn clipped(&self, width: f64, height: f64) -> Option<PixelBox> {
         let (l, t) = (self.left.max(0.0), self.top.max(0.0));
@@ -120,6 +127,16 @@ impl PixelBox {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hand_worked_border_distances() {
+        // 100 x 50 image.
+        assert_eq!(PixelBox::new(10.0, 20.0, 30.0, 5.0).border_distance(100.0, 50.0), 10.0);
+        assert_eq!(PixelBox::new(60.0, 20.0, 38.0, 5.0).border_distance(100.0, 50.0), 2.0);
+        assert_eq!(PixelBox::new(0.0, 20.0, 30.0, 5.0).border_distance(100.0, 50.0), 0.0, "clipped");
+        assert_eq!(PixelBox::new(40.0, 45.0, 10.0, 8.0).border_distance(100.0, 50.0), -3.0, "over it");
+        assert_eq!(PixelBox::new(50.0, 24.0, 0.0, 0.0).border_distance(100.0, 50.0), 24.0, "a point");
+    }
 
     #[test]
     fn hand_worked_overlaps() {

@@ -231,15 +231,14 @@ impl Georeference {
         }
     }
 
-    /// How far a percept is from the image's nearest border, pixels: the box's nearest side (0 or
-    /// less for a box the detector clipped at the border, as boxes of vehicles moving into the
-    /// image are), or the point's distance.
+    /// How far a percept is from the image's nearest border, pixels (0 or less for a box the
+    /// detector clipped at the border, as boxes of vehicles moving into the image are).
     fn border_px(&self, point: &ImagePoint) -> f64 {
-        let (w, h) = (self.intrinsics.width, self.intrinsics.height);
-        match point {
-            ImagePoint::Box(b) => b.left.min(b.top).min(w - b.right()).min(h - b.bottom()),
-            ImagePoint::Point(p) => p[0].min(p[1]).min(w - p[0]).min(h - p[1]),
-        }
+        let b = match point {
+            ImagePoint::Box(b) => *b,
+            ImagePoint::Point(p) => PixelBox::new(p[0], p[1], 0.0, 0.0),
+        };
+        b.border_distance(self.intrinsics.width, self.intrinsics.height)
     }
 
     /// The world percept of one image percept.

@@ -134,6 +134,21 @@ type Recognised = BTreeSet<(Vec<String>, Vec<Time>, Time)>;
 /// The cars of each state: `(valid, [(symbol, car)])`.
 type Snapshots = Vec<(Time, Vec<(String, Value)>)>;
 
+/// A predicate's events from one state to the next, in order: the tuples whose value changed
+/// (absent before counts as false) and those true before and gone now (false).
+fn changes<K: Ord + Clone>(last: &BTreeMap<K, bool>, now: &BTreeMap<K, bool>) -> Vec<(K, bool)> {
+    let mut out: Vec<(K, bool)> = now
+        .iter()
+        .filter(|(k, value)| last.get(*k).copied().unwrap_or(false) != **value)
+        .map(|(k, value)| (k.clone(), *value))
+        .collect();
+    out.extend(
+        last.iter().filter(|(k, value)| **value && !now.contains_key(*k)).map(|(k, _)| (k.clone(), false)),
+    );
+    out.sort();
+    out
+}
+
 /// The recognitions the pure recogniser gives on the events of the recorded car snapshots, with
 /// `third` as the predicate of the third event (`front` or `cut`) and, with `single`, a predicate
 /// of one car as source 5.
@@ -169,19 +184,7 @@ fn expected(
                     now.insert((ida.clone(), idb.clone()), value);
                 }
             }
-            let mut changes: Vec<((String, String), bool)> = Vec::new();
-            for (pair, &value) in &now {
-                if last.get(pair).copied().unwrap_or(false) != value {
-                    changes.push((pair.clone(), value));
-                }
-            }
-            for (pair, &value) in last.iter() {
-                if value && !now.contains_key(pair) {
-                    changes.push((pair.clone(), false));
-                }
-            }
-            changes.sort();
-            for ((a, b), value) in changes {
+            for ((a, b), value) in changes(last, &now) {
                 let args = vec![Arc::from(a.as_str()), Arc::from(b.as_str())];
                 events.push(Event { source: SourceId(source as u32), args, value, time: *valid });
             }
@@ -190,19 +193,7 @@ fn expected(
         if let Some(single) = single {
             let now: BTreeMap<String, bool> =
                 cars.iter().map(|(id, car)| (id.clone(), single(car))).collect();
-            let mut changes: Vec<(String, bool)> = now
-                .iter()
-                .filter(|(id, value)| previous_single.get(*id).copied().unwrap_or(false) != **value)
-                .map(|(id, value)| (id.clone(), *value))
-                .collect();
-            changes.extend(
-                previous_single
-                    .iter()
-                    .filter(|(id, value)| **value && !now.contains_key(*id))
-                    .map(|(id, _)| (id.clone(), false)),
-            );
-            changes.sort();
-            for (id, value) in changes {
+            for (id, value) in changes(&previous_single, &now) {
                 events.push(Event {
                     source: SourceId(5),
                     args: vec![Arc::from(id.as_str())],
@@ -305,6 +296,21 @@ fn the_reckless_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     assert_eq!(got, want);
 }
 
+/// Runs a spec written in the test, with `dir` as its folder (its data) and output folder; what
+/// its sink recorded in `out.jsonl`.
+fn run_text(dir: &Path, name: &str, text: &str) -> Vec<(String, Time, serde_json::Value)> {
+    let spec = kpl_std::check_text(text).unwrap();
+    let config = RunConfig {
+        out_dir: dir.to_path_buf(),
+        spec_dir: dir.to_path_buf(),
+        spec_name: name.into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    read_samples(&dir.join("out.jsonl"))
+}
+
 /// The reckless overtake of sumo_reckless.kpl as the spec writes it, on two hand-made pairs at
 /// 10 Hz: on road 0, `a1` (25 m/s, 20 m behind) passes `b1` (17 m/s) on the left lane and cuts
 /// in at 4.2 s, 9.1 m in front of `b1` (0.54 s at its speed); on road 1, `a2` and `b2` drive
@@ -353,16 +359,7 @@ fn the_reckless_overtake_is_the_cutters_lane_change_not_the_overtaken_ones() {
          source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n{chronicle}\n\
          sink out = file.jsonl(reckless_overtake, path: \"out.jsonl\")\n"
     );
-    let spec = kpl_std::check_text(&text).unwrap();
-    let config = RunConfig {
-        out_dir: dir.clone(),
-        spec_dir: dir.clone(),
-        spec_name: "reckless_lane_change".into(),
-        ..RunConfig::default()
-    };
-    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
-    let recorded = read_samples(&dir.join("out.jsonl"));
+    let recorded = run_text(&dir, "reckless_lane_change", &text);
     let pairs: Vec<(String, String, Time)> = recorded
         .iter()
         .map(|(_, valid, v)| {
@@ -395,16 +392,7 @@ fn hysteresis_keeps_a_jittering_relation_from_flickering() {
         chronicle near_raw(a: Car, b: Car) {\n  event meet = xydist(a.pos, b.pos) < 20.0 becomes true\n}\n\
         chronicle near(a: Car, b: Car) {\n  event meet = hysteresis(xydist(a.pos, b.pos) < 20.0, xydist(a.pos, b.pos) > 25.0) becomes true\n}\n\
         sink out = file.jsonl(near_raw, near, path: \"out.jsonl\")\n";
-    let spec = kpl_std::check_text(text).unwrap();
-    let config = RunConfig {
-        out_dir: dir.clone(),
-        spec_dir: dir.clone(),
-        spec_name: "hysteresis".into(),
-        ..RunConfig::default()
-    };
-    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
-    let recorded = read_samples(&dir.join("out.jsonl"));
+    let recorded = run_text(&dir, "hysteresis", text);
     let times = |stream: &str, a: &str| -> Vec<Time> {
         recorded.iter().filter(|(s, _, v)| s == stream && v["a"] == a).map(|(_, t, _)| *t / S).collect()
     };
