@@ -18,7 +18,7 @@ pub mod clock;
 pub mod context;
 pub mod edge;
 pub mod instances;
-mod monitor;
+pub mod monitor;
 pub mod plan;
 pub mod policy;
 pub mod process;

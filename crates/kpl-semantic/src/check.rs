@@ -257,6 +257,7 @@ impl<'a> Checker<'a> {
 
         let identifications = self.identifications(spec, &drafts);
         let chronicles = self.chronicles(spec, &drafts);
+        chronicle::feed_monitors(&chronicles, &mut processes);
         let deploy = self.deploy(spec, &drafts, &stream_decls);
         let graph = self.graph(&processes);
 

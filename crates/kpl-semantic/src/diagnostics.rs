@@ -60,7 +60,6 @@ pub const UNUSED_STREAM: &str = "W0201";
 pub const UNUSED_OUTPUT: &str = "W0202";
 pub const BARE_BOUND: &str = "W0203";
 pub const UNSET_ATTRIBUTE: &str = "W0204";
-pub const CHRONICLE_NOT_RUN: &str = "W0205";
 pub const FORGET_WHEN_INEFFECTIVE: &str = "W0206";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
@@ -560,18 +559,6 @@ pub fn chronicle_hysteresis_nested(span: Span) -> Diagnostic {
     )
     .with_label("inside another expression")
     .with_hint("write `event e = hysteresis(ENTER, LEAVE) becomes true`, with the conditions inside it: `hysteresis(close(a, b, 20.0), not close(a, b, 25.0))`")
-}
-
-pub fn chronicle_not_run(span: Span, chronicle: &str, monitor: &str) -> Diagnostic {
-    Diagnostic::warning(
-        CHRONICLE_NOT_RUN,
-        span,
-        format!(
-            "chronicle `{chronicle}` has monitor `{monitor}`'s verdicts as events, which `kpl run` does not feed to chronicles yet: it is never recognised"
-        ),
-    )
-    .with_label("never recognised by `kpl run`")
-    .with_hint("events that are predicates over the parameters, and other chronicles' recognitions, are run; a monitor's episodes arrive when they end, after the states the recogniser has passed")
 }
 
 pub fn forget_when_ineffective(span: Span, ty: &str) -> Diagnostic {

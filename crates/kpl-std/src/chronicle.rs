@@ -44,8 +44,14 @@
 //! chronicle's gate, every pair evaluated there) and, with a chronicle's gate, the previous
 //! state's objects. Tuples are kept as numbers of objects ([`Numbers`]: a symbol has one while
 //! it is present at consecutive states), so memory follows the objects present, not every object
-//! the run has seen. Monitors' verdicts as events are not fed yet (`kpl check` says so with W0205):
-//! such an event never occurs.
+//! the run has seen.
+//!
+//! Monitors' verdicts as events (`event x = monitor M(...) becomes false`): the process progresses
+//! each such monitor itself, at its own states ([`MonitorVerdicts`]; its inputs include every
+//! stream the monitor reads, `kpl_semantic`'s checker adds them), and a verdict that begins an
+//! episode of a binding (its first, or one that differs from its last) is an event at the state
+//! that decided it, with the binding's objects as its arguments. A verdict decided when a binding
+//! closes is at its last state, already passed: no event.
 
 use std::collections::{BTreeMap, HashSet};
 use std::sync::Arc;
@@ -62,6 +68,7 @@ use kpl_mtl::gate::{GateGrid, Horizon, PairGate};
 
 use kpl_mtl::{Context, Formula, Progressor, SlotId, SlotState};
 use kpl_runtime::Registry;
+use kpl_runtime::monitor::MonitorVerdicts;
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
 use kpl_runtime::registry::{BuildContext, BuildError};
 use kpl_runtime::stats::ProcessStats;
@@ -163,6 +170,8 @@ struct Builder<'a> {
     next: u32,
     /// Chronicle name -> the source of its recognitions.
     chronicle_sources: BTreeMap<String, SourceId>,
+    /// Monitor name -> the source of its verdicts.
+    monitor_sources: BTreeMap<String, SourceId>,
 }
 
 impl Builder<'_> {
@@ -227,8 +236,14 @@ impl Builder<'_> {
     ) -> Result<SourceId, String> {
         match source {
             hir::EventSource::Predicate(expr) => self.predicate(c, expr, args),
-            // Never fed (W0205): a source no event comes from.
-            hir::EventSource::Monitor(_) => Ok(self.fresh()),
+            hir::EventSource::Monitor(name) => match self.monitor_sources.get(name) {
+                Some(&source) => Ok(source),
+                None => {
+                    let source = self.fresh();
+                    self.monitor_sources.insert(name.clone(), source);
+                    Ok(source)
+                }
+            },
             hir::EventSource::Chronicle(name) => self
                 .chronicle_sources
                 .get(name)
@@ -355,6 +370,7 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
         predicates: Vec::new(),
         next: 0,
         chronicle_sources: BTreeMap::new(),
+        monitor_sources: BTreeMap::new(),
     };
     let mut compiled = Vec::new();
     for c in &chronicles {
@@ -376,6 +392,8 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
         .inputs
         .iter()
         .map(|i| match &i.stream.ty {
+            // A stream a monitor reads as a value (not as objects) is the monitor's.
+            _ if i.port != "objects" => None,
             ValueType::List(item) => match item.as_ref() {
                 ValueType::Record(r) => Some(r.name.to_string()),
                 _ => None,
@@ -399,8 +417,24 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
             (ty.clone(), inputs)
         })
         .collect();
+    let mut monitors = Vec::new();
+    for (name, &source) in &builder.monitor_sources {
+        let monitor = ctx
+            .spec
+            .processes
+            .iter()
+            .find_map(|p| match &p.kind {
+                hir::ProcessKind::Monitor(m) if p.name == *name => Some(m),
+                _ => None,
+            })
+            .ok_or_else(|| ctx.error(format!("monitor `{name}` is not in the checked spec")))?;
+        let verdicts = MonitorVerdicts::new(&ctx.process.inputs, monitor, ctx.registry, ctx.stats.clone())
+            .map_err(|e| ctx.error(format!("monitor `{name}`: {e}")))?;
+        monitors.push((source, verdicts));
+    }
     let params = chronicles[own].params.iter().map(|(p, _)| Arc::from(p.as_str())).collect();
     Ok(ChronicleUnit {
+        monitors,
         predicates: builder.predicates,
         recogniser,
         own,
@@ -416,6 +450,8 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
 
 struct ChronicleUnit {
     predicates: Vec<Predicate>,
+    /// The monitors whose verdicts are events, each progressed here at this process's states.
+    monitors: Vec<(SourceId, MonitorVerdicts)>,
     recogniser: Recogniser<Arc<str>>,
     /// The index of this process's chronicle in the recogniser (the others are those it uses).
     own: usize,
@@ -719,7 +755,15 @@ impl Unit for ChronicleUnit {
 
     fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
         let objects = self.objects(input.values);
-        let events = self.events(input.valid, &objects);
+        let mut events = self.events(input.valid, &objects);
+        for (source, verdicts) in &mut self.monitors {
+            events.extend(verdicts.step(input).into_iter().map(|d| Event {
+                source: *source,
+                args: d.ids.into_vec(),
+                value: d.verdict,
+                time: input.valid,
+            }));
+        }
         match self.recogniser.step(input.valid, events) {
             Ok(found) => {
                 for r in found.iter().filter(|r| r.chronicle == self.own) {

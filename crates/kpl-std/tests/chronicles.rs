@@ -476,3 +476,138 @@ fn the_weaving_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     assert!(!want.is_empty(), "the scenario's weaving");
     assert_eq!(got, want);
 }
+
+/// A monitor's verdicts as events, differentially: the shipped situation monitors of
+/// sumo_situations.kpl, verbatim, each with a one-event chronicle `monitor M(...) becomes true`,
+/// on its recorded SUMO traffic. Every `true` episode the monitor's own process reports begins
+/// with a verdict decided at a state, and the chronicle (which progresses the monitor itself, at
+/// its own states) recognises exactly those: the same bindings at the same valid times. (The
+/// situation monitors never decide `true` when a binding closes: their `eventually[2s, 3s] true`
+/// is then unsatisfied.)
+#[test]
+fn a_monitors_verdicts_as_events_are_the_monitors_own_episodes() {
+    let dir = fresh_dir("monitor-events");
+    let shipped = std::fs::read_to_string(traffic_dir().join("sumo_situations.kpl")).unwrap();
+    let monitors = [("overtake", 2), ("speeding", 1), ("stopped", 1), ("tailgating", 2)];
+    let mut text = shipped.clone();
+    for (monitor, arity) in monitors {
+        let (params, args) = if arity == 1 { ("a: Car", "a") } else { ("a: Car, b: Car", "a, b") };
+        text.push_str(&format!(
+            "chronicle {monitor}_event({params}) {{\n  event e = monitor {monitor}({args}) becomes true\n}}\n"
+        ));
+    }
+    let names: Vec<String> = monitors.iter().map(|(m, _)| format!("{m}_event")).collect();
+    text.push_str(&format!("sink events = file.jsonl({}, path: \"events.jsonl\")\n", names.join(", ")));
+    let spec = kpl_std::check_text(&text).unwrap();
+    let config = RunConfig {
+        duration: Some(60 * S),
+        seed: 3,
+        out_dir: dir.clone(),
+        spec_dir: traffic_dir(),
+        spec_name: "sumo_situations".into(),
+        ..RunConfig::default()
+    };
+    let report = kpl_runtime::run(&spec, &kpl_std::registry(), &config, None).unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let episodes = read_samples(&dir.join("sumo_situations/situations.jsonl"));
+    let events = read_samples(&dir.join("events.jsonl"));
+    let mut seen = 0;
+    for (monitor, arity) in monitors {
+        let binding = |v: &serde_json::Value, keys: &[&str]| -> Vec<String> {
+            keys[..arity].iter().map(|k| v[*k].as_str().unwrap().to_string()).collect()
+        };
+        let keys: [&str; 2] = if arity == 1 { ["c", ""] } else { ["a", "b"] };
+        let want: Vec<(Vec<String>, Time)> = episodes
+            .iter()
+            .filter(|(s, _, v)| s == monitor && v["verdict"] == true)
+            .map(|(_, valid, v)| (binding(v, &keys), *valid))
+            .collect();
+        let stream = format!("{monitor}_event");
+        let got: Vec<(Vec<String>, Time)> = events
+            .iter()
+            .filter(|(s, _, _)| *s == stream)
+            .map(|(_, valid, v)| (binding(v, &["a", "b"]), *valid))
+            .collect();
+        let sorted = |mut v: Vec<(Vec<String>, Time)>| {
+            v.sort();
+            v
+        };
+        assert_eq!(sorted(got), sorted(want.clone()), "{monitor}");
+        seen += want.len();
+    }
+    // Enough situations that the comparison means something (overtakes and speeding at least).
+    assert!(seen >= 10, "{seen} true episodes");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A monitor's verdicts as events, by hand: the example of docs/language.md (`fast_start`: a car
+/// goes, then breaks `too_fast` within 10 s), and a monitor without `forall` over a value stream
+/// (`high`: the level stream, which the chronicle does not otherwise read). At 1 Hz: `c1` goes at
+/// 1 s and is too fast from 4 s to 6 s and again from 9 s (one episode: its verdicts in between
+/// are `true` only when its progression closes); `c2` goes at 0 s (its first state) and is never
+/// too fast; `c3` goes at 0 s and is too fast only at 12 s, too late. The level breaks 10.0 at
+/// 3 s and at 8 s (two episodes: true in between, decided at each state).
+#[test]
+fn a_monitors_verdicts_become_events_of_a_chronicle() {
+    let dir = fresh_dir("monitor-verdicts");
+    let speed = |id: &str, t: i64| -> f64 {
+        match (id, t) {
+            ("c1", 0) => 0.0,
+            ("c1", 4..=6) | ("c1", 9..) => 30.0,
+            ("c1", _) => 5.0,
+            ("c2", _) => 5.0,
+            (_, 12) => 30.0,
+            _ => 5.0,
+        }
+    };
+    let level = |t: i64| if t == 3 || t == 8 { 12.0 } else { 4.0 };
+    let mut cars = String::new();
+    let mut levels = String::new();
+    for t in 0..15 {
+        let objects: Vec<String> = ["c1", "c2", "c3"]
+            .iter()
+            .map(|id| format!("{{\"id\": \"{id}\", \"pos\": [0.0, 0.0], \"vel\": [{}, 0.0]}}", speed(id, t)))
+            .collect();
+        cars.push_str(&format!(
+            "{{\"stream\": \"cars\", \"valid\": {}, \"value\": [{}]}}\n",
+            t * S,
+            objects.join(", ")
+        ));
+        levels.push_str(&format!(
+            "{{\"stream\": \"level\", \"valid\": {}, \"value\": {}}}\n",
+            t * S,
+            level(t)
+        ));
+    }
+    std::fs::write(dir.join("cars.jsonl"), cars).unwrap();
+    std::fs::write(dir.join("level.jsonl"), levels).unwrap();
+    let text = "type Car symbol co { pos: vec2, vel: vec2 }\n\
+        source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n\
+        source level : float = file.jsonl(path: \"level.jsonl\")\n\
+        monitor too_fast = forall c: Car . always (norm(c.vel) < 25.0)\n\
+        monitor high = always (level < 10.0)\n\
+        chronicle fast_start(a: Car) {\n  event go = norm(a.vel) > 1.0 becomes true\n  event fast = monitor too_fast(a) becomes false\n  fast - go in [0s, 10s]\n}\n\
+        chronicle high_while_going(a: Car) {\n  event go = norm(a.vel) > 1.0 becomes true\n  event up = monitor high() becomes false\n  up - go in [0s, 4s]\n}\n\
+        sink out = file.jsonl(fast_start, high_while_going, too_fast, path: \"out.jsonl\")\n";
+    let recorded = run_text(&dir, "monitor_verdicts", text);
+    let found = |stream: &str| -> Vec<(String, Vec<Time>)> {
+        recorded
+            .iter()
+            .filter(|(s, _, _)| s == stream)
+            .map(|(_, _, v)| {
+                let times = v["times"].as_array().unwrap().iter().map(|t| t.as_i64().unwrap() / S).collect();
+                (v["a"].as_str().unwrap().to_string(), times)
+            })
+            .collect()
+    };
+    assert_eq!(found("fast_start"), [("c1".to_string(), vec![1, 4])], "{recorded:?}");
+    // `high` becomes false at 3 s (c1 went at 1 s; c2 and c3 at 0 s) and at 8 s (too late for all).
+    let mut high = found("high_while_going");
+    high.sort();
+    assert_eq!(
+        high,
+        [("c1".to_string(), vec![1, 3]), ("c2".to_string(), vec![0, 3]), ("c3".to_string(), vec![0, 3])],
+        "{recorded:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -16,7 +16,6 @@ use std::sync::Arc;
 use kpl_core::{Record, Time, Value};
 use kpl_mtl::{DomainId, Formula, InstanceId, ProgressorGroup, SlotId, SlotState, State};
 
-use crate::process::Emitter;
 use crate::stats::ProcessStats;
 use kpl_mtl::gate::GateGrid;
 
@@ -37,6 +36,14 @@ struct Episode {
     end: Time,
     /// When its first verdict was decided: the valid time of the episode's sample.
     decided: Time,
+}
+
+/// A verdict that began an episode of a binding: its objects' symbols (one per variable) and the
+/// verdict.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    pub ids: Box<[Arc<str>]>,
+    pub verdict: bool,
 }
 
 /// One binding: its instance of the body in the group, and the episode it has not reported yet.
@@ -279,10 +286,10 @@ impl Bindings {
     }
 
     /// Emits episodes in the order of their bindings' symbols (stable: one binding's in order).
-    fn report(&self, mut episodes: Reports, out: &mut Emitter) {
+    fn report(&self, mut episodes: Reports, out: &mut dyn FnMut(Time, Value)) {
         episodes.sort_by(|a, b| a.0.cmp(&b.0));
         for (ids, episode) in episodes {
-            out.emit_at(episode.decided, self.verdict(&ids, episode));
+            out(episode.decided, self.verdict(&ids, episode));
         }
     }
 
@@ -393,7 +400,15 @@ impl Bindings {
 
     /// Steps the bindings of the objects present (those within the gate, and those with an open
     /// progression); closes those of objects that are gone, and idle pairs that left the gate.
-    pub fn step(&mut self, valid: Time, state: &SlotState, stats: &ProcessStats, out: &mut Emitter) {
+    /// Emits the episodes that ended; gives the verdicts decided at this state that began an
+    /// episode (a binding's first verdict, or one that differs from its last), by symbols.
+    pub fn step(
+        &mut self,
+        valid: Time,
+        state: &SlotState,
+        stats: &ProcessStats,
+        out: &mut dyn FnMut(Time, Value),
+    ) -> Vec<Decision> {
         self.epoch += 1;
         let epoch = self.epoch;
         self.find_present(state);
@@ -437,6 +452,7 @@ impl Bindings {
             }
         }
         let mut reports = Vec::new();
+        let mut began = Vec::new();
         for slot in ended {
             self.close_binding(slot, &mut reports);
         }
@@ -452,16 +468,21 @@ impl Bindings {
             if let Some(episode) = binding.step(&mut self.group, valid, &bound, stats) {
                 reports.push((binding.ids.clone(), episode));
             }
+            if let Some(episode) = binding.pending.filter(|e| e.decided == valid) {
+                began.push(Decision { ids: binding.ids.clone(), verdict: episode.verdict });
+            }
         }
         self.report(reports, out);
         self.todo = todo;
         for symbols in &mut self.symbols {
             symbols.sweep(epoch);
         }
+        began.sort_by(|a, b| a.ids.cmp(&b.ids));
+        began
     }
 
     /// Closes every binding at the end of the streams.
-    pub fn close(&mut self, out: &mut Emitter) {
+    pub fn close(&mut self, out: &mut dyn FnMut(Time, Value)) {
         let mut reports = Vec::new();
         for slot in 0..self.bindings.len() as u32 {
             self.close_binding(slot, &mut reports);

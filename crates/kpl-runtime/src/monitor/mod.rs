@@ -22,6 +22,10 @@
 //! every state). A pair monitor whose body requires the pair to be close now (a top-level conjunct
 //! `close(a, b, d)` or `xydist(a, b) < d`: `kpl_mtl::gate`) progresses only the pairs within that
 //! distance (and those whose progression is open), found with its grid.
+//!
+//! [`MonitorVerdicts`] is the same progression for a chronicle that has a monitor's verdicts as
+//! events: it gives, at each state, the verdicts that begin an episode there, instead of reporting
+//! episodes when they end.
 
 use std::sync::Arc;
 
@@ -43,12 +47,68 @@ enum Role {
     Domain(usize),
 }
 
-pub(crate) struct MonitorUnit {
+/// A monitor's progression over the states of a process's inputs.
+struct Engine {
     roles: Vec<Role>,
     slots: usize,
     domains: usize,
     stats: Arc<ProcessStats>,
     mode: Mode,
+}
+
+/// A monitor as a process: its verdicts (episodes, per binding) are its output stream.
+pub(crate) struct MonitorUnit(Engine);
+
+/// A monitor's verdicts as they are decided, for a chronicle that has them as events
+/// (`event x = monitor M(...) becomes false`; the chronicle adapter in `kpl-std` runs one per
+/// monitor it uses). It progresses the monitor over the states of the chronicle's own inputs (which
+/// include every stream the monitor reads), exactly as the monitor's process does, and gives at
+/// each state the verdicts that begin an episode there: a binding's first verdict, or one that
+/// differs from its previous verdict. What is decided when a binding closes (its object gone, the
+/// streams' end) is at the binding's last state, which the chronicle has passed; it is no event.
+pub struct MonitorVerdicts {
+    engine: Engine,
+    /// Whole formula: the last verdict decided (an episode begins when it changes).
+    last: Option<bool>,
+}
+
+pub use bindings::Decision;
+
+impl std::fmt::Debug for MonitorVerdicts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MonitorVerdicts").field("last", &self.last).finish_non_exhaustive()
+    }
+}
+
+impl MonitorVerdicts {
+    /// The verdicts of `monitor` over states of a process whose inputs are `inputs` (each named
+    /// stream of the monitor among them).
+    pub fn new(
+        inputs: &[hir::Input],
+        monitor: &hir::Monitor,
+        registry: &Registry,
+        stats: Arc<ProcessStats>,
+    ) -> Result<MonitorVerdicts, String> {
+        Ok(MonitorVerdicts { engine: Engine::new(inputs, monitor, registry, stats)?, last: None })
+    }
+
+    /// Steps through the state of `input`: the verdicts that began an episode at it, in the order
+    /// of their objects' symbols. A monitor without `forall` has one binding of no objects.
+    pub fn step(&mut self, input: &Input<'_>) -> Vec<Decision> {
+        let state = self.engine.state(input);
+        match &mut self.engine.mode {
+            Mode::Whole(open) => match open.step(input.valid, &state, &self.engine.stats) {
+                Some(verdict) if self.last != Some(verdict) => {
+                    self.last = Some(verdict);
+                    vec![Decision { ids: Box::new([]), verdict }]
+                }
+                _ => Vec::new(),
+            },
+            Mode::PerBinding(bindings) => {
+                bindings.step(input.valid, &state, &self.engine.stats, &mut |_, _| {})
+            }
+        }
+    }
 }
 
 enum Mode {
@@ -110,72 +170,88 @@ pub(crate) fn build(
     registry: &Registry,
     stats: Arc<ProcessStats>,
 ) -> Result<MonitorUnit, BuildError> {
-    let error = |message: String| BuildError { process: process.name.clone(), message };
-    // Time stamps are microseconds; bare interval bounds in a spec are milliseconds.
-    let mut ctx = Context::new(TimeUnit::Us, hir::SPEC_TICK);
-    for function in registry.functions() {
-        ctx.register_function(function.clone());
-    }
-    let mut roles = Vec::with_capacity(process.inputs.len());
-    for input in &process.inputs {
-        if input.port == "objects" {
-            let ty = match &input.stream.ty {
-                kpl_core::ValueType::List(item) => match item.as_ref() {
-                    kpl_core::ValueType::Record(r) => r.name.to_string(),
-                    _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
-                },
-                _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
-            };
-            let domain = ctx.domain(&ty).unwrap_or_else(|| ctx.declare_object_type(&ty));
-            roles.push(Role::Domain(domain as usize));
-        } else {
-            let slot = ctx.slot(&input.stream.name).unwrap_or_else(|| ctx.declare_value(&input.stream.name));
-            roles.push(Role::Slot(slot as usize));
-        }
-    }
-    for ty in &monitor.object_types {
-        if ctx.domain(ty).is_none() {
-            ctx.declare_object_type(ty);
-        }
-    }
-    let compile = |expr: &kpl_syntax::ast::Expr, ctx: &mut Context| {
-        Formula::from_ast(expr, ctx).map(Arc::new).map_err(|errors| {
-            let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
-            error(format!("formula: {}", messages.join("; ")))
-        })
-    };
-    let (vars, body) = hir::monitor_bindings(&monitor.formula);
-    let mode = if !vars.is_empty() && vars.iter().all(|(var, _)| ctx.slot(var).is_none()) {
-        // Each variable becomes a named value of the state, set to each object in turn.
-        let vars: Vec<Var> = vars
-            .iter()
-            .map(|(var, ty)| {
-                let domain = ctx.domain(ty).unwrap_or_else(|| ctx.declare_object_type(ty)) as usize;
-                Var { name: Arc::from(*var), slot: ctx.declare_value(var) as usize, domain }
-            })
-            .collect();
-        let mtl = kpl_mtl::lower(body, &mut ctx).map_err(|errors| {
-            let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
-            error(format!("formula: {}", messages.join("; ")))
-        })?;
-        let gate = match vars.as_slice() {
-            [a, b] => PairGate::new(&ctx, a.slot as SlotId, b.slot as SlotId).distance(&mtl, Horizon::Now),
-            _ => None,
-        };
-        let body = Formula::new(&mtl, &ctx).map_err(|e| error(format!("formula: {e}")))?;
-        Mode::PerBinding(Bindings::new(Arc::new(body), vars, gate))
-    } else {
-        Mode::Whole(Open::new(&compile(&monitor.formula, &mut ctx)?))
-    };
-    Ok(MonitorUnit { roles, slots: ctx.slot_names().len(), domains: ctx.domain_names().len(), stats, mode })
+    Engine::new(&process.inputs, monitor, registry, stats)
+        .map(MonitorUnit)
+        .map_err(|message| BuildError { process: process.name.clone(), message })
 }
 
-impl Unit for MonitorUnit {
-    fn synchronized(&self) -> bool {
-        true
+impl Engine {
+    fn new(
+        inputs: &[hir::Input],
+        monitor: &hir::Monitor,
+        registry: &Registry,
+        stats: Arc<ProcessStats>,
+    ) -> Result<Engine, String> {
+        let error = |message: String| message;
+        // Time stamps are microseconds; bare interval bounds in a spec are milliseconds.
+        let mut ctx = Context::new(TimeUnit::Us, hir::SPEC_TICK);
+        for function in registry.functions() {
+            ctx.register_function(function.clone());
+        }
+        let mut roles = Vec::with_capacity(inputs.len());
+        for input in inputs {
+            if input.port == "objects" {
+                let ty = match &input.stream.ty {
+                    kpl_core::ValueType::List(item) => match item.as_ref() {
+                        kpl_core::ValueType::Record(r) => r.name.to_string(),
+                        _ => {
+                            return Err(error(format!(
+                                "stream `{}` does not carry objects",
+                                input.stream.name
+                            )));
+                        }
+                    },
+                    _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
+                };
+                let domain = ctx.domain(&ty).unwrap_or_else(|| ctx.declare_object_type(&ty));
+                roles.push(Role::Domain(domain as usize));
+            } else {
+                let slot =
+                    ctx.slot(&input.stream.name).unwrap_or_else(|| ctx.declare_value(&input.stream.name));
+                roles.push(Role::Slot(slot as usize));
+            }
+        }
+        for ty in &monitor.object_types {
+            if ctx.domain(ty).is_none() {
+                ctx.declare_object_type(ty);
+            }
+        }
+        let compile = |expr: &kpl_syntax::ast::Expr, ctx: &mut Context| {
+            Formula::from_ast(expr, ctx).map(Arc::new).map_err(|errors| {
+                let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
+                error(format!("formula: {}", messages.join("; ")))
+            })
+        };
+        let (vars, body) = hir::monitor_bindings(&monitor.formula);
+        let mode = if !vars.is_empty() && vars.iter().all(|(var, _)| ctx.slot(var).is_none()) {
+            // Each variable becomes a named value of the state, set to each object in turn.
+            let vars: Vec<Var> = vars
+                .iter()
+                .map(|(var, ty)| {
+                    let domain = ctx.domain(ty).unwrap_or_else(|| ctx.declare_object_type(ty)) as usize;
+                    Var { name: Arc::from(*var), slot: ctx.declare_value(var) as usize, domain }
+                })
+                .collect();
+            let mtl = kpl_mtl::lower(body, &mut ctx).map_err(|errors| {
+                let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
+                error(format!("formula: {}", messages.join("; ")))
+            })?;
+            let gate = match vars.as_slice() {
+                [a, b] => {
+                    PairGate::new(&ctx, a.slot as SlotId, b.slot as SlotId).distance(&mtl, Horizon::Now)
+                }
+                _ => None,
+            };
+            let body = Formula::new(&mtl, &ctx).map_err(|e| error(format!("formula: {e}")))?;
+            Mode::PerBinding(Bindings::new(Arc::new(body), vars, gate))
+        } else {
+            Mode::Whole(Open::new(&compile(&monitor.formula, &mut ctx)?))
+        };
+        Ok(Engine { roles, slots: ctx.slot_names().len(), domains: ctx.domain_names().len(), stats, mode })
     }
 
-    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+    /// The state of one synchronized input: the named streams' values and the objects by type.
+    fn state(&self, input: &Input<'_>) -> SlotState {
         let mut state = SlotState { values: vec![None; self.slots], objects: vec![Vec::new(); self.domains] };
         for (role, value) in self.roles.iter().zip(input.values) {
             let Some(sample) = value else { continue };
@@ -188,25 +264,39 @@ impl Unit for MonitorUnit {
                 },
             }
         }
-        match &mut self.mode {
+        state
+    }
+}
+
+impl Unit for MonitorUnit {
+    fn synchronized(&self) -> bool {
+        true
+    }
+
+    fn on_input(&mut self, input: &Input<'_>, out: &mut Emitter) -> Result<(), ProcessError> {
+        let engine = &mut self.0;
+        let state = engine.state(input);
+        match &mut engine.mode {
             Mode::Whole(open) => {
-                if let Some(verdict) = open.step(input.valid, &state, &self.stats) {
+                if let Some(verdict) = open.step(input.valid, &state, &engine.stats) {
                     out.emit(Value::Bool(verdict));
                 }
             }
-            Mode::PerBinding(bindings) => bindings.step(input.valid, &state, &self.stats, out),
+            Mode::PerBinding(bindings) => {
+                bindings.step(input.valid, &state, &engine.stats, &mut |at, value| out.emit_at(at, value));
+            }
         }
         Ok(())
     }
 
     fn on_end(&mut self, out: &mut Emitter) -> Result<(), ProcessError> {
-        match &mut self.mode {
+        match &mut self.0.mode {
             Mode::Whole(open) => {
                 if let Some((last, verdict)) = open.close() {
                     out.emit_at(last, Value::Bool(verdict));
                 }
             }
-            Mode::PerBinding(bindings) => bindings.close(out),
+            Mode::PerBinding(bindings) => bindings.close(&mut |at, value| out.emit_at(at, value)),
         }
         Ok(())
     }

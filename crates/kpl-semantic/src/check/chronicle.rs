@@ -87,13 +87,7 @@ impl Checker<'_> {
                 out.push(checked);
             }
         }
-        if !self.chronicle_cycles(&out) {
-            for c in &out {
-                if let Some(monitor) = uses_monitor(c, &out) {
-                    self.diagnostics.push(diag::chronicle_not_run(c.span, &c.name, &monitor));
-                }
-            }
-        }
+        self.chronicle_cycles(&out);
         out
     }
 
@@ -391,8 +385,8 @@ impl Checker<'_> {
         Some((from_index, to_index))
     }
 
-    /// Reports chronicles that recognise each other in a cycle; whether there is one.
-    fn chronicle_cycles(&mut self, chronicles: &[hir::Chronicle]) -> bool {
+    /// Reports chronicles that recognise each other in a cycle (the first one found).
+    fn chronicle_cycles(&mut self, chronicles: &[hir::Chronicle]) {
         let index: BTreeMap<&str, usize> =
             chronicles.iter().enumerate().map(|(i, c)| (c.name.as_str(), i)).collect();
         let uses: Vec<Vec<usize>> = chronicles
@@ -414,32 +408,63 @@ impl Checker<'_> {
             if let Some(cycle) = find_cycle(start, &uses, &mut state, &mut path) {
                 let names: Vec<String> = cycle.iter().map(|&i| chronicles[i].name.clone()).collect();
                 self.diagnostics.push(diag::chronicle_cycle(chronicles[cycle[0]].span, &names));
-                return true;
+                return;
             }
         }
-        false
     }
 }
 
-/// The first monitor whose verdicts `chronicle` (or a chronicle it uses) has as events: `kpl run`
-/// does not feed monitors' verdicts to chronicles yet. `chronicles` has no cycle.
-fn uses_monitor(chronicle: &hir::Chronicle, chronicles: &[hir::Chronicle]) -> Option<String> {
+/// The monitors whose verdicts are events of `chronicle`, itself or through the chronicles it uses
+/// (without cycles among them), each once, in the order met.
+fn monitors_used(
+    chronicle: &hir::Chronicle,
+    chronicles: &[hir::Chronicle],
+    out: &mut Vec<String>,
+    depth: usize,
+) {
+    if depth > chronicles.len() {
+        return; // a cycle, reported by `chronicle_cycles`
+    }
     let sources =
         chronicle.events.iter().map(|e| &e.source).chain(chronicle.nevers.iter().map(|n| &n.source));
     for source in sources {
         match source {
-            hir::EventSource::Monitor(m) => return Some(m.clone()),
+            hir::EventSource::Monitor(m) if !out.contains(m) => out.push(m.clone()),
             hir::EventSource::Chronicle(name) => {
-                if let Some(m) =
-                    chronicles.iter().find(|c| c.name == *name).and_then(|c| uses_monitor(c, chronicles))
-                {
-                    return Some(m);
+                if let Some(used) = chronicles.iter().find(|c| c.name == *name) {
+                    monitors_used(used, chronicles, out, depth + 1);
                 }
             }
-            hir::EventSource::Predicate(_) => {}
+            _ => {}
         }
     }
-    None
+}
+
+/// Makes the inputs of every monitor whose verdicts a chronicle has as events (itself or through
+/// the chronicles it uses) inputs of the chronicle's recogniser too: it progresses those monitors
+/// itself, at its own states (`kpl_runtime::monitor::MonitorVerdicts`), so it reads what they read.
+pub(super) fn feed_monitors(chronicles: &[hir::Chronicle], processes: &mut [hir::Process]) {
+    for k in 0..processes.len() {
+        let hir::ProcessKind::Chronicle(name) = &processes[k].kind else { continue };
+        let Some(chronicle) = chronicles.iter().find(|c| c.name == *name) else { continue };
+        let mut monitors = Vec::new();
+        monitors_used(chronicle, chronicles, &mut monitors, 0);
+        let mut inputs = processes[k].inputs.clone();
+        for monitor in &monitors {
+            let Some(m) = processes
+                .iter()
+                .find(|p| p.name == *monitor && matches!(p.kind, hir::ProcessKind::Monitor(_)))
+            else {
+                continue;
+            };
+            for input in &m.inputs {
+                if !inputs.iter().any(|i| i.port == input.port && i.stream.name == input.stream.name) {
+                    inputs.push(input.clone());
+                }
+            }
+        }
+        processes[k].inputs = inputs;
+    }
 }
 
 fn find_cycle(
