@@ -429,6 +429,10 @@ struct ChronicleUnit {
     merge: Merge<Arc<str>>,
 }
 
+/// A gate distance (its bits) and the object types of a predicate's two slots: the predicates
+/// with the same one share their pairs within the gate at a state.
+type GateKey<'t> = (u64, &'t str, &'t str);
+
 /// Objects by type and number.
 type ObjectsByNumber = BTreeMap<String, FxHashMap<Num, Value>>;
 
@@ -478,7 +482,7 @@ impl ChronicleUnit {
         // The pairs within a gate, found once per gate distance and pair of object types for
         // every predicate gated so (`shared[within[k]]` is predicate k's), and where each present
         // object is in its type's list (for an own gate's pairs true at the previous state).
-        let mut shared: Vec<((u64, &str, &str), Vec<[usize; 2]>)> = Vec::new();
+        let mut shared: Vec<(GateKey<'_>, Vec<[usize; 2]>)> = Vec::new();
         let mut within: Vec<Option<usize>> = Vec::with_capacity(self.predicates.len());
         for p in &self.predicates {
             let radius = match p.gate {
