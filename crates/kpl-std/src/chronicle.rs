@@ -794,3 +794,47 @@ impl Unit for ChronicleUnit {
         Ok(())
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    fn car(x: f64, y: f64) -> Value {
+        let fields = vec![(Arc::from("pos"), Value::Vec2([x, y]))];
+        Value::Record(Arc::new(Record { id: Some(Arc::from(format!("c{x}_{y}"))), fields }))
+    }
+
+    /// The pairs shared by the predicates of one gate are those every pair within the distance
+    /// gives (an object never with itself, one without a finite `pos` with none), sorted as
+    /// `candidates` needs them to find the pairs true before among them.
+    #[test]
+    fn pairs_within_a_gate_are_every_close_pair_of_distinct_objects_sorted() {
+        let mut values: Vec<Value> =
+            (0..60).map(|k| car(f64::from(k % 12) * 7.3, f64::from(k / 12) * 11.0)).collect();
+        values.push(Value::Record(Arc::new(Record { id: Some(Arc::from("nowhere")), fields: Vec::new() })));
+        values.push(car(f64::NAN, 3.0));
+        let objects: Vec<(Num, &Value)> = values.iter().enumerate().map(|(k, v)| (k as Num + 1, v)).collect();
+        let radius = 20.0;
+        let pos = |v: &Value| match v {
+            Value::Record(r) => {
+                r.get("pos").and_then(Value::as_vec2).filter(|q| q[0].is_finite() && q[1].is_finite())
+            }
+            _ => None,
+        };
+        let mut expected = Vec::new();
+        for (i, (n, a)) in objects.iter().enumerate() {
+            for (j, (m, b)) in objects.iter().enumerate() {
+                if let (Some(p), Some(q)) = (pos(a), pos(b))
+                    && n != m
+                    && (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) <= radius * radius
+                {
+                    expected.push([i, j]);
+                }
+            }
+        }
+        let found = pairs_within(radius, &objects, &objects);
+        assert!(expected.len() > 60, "too few pairs to compare: {}", expected.len());
+        assert_eq!(found, expected);
+    }
+}
