@@ -66,7 +66,7 @@ use kpl_chronicle::recognise::{Config, Recogniser, Recognition};
 use kpl_core::{Record, Time, TimeUnit, Value, ValueType};
 use kpl_mtl::gate::{GateGrid, Horizon, PairGate};
 
-use kpl_mtl::{Context, Formula, Progressor, SlotId, SlotState};
+use kpl_mtl::{Context, Formula, Progressor, SlotId, State};
 use kpl_runtime::Registry;
 use kpl_runtime::monitor::MonitorVerdicts;
 use kpl_runtime::process::{Emitter, Input, ProcessError, SyncUnit, Unit};
@@ -91,8 +91,6 @@ struct Predicate {
     args: Vec<usize>,
     /// Which tuples are evaluated ([`Gate`]).
     gate: Gate,
-    /// The state an evaluation reads (its slots overwritten for each tuple).
-    scratch: SlotState,
     /// The tuples that were true at the previous state (with [`Gate::Chronicle`]: every tuple
     /// evaluated there, with its value).
     last: FxHashMap<Key, bool>,
@@ -221,7 +219,6 @@ impl Builder<'_> {
             leave,
             slots,
             args: args.to_vec(),
-            scratch: SlotState { values: vec![None; ctx.slot_names().len()], objects: Vec::new() },
             gate: if self.gated { gate.map_or(Gate::None, Gate::Own) } else { Gate::None },
             last: FxHashMap::default(),
         });
@@ -468,6 +465,10 @@ struct ChronicleUnit {
     merge: Merge<Arc<str>>,
 }
 
+/// A gate distance (its bits) and the object types of a predicate's two slots: the predicates
+/// with the same one share their pairs within the gate at a state.
+type GateKey<'t> = (u64, &'t str, &'t str);
+
 /// Objects by type and number.
 type ObjectsByNumber = BTreeMap<String, FxHashMap<Num, Value>>;
 
@@ -513,12 +514,47 @@ impl ChronicleUnit {
         } else {
             BTreeMap::new()
         };
+        let domain = |ty: &str| objects.get(ty).map_or(&[][..], Vec::as_slice);
+        // The pairs within a gate, found once per gate distance and pair of object types for
+        // every predicate gated so (`shared[within[k]]` is predicate k's), and where each present
+        // object is in its type's list (for an own gate's pairs true at the previous state).
+        let mut shared: Vec<(GateKey<'_>, Vec<[usize; 2]>)> = Vec::new();
+        let mut within: Vec<Option<usize>> = Vec::with_capacity(self.predicates.len());
+        for p in &self.predicates {
+            let radius = match p.gate {
+                Gate::Own(r) | Gate::Chronicle(r) => Some(r),
+                Gate::None => None,
+            };
+            let (Some(radius), [(_, ta), (_, tb)]) = (radius, p.slots.as_slice()) else {
+                within.push(None);
+                continue;
+            };
+            let key = (radius.to_bits(), ta.as_str(), tb.as_str());
+            let k = match shared.iter().position(|(k, _)| *k == key) {
+                Some(k) => k,
+                None => {
+                    shared.push((key, pairs_within(radius, domain(ta), domain(tb))));
+                    shared.len() - 1
+                }
+            };
+            within.push(Some(k));
+        }
+        let shared: Vec<Vec<[usize; 2]>> = shared.into_iter().map(|(_, pairs)| pairs).collect();
+        let index: BTreeMap<&str, FxHashMap<Num, usize>> =
+            if self.predicates.iter().any(|p| matches!(p.gate, Gate::Own(_))) {
+                objects
+                    .iter()
+                    .map(|(ty, o)| (ty.as_str(), o.iter().enumerate().map(|(k, (n, _))| (*n, k)).collect()))
+                    .collect()
+            } else {
+                BTreeMap::new()
+            };
         let mut tuples = Vec::new();
-        for p in &mut self.predicates {
-            let domains: Vec<&[(Num, &Value)]> =
-                p.slots.iter().map(|(_, ty)| objects.get(ty).map_or(&[][..], Vec::as_slice)).collect();
+        for (p, within) in self.predicates.iter_mut().zip(within) {
+            let domains: Vec<&[(Num, &Value)]> = p.slots.iter().map(|(_, ty)| domain(ty)).collect();
             let arity = domains.len();
-            let count = candidates(p, &domains, &mut tuples);
+            let within = within.map(|k| shared[k].as_slice());
+            let count = candidates(p, &domains, within, &index, &mut tuples);
             let mut now: FxHashMap<Key, bool> =
                 FxHashMap::with_capacity_and_hasher(count, Default::default());
             let mut changes: Vec<(Key, bool)> = Vec::new();
@@ -637,6 +673,21 @@ impl Gate {
     }
 }
 
+/// The objects of one tuple as the state a predicate's formula reads: slot `slots[k].0` holds
+/// `items[k]`, every other slot nothing. Borrowed, so evaluating a tuple copies no value.
+struct TupleState<'a, 'v> {
+    slots: &'a [(usize, String)],
+    items: &'a [&'v Value],
+}
+
+impl State for TupleState<'_, '_> {
+    #[inline]
+    fn value(&self, slot: SlotId) -> Option<&Value> {
+        let k = self.slots.iter().position(|(s, _)| *s == slot as usize)?;
+        self.items.get(k).copied()
+    }
+}
+
 /// ENTER's value (the predicate's) for these objects at `valid`, and LEAVE's with hysteresis. A
 /// predicate that one state does not decide, or that fails, is false.
 fn evaluate(
@@ -646,13 +697,10 @@ fn evaluate(
     undecided: &mut u64,
     stats: &ProcessStats,
 ) -> (bool, Option<bool>) {
-    for ((slot, _), item) in p.slots.iter().zip(items) {
-        p.scratch.values[*slot] = Some((*item).clone());
-    }
-    let state = &p.scratch;
+    let state = TupleState { slots: &p.slots, items };
     let mut eval = |progressor: &mut Progressor| {
         progressor.reset();
-        match progressor.step(valid, state) {
+        match progressor.step(valid, &state) {
             Ok(Some(v)) => v,
             Ok(None) => {
                 *undecided += 1;
@@ -671,17 +719,19 @@ fn evaluate(
 
 /// The tuples of objects (indices into `domains`, one per slot, one tuple after the other in
 /// `out`) to evaluate `p` for at this state (module doc, "Gating"): every tuple of distinct
-/// objects, or with a gate over two slots the pairs within it (found with a grid; an object
-/// without a finite `pos` is within no gate) and, for an own gate, the pairs that were true at the
-/// previous state. Returns the number of tuples (a predicate over no object has one, the empty
-/// tuple).
-fn candidates(p: &Predicate, domains: &[&[(Num, &Value)]], out: &mut Vec<usize>) -> usize {
+/// objects, or with a gate over two slots the pairs within it (`within`, [`pairs_within`] of its
+/// distance and domains) and, for an own gate, the pairs that were true at the previous state
+/// (`index`: where each present object is in its type's domain). Returns the number of tuples (a
+/// predicate over no object has one, the empty tuple).
+fn candidates(
+    p: &Predicate,
+    domains: &[&[(Num, &Value)]],
+    within: Option<&[[usize; 2]]>,
+    index: &BTreeMap<&str, FxHashMap<Num, usize>>,
+    out: &mut Vec<usize>,
+) -> usize {
     out.clear();
-    let radius = match p.gate {
-        Gate::Own(r) | Gate::Chronicle(r) => Some(r),
-        Gate::None => None,
-    };
-    let (Some(radius), [da, db]) = (radius, domains) else {
+    let (Some(within), [(_, ta), (_, tb)]) = (within, p.slots.as_slice()) else {
         let mut count = 0;
         for_each_tuple(domains, &mut |t| {
             out.extend_from_slice(t);
@@ -689,6 +739,25 @@ fn candidates(p: &Predicate, domains: &[&[(Num, &Value)]], out: &mut Vec<usize>)
         });
         return count;
     };
+    out.extend(within.iter().flatten());
+    if matches!(p.gate, Gate::Own(_))
+        && !p.last.is_empty()
+        && let (Some(ia), Some(ib)) = (index.get(ta.as_str()), index.get(tb.as_str()))
+    {
+        for (key, _) in p.last.iter().filter(|(_, v)| **v) {
+            if let (Some(&i), Some(&j)) = (ia.get(&key[0]), ib.get(&key[1]))
+                && within.binary_search(&[i, j]).is_err()
+            {
+                out.extend_from_slice(&[i, j]);
+            }
+        }
+    }
+    out.len() / 2
+}
+
+/// The pairs of distinct objects `(i, j)` (indices into `da` and `db`) within `radius` of each
+/// other, found with a grid (an object without a finite `pos` is within no gate), sorted.
+fn pairs_within(radius: f64, da: &[(Num, &Value)], db: &[(Num, &Value)]) -> Vec<[usize; 2]> {
     let pos = |v: &Value| match v {
         Value::Record(r) => {
             r.get("pos").and_then(Value::as_vec2).filter(|q| q[0].is_finite() && q[1].is_finite())
@@ -703,28 +772,14 @@ fn candidates(p: &Predicate, domains: &[&[(Num, &Value)]], out: &mut Vec<usize>)
     }
     grid.finish();
     let mut near = Vec::new();
+    let mut out = Vec::new();
     for (i, (n, v)) in da.iter().enumerate() {
         let Some(q) = pos(v) else { continue };
+        // Sorted: `near` gives the indices in order.
         grid.near(Some(q), &mut near);
-        for &j in near.iter().filter(|&&j| db[j].0 != *n) {
-            out.extend_from_slice(&[i, j]);
-        }
+        out.extend(near.iter().filter(|&&j| db[j].0 != *n).map(|&j| [i, j]));
     }
-    if matches!(p.gate, Gate::Own(_)) && !p.last.is_empty() {
-        let index = |d: &[(Num, &Value)]| -> FxHashMap<Num, usize> {
-            d.iter().enumerate().map(|(k, (n, _))| (*n, k)).collect()
-        };
-        let (ia, ib) = (index(da), index(db));
-        let within: FxHashSet<(usize, usize)> = out.chunks(2).map(|t| (t[0], t[1])).collect();
-        for (key, _) in p.last.iter().filter(|(_, v)| **v) {
-            if let (Some(&i), Some(&j)) = (ia.get(&key[0]), ib.get(&key[1]))
-                && !within.contains(&(i, j))
-            {
-                out.extend_from_slice(&[i, j]);
-            }
-        }
-    }
-    out.len() / 2
+    out
 }
 
 /// Calls `f` with every tuple of indices into `domains` whose objects are distinct.
@@ -781,5 +836,49 @@ impl Unit for ChronicleUnit {
     fn on_end(&mut self, _out: &mut Emitter) -> Result<(), ProcessError> {
         self.report();
         Ok(())
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests
+mod tests {
+    use super::*;
+
+    fn car(x: f64, y: f64) -> Value {
+        let fields = vec![(Arc::from("pos"), Value::Vec2([x, y]))];
+        Value::Record(Arc::new(Record { id: Some(Arc::from(format!("c{x}_{y}"))), fields }))
+    }
+
+    /// The pairs shared by the predicates of one gate are those every pair within the distance
+    /// gives (an object never with itself, one without a finite `pos` with none), sorted as
+    /// `candidates` needs them to find the pairs true before among them.
+    #[test]
+    fn pairs_within_a_gate_are_every_close_pair_of_distinct_objects_sorted() {
+        let mut values: Vec<Value> =
+            (0..60).map(|k| car(f64::from(k % 12) * 7.3, f64::from(k / 12) * 11.0)).collect();
+        values.push(Value::Record(Arc::new(Record { id: Some(Arc::from("nowhere")), fields: Vec::new() })));
+        values.push(car(f64::NAN, 3.0));
+        let objects: Vec<(Num, &Value)> = values.iter().enumerate().map(|(k, v)| (k as Num + 1, v)).collect();
+        let radius = 20.0;
+        let pos = |v: &Value| match v {
+            Value::Record(r) => {
+                r.get("pos").and_then(Value::as_vec2).filter(|q| q[0].is_finite() && q[1].is_finite())
+            }
+            _ => None,
+        };
+        let mut expected = Vec::new();
+        for (i, (n, a)) in objects.iter().enumerate() {
+            for (j, (m, b)) in objects.iter().enumerate() {
+                if let (Some(p), Some(q)) = (pos(a), pos(b))
+                    && n != m
+                    && (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) <= radius * radius
+                {
+                    expected.push([i, j]);
+                }
+            }
+        }
+        let found = pairs_within(radius, &objects, &objects);
+        assert!(expected.len() > 60, "too few pairs to compare: {}", expected.len());
+        assert_eq!(found, expected);
     }
 }
