@@ -26,6 +26,8 @@
 //!   as a pair monitor's: `close(a, b, 50.0)` or `xydist(a, b) < 10.0` among its top-level
 //!   conjuncts; with hysteresis, ENTER's). It is evaluated for the pairs within that distance,
 //!   found with a grid, and for the pairs true at the previous state; every other pair is false.
+//!   Predicates with the same gate distance over the same two object types share one grid and one
+//!   list of the pairs within it per state (`pairs_within`).
 //! - *A chronicle's gate*: a `hold` over the same two parameters whose own predicate has an own
 //!   gate and whose `from` and `to` events come first and last in every instance (by the minimal
 //!   network) keeps every event of every recognition within that distance, so the chronicle's
