@@ -51,6 +51,20 @@ pub enum ValueType {
     Record(Arc<RecordType>),
 }
 
+impl ValueType {
+    /// The record type of the objects a stream of this type carries (`list<T>` with `T` a record
+    /// type: a snapshot of objects), if it carries objects.
+    pub fn object_type(&self) -> Option<&RecordType> {
+        match self {
+            ValueType::List(item) => match item.as_ref() {
+                ValueType::Record(r) => Some(r),
+                _ => None,
+            },
+            _ => None,
+        }
+    }
+}
+
 /// A declared record (object) type after name resolution.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordType {

@@ -65,7 +65,7 @@ use kpl_chronicle::fluent;
 use kpl_chronicle::merge::Merge;
 use kpl_chronicle::model::{Chronicle, Compiled, Event, Hold, Never, Pattern, SourceId};
 use kpl_chronicle::recognise::{Config, Recogniser, Recognition};
-use kpl_core::{Record, Time, TimeUnit, Value, ValueType};
+use kpl_core::{Record, Time, TimeUnit, Value};
 use kpl_mtl::gate::{GateGrid, Horizon, PairGate};
 
 use kpl_mtl::{Context, Formula, Progressor, SlotId, State};
@@ -390,13 +390,9 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
         .process
         .inputs
         .iter()
-        .map(|i| match &i.stream.ty {
+        .map(|i| match i.port.as_str() {
+            "objects" => i.stream.ty.object_type().map(|r| r.name.to_string()),
             // A stream a monitor reads as a value (not as objects) is the monitor's.
-            _ if i.port != "objects" => None,
-            ValueType::List(item) => match item.as_ref() {
-                ValueType::Record(r) => Some(r.name.to_string()),
-                _ => None,
-            },
             _ => None,
         })
         .collect();

@@ -175,6 +175,12 @@ pub(crate) fn build(
         .map_err(|message| BuildError { process: process.name.clone(), message })
 }
 
+/// The message of a monitor formula that does not compile.
+fn formula_error(errors: &[impl std::fmt::Display]) -> String {
+    let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
+    format!("formula: {}", messages.join("; "))
+}
+
 impl Engine {
     fn new(
         inputs: &[hir::Input],
@@ -182,7 +188,6 @@ impl Engine {
         registry: &Registry,
         stats: Arc<ProcessStats>,
     ) -> Result<Engine, String> {
-        let error = |message: String| message;
         // Time stamps are microseconds; bare interval bounds in a spec are milliseconds.
         let mut ctx = Context::new(TimeUnit::Us, hir::SPEC_TICK);
         for function in registry.functions() {
@@ -191,18 +196,13 @@ impl Engine {
         let mut roles = Vec::with_capacity(inputs.len());
         for input in inputs {
             if input.port == "objects" {
-                let ty = match &input.stream.ty {
-                    kpl_core::ValueType::List(item) => match item.as_ref() {
-                        kpl_core::ValueType::Record(r) => r.name.to_string(),
-                        _ => {
-                            return Err(error(format!(
-                                "stream `{}` does not carry objects",
-                                input.stream.name
-                            )));
-                        }
-                    },
-                    _ => return Err(error(format!("stream `{}` does not carry objects", input.stream.name))),
-                };
+                let ty = input
+                    .stream
+                    .ty
+                    .object_type()
+                    .ok_or_else(|| format!("stream `{}` does not carry objects", input.stream.name))?
+                    .name
+                    .to_string();
                 let domain = ctx.domain(&ty).unwrap_or_else(|| ctx.declare_object_type(&ty));
                 roles.push(Role::Domain(domain as usize));
             } else {
@@ -217,10 +217,7 @@ impl Engine {
             }
         }
         let compile = |expr: &kpl_syntax::ast::Expr, ctx: &mut Context| {
-            Formula::from_ast(expr, ctx).map(Arc::new).map_err(|errors| {
-                let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
-                error(format!("formula: {}", messages.join("; ")))
-            })
+            Formula::from_ast(expr, ctx).map(Arc::new).map_err(|errors| formula_error(&errors))
         };
         let (vars, body) = hir::monitor_bindings(&monitor.formula);
         let mode = if !vars.is_empty() && vars.iter().all(|(var, _)| ctx.slot(var).is_none()) {
@@ -232,17 +229,14 @@ impl Engine {
                     Var { name: Arc::from(*var), slot: ctx.declare_value(var) as usize, domain }
                 })
                 .collect();
-            let mtl = kpl_mtl::lower(body, &mut ctx).map_err(|errors| {
-                let messages: Vec<String> = errors.iter().map(ToString::to_string).collect();
-                error(format!("formula: {}", messages.join("; ")))
-            })?;
+            let mtl = kpl_mtl::lower(body, &mut ctx).map_err(|errors| formula_error(&errors))?;
             let gate = match vars.as_slice() {
                 [a, b] => {
                     PairGate::new(&ctx, a.slot as SlotId, b.slot as SlotId).distance(&mtl, Horizon::Now)
                 }
                 _ => None,
             };
-            let body = Formula::new(&mtl, &ctx).map_err(|e| error(format!("formula: {e}")))?;
+            let body = Formula::new(&mtl, &ctx).map_err(|e| format!("formula: {e}"))?;
             Mode::PerBinding(Bindings::new(Arc::new(body), vars, gate))
         } else {
             Mode::Whole(Open::new(&compile(&monitor.formula, &mut ctx)?))
