@@ -6,7 +6,8 @@
 //! with (binding, and the minimal network's bounds against every node already matched), keeping
 //! the instance it extends, and starts a new one. An instance is dropped as soon as its deadline
 //! passes (the latest time its earliest-due open node may still occur), so an instance never lives
-//! longer than the chronicle's window. Instances are grouped by the objects bound to the
+//! longer than the chronicle's window, and as soon as one of its `hold`s fails before its `to`
+//! event (it could only complete into a failure). Instances are grouped by the objects bound to the
 //! parameters that every event binds, so an event is tried only against the instances of its own
 //! objects. A complete instance is checked against its `hold` and
 //! `never` conditions when its step is done (so every event at that instant is known), and each
@@ -63,6 +64,9 @@ pub struct Stats {
     pub peak_instances: usize,
     /// Partial instances dropped because their deadline passed.
     pub expired: u64,
+    /// Partial instances dropped because a `hold` already failed (its fluent became false after
+    /// its `from` event, before its `to` event): they could only complete into a failure.
+    pub broken: u64,
     /// Instances not started or extended because a chronicle had `max_instances` already.
     pub refused: u64,
     /// Complete instances whose `hold` or `never` condition failed.
@@ -255,6 +259,9 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         });
         instances.len = instances.groups.values().map(Vec::len).sum();
         self.stats.expired += (before - instances.len) as u64;
+        let broken = drop_broken(compiled, instances, time, batch);
+        instances.len -= broken;
+        self.stats.broken += broken as u64;
         // The groups touched, in the order first touched (so that what completes comes out in an
         // order that does not depend on hashing).
         let mut touched: Vec<Vec<O>> = Vec::new();
@@ -342,6 +349,51 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         }
         true
     }
+}
+
+/// Drops the partial instances of a chronicle that a `hold` already fails: its fluent became false
+/// in this batch (at `time`), after the instance's `from` event and before its `to` event, on the
+/// objects the instance binds. Such an instance could only complete at `time` or later, when its
+/// hold would fail (`Recogniser::conditions_hold`), so dropping it now changes no recognition; it
+/// only keeps instances from living out the chronicle's window. A hold whose arguments do not
+/// name the instances' group (every event's parameters) is left to the check at completion.
+/// Returns how many were dropped.
+fn drop_broken<O: Clone + Eq + Hash>(
+    compiled: &Compiled,
+    instances: &mut Instances<O>,
+    time: Time,
+    batch: &[(Event<O>, u64)],
+) -> usize {
+    let mut dropped = 0;
+    for hold in &compiled.chronicle.holds {
+        // Where each of the group's parameters is among the hold's arguments.
+        let Some(positions) = instances
+            .key_params
+            .iter()
+            .map(|p| hold.args.iter().position(|a| a == p))
+            .collect::<Option<Vec<usize>>>()
+        else {
+            continue;
+        };
+        for (event, _) in batch {
+            if event.source != hold.source || event.value || event.args.len() != hold.args.len() {
+                continue;
+            }
+            let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
+            let Some(group) = instances.groups.get_mut(&key) else { continue };
+            let before = group.len();
+            group.retain(|p| {
+                let open = p.times[hold.from].is_some_and(|t1| t1 < time) && p.times[hold.to].is_none();
+                let same = hold.args.iter().zip(&event.args).all(|(a, o)| p.binding[*a].as_ref() == Some(o));
+                !(open && same)
+            });
+            dropped += before - group.len();
+            if group.is_empty() {
+                instances.groups.remove(&key);
+            }
+        }
+    }
+    dropped
 }
 
 /// `instance` with `node` matched by `event`, if the binding and the network allow it.

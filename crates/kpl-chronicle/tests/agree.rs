@@ -296,6 +296,27 @@ fn the_instance_bound_is_kept_and_counted() {
     assert_eq!(r.stats().refused, 2);
 }
 
+/// A partial instance whose `hold` fails before its `to` event is dropped then (it could only
+/// complete into a failure), not kept to its deadline; a hold failing on other objects keeps it.
+#[test]
+fn an_instance_whose_hold_failed_is_dropped_at_once() {
+    let mut c = two_step(1, 1000);
+    c.holds = vec![Hold { source: SourceId(4), args: vec![0], from: 0, to: 1 }];
+    let fluent = |object: u8, value: bool| Event { value, ..ev(4, object) };
+    let run = |fails: Option<u8>| {
+        let mut r = Recogniser::new(vec![c.clone().compile().unwrap()], Config::default()).unwrap();
+        r.step(0, vec![fluent(1, true), fluent(2, true), ev(2, 1)]).unwrap();
+        assert_eq!(r.stats().instances, 1);
+        r.step(5, fails.map(|o| fluent(o, false)).into_iter().collect()).unwrap();
+        let instances = r.stats().instances;
+        let found = r.step(6, vec![ev(3, 1)]).unwrap();
+        (instances, r.stats().broken, found.len())
+    };
+    assert_eq!(run(None), (1, 0, 1));
+    assert_eq!(run(Some(2)), (1, 0, 1));
+    assert_eq!(run(Some(1)), (0, 1, 0));
+}
+
 #[test]
 fn late_steps_are_refused() {
     let mut r = Recogniser::new(vec![two_step(1, 5).compile().unwrap()], Config::default()).unwrap();

@@ -58,7 +58,7 @@
 use std::collections::{BTreeMap, HashSet};
 use std::sync::Arc;
 
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 use smallvec::SmallVec;
 
 use kpl_chronicle::fluent;
@@ -83,7 +83,10 @@ pub(crate) fn register(registry: &mut Registry) {
 
 /// A predicate over some parameters of a chronicle, evaluated for tuples of objects.
 struct Predicate {
-    source: SourceId,
+    /// The sources of its events: one per event or condition that names it, each an alias of the
+    /// first, so that a predicate written several times (the weaving chronicle's six lane
+    /// departures and returns) is evaluated once per tuple.
+    sources: Vec<SourceId>,
     progressor: Progressor,
     /// `hysteresis(ENTER, LEAVE)`: `progressor` is ENTER, this is LEAVE (`kpl_chronicle::fluent`).
     leave: Option<Progressor>,
@@ -94,8 +97,9 @@ struct Predicate {
     /// Which tuples are evaluated ([`Gate`]).
     gate: Gate,
     /// The tuples that were true at the previous state (with [`Gate::Chronicle`]: every tuple
-    /// evaluated there, with its value).
-    last: FxHashMap<Key, bool>,
+    /// evaluated there, with its value), sorted by key: a state's candidate tuples come sorted the
+    /// same way, so the two are merged in one pass, with no hashing per tuple.
+    last: Vec<(Key, bool)>,
 }
 
 /// A present object's number ([`Numbers`]).
@@ -172,6 +176,8 @@ struct Builder<'a> {
     chronicle_sources: BTreeMap<String, SourceId>,
     /// Monitor name -> the source of its verdicts.
     monitor_sources: BTreeMap<String, SourceId>,
+    /// (Chronicle, predicate as `kpl fmt` writes it, parameters) -> its index in `predicates`.
+    written: BTreeMap<(String, String, Vec<usize>), usize>,
 }
 
 impl Builder<'_> {
@@ -186,6 +192,14 @@ impl Builder<'_> {
         expr: &kpl_syntax::ast::Expr,
         args: &[usize],
     ) -> Result<SourceId, String> {
+        let mut text = String::new();
+        kpl_syntax::format::expr(&mut text, expr, 0);
+        let written = (c.name.clone(), text, args.to_vec());
+        if let Some(&k) = self.written.get(&written) {
+            let source = self.fresh();
+            self.predicates[k].sources.push(source);
+            return Ok(source);
+        }
         let mut ctx = Context::new(TimeUnit::Us, hir::SPEC_TICK);
         for function in self.registry.functions() {
             ctx.register_function(function.clone());
@@ -215,14 +229,15 @@ impl Builder<'_> {
             _ => (compile(expr, true)?, None),
         };
         let source = self.fresh();
+        self.written.insert(written, self.predicates.len());
         self.predicates.push(Predicate {
-            source,
+            sources: vec![source],
             progressor,
             leave,
             slots,
             args: args.to_vec(),
             gate: if self.gated { gate.map_or(Gate::None, Gate::Own) } else { Gate::None },
-            last: FxHashMap::default(),
+            last: Vec::new(),
         });
         Ok(source)
     }
@@ -332,9 +347,10 @@ fn gate_by_holds(model: &Compiled, predicates: &mut [Predicate]) {
         })
     };
     let hold_sources: HashSet<SourceId> = chronicle.holds.iter().map(|h| h.source).collect();
+    let is_hold = |p: &Predicate| p.sources.iter().any(|s| hold_sources.contains(s));
     let mut radius: Option<(f64, [usize; 2])> = None;
     for hold in chronicle.holds.iter().filter(|h| spans(h.from, h.to)) {
-        let Some(p) = predicates.iter().find(|p| p.source == hold.source) else { continue };
+        let Some(p) = predicates.iter().find(|p| p.sources.contains(&hold.source)) else { continue };
         if let (Gate::Own(r), [a, b]) = (p.gate, p.args.as_slice())
             && radius.is_none_or(|(best, _)| r < best)
         {
@@ -343,7 +359,7 @@ fn gate_by_holds(model: &Compiled, predicates: &mut [Predicate]) {
     }
     let Some((r, pair)) = radius else { return };
     for p in predicates.iter_mut() {
-        if p.gate == Gate::None && p.leave.is_none() && !hold_sources.contains(&p.source) && p.args == pair {
+        if p.gate == Gate::None && p.leave.is_none() && !is_hold(p) && p.args == pair {
             p.gate = Gate::Chronicle(r);
         }
     }
@@ -370,6 +386,7 @@ fn build(ctx: &mut BuildContext<'_>, gated: bool) -> Result<ChronicleUnit, Build
         next: 0,
         chronicle_sources: BTreeMap::new(),
         monitor_sources: BTreeMap::new(),
+        written: BTreeMap::new(),
     };
     let mut compiled = Vec::new();
     for c in &chronicles {
@@ -470,7 +487,8 @@ type GateKey<'t> = (u64, &'t str, &'t str);
 /// Objects by type and number.
 type ObjectsByNumber = BTreeMap<String, FxHashMap<Num, Value>>;
 
-/// The present objects of one type (those with a symbol, each symbol once), with their numbers.
+/// The present objects of one type (those with a symbol, each symbol once), with their numbers,
+/// sorted by number.
 type Objects<'v> = Vec<(Num, &'v Value)>;
 
 impl ChronicleUnit {
@@ -482,19 +500,19 @@ impl ChronicleUnit {
         let mut out = BTreeMap::new();
         for (ty, inputs) in &self.feeds {
             let mut objects: Objects<'v> = Vec::new();
-            let mut seen: FxHashSet<Num> = FxHashSet::default();
             for &i in inputs {
                 let Some(sample) = values.get(i).and_then(Option::as_ref) else { continue };
                 let Value::List(items) = &sample.value else { continue };
                 for item in items.iter() {
                     let Value::Record(record) = item else { continue };
                     let Some(id) = &record.id else { continue };
-                    let n = self.numbers.number(id);
-                    if seen.insert(n) {
-                        objects.push((n, item));
-                    }
+                    objects.push((self.numbers.number(id), item));
                 }
             }
+            // Sorted by number (stable: a symbol's first object is kept), so that tuples of
+            // indices in lexicographic order are tuples of numbers in lexicographic order.
+            objects.sort_by_key(|(n, _)| *n);
+            objects.dedup_by_key(|(n, _)| *n);
             out.insert(ty.clone(), objects);
         }
         out
@@ -507,15 +525,9 @@ impl ChronicleUnit {
         let previous = self.previous.take();
         // What only a chronicle's gate needs, made only then (this runs at every state).
         let keep_previous = self.predicates.iter().any(|p| p.gate.unknown_beyond());
-        let present: BTreeMap<&str, FxHashSet<Num>> = if keep_previous {
-            objects.iter().map(|(ty, o)| (ty.as_str(), o.iter().map(|(n, _)| *n).collect())).collect()
-        } else {
-            BTreeMap::new()
-        };
         let domain = |ty: &str| objects.get(ty).map_or(&[][..], Vec::as_slice);
         // The pairs within a gate, found once per gate distance and pair of object types for
-        // every predicate gated so (`shared[within[k]]` is predicate k's), and where each present
-        // object is in its type's list (for an own gate's pairs true at the previous state).
+        // every predicate gated so (`shared[within[k]]` is predicate k's).
         let mut shared: Vec<(GateKey<'_>, Vec<[usize; 2]>)> = Vec::new();
         let mut within: Vec<Option<usize>> = Vec::with_capacity(self.predicates.len());
         for p in &self.predicates {
@@ -538,47 +550,85 @@ impl ChronicleUnit {
             within.push(Some(k));
         }
         let shared: Vec<Vec<[usize; 2]>> = shared.into_iter().map(|(_, pairs)| pairs).collect();
-        let index: BTreeMap<&str, FxHashMap<Num, usize>> =
-            if self.predicates.iter().any(|p| matches!(p.gate, Gate::Own(_))) {
-                objects
-                    .iter()
-                    .map(|(ty, o)| (ty.as_str(), o.iter().enumerate().map(|(k, (n, _))| (*n, k)).collect()))
-                    .collect()
-            } else {
-                BTreeMap::new()
-            };
         let mut tuples = Vec::new();
+        let mut indices: Vec<usize> = Vec::new();
+        let mut items: Vec<&Value> = Vec::new();
         for (p, within) in self.predicates.iter_mut().zip(within) {
             let domains: Vec<&[(Num, &Value)]> = p.slots.iter().map(|(_, ty)| domain(ty)).collect();
             let arity = domains.len();
-            let within = within.map(|k| shared[k].as_slice());
-            let count = candidates(p, &domains, within, &index, &mut tuples);
-            let mut now: FxHashMap<Key, bool> =
-                FxHashMap::with_capacity_and_hasher(count, Default::default());
+            let count = candidates(&domains, within.map(|k| shared[k].as_slice()), &mut tuples);
+            let last = std::mem::take(&mut p.last);
+            let mut now: Vec<(Key, bool)> = Vec::with_capacity(count);
             let mut changes: Vec<(Key, bool)> = Vec::new();
-            let mut items: Vec<&Value> = Vec::with_capacity(arity);
-            for t in 0..count {
-                let tuple = &tuples[t * arity..(t + 1) * arity];
+            // This state's candidates and the previous state's tuples, both sorted by key, merged.
+            let (mut t, mut l) = (0, 0);
+            while t < count || l < last.len() {
+                let tuple = if t < count { &tuples[t * arity..(t + 1) * arity] } else { &[][..] };
                 let key: Key = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0).collect();
-                let before = match p.last.get(&key) {
-                    Some(&value) => value,
+                let order = match (t < count, last.get(l)) {
+                    (true, Some((kept, _))) => key.cmp(kept),
+                    (true, None) => std::cmp::Ordering::Less,
+                    (false, _) => std::cmp::Ordering::Greater,
+                };
+                let (key, before) = match order {
+                    std::cmp::Ordering::Equal => {
+                        t += 1;
+                        l += 1;
+                        indices.clear();
+                        indices.extend_from_slice(tuple);
+                        (key, last[l - 1].1)
+                    }
                     // Not evaluated at the previous state: beyond an own gate (or absent) it was
-                    // false; beyond a chronicle's gate it was not known, so it is evaluated now
-                    // on the previous state's objects.
-                    None => match (p.gate, &previous) {
-                        (Gate::Chronicle(_), Some((t, before))) => {
-                            let items: Option<Vec<&Value>> = key
-                                .iter()
-                                .zip(&p.slots)
-                                .map(|(n, (_, ty))| before.get(ty).and_then(|m| m.get(n)))
-                                .collect();
-                            items.is_some_and(|items| evaluate(p, *t, &items, &mut undecided, &self.stats).0)
+                    // false; beyond a chronicle's gate it was not known, so it is evaluated now on
+                    // the previous state's objects.
+                    std::cmp::Ordering::Less => {
+                        t += 1;
+                        indices.clear();
+                        indices.extend_from_slice(tuple);
+                        let before = match (p.gate, &previous) {
+                            (Gate::Chronicle(_), Some((t, before))) => {
+                                let kept: Option<Vec<&Value>> = key
+                                    .iter()
+                                    .zip(&p.slots)
+                                    .map(|(n, (_, ty))| before.get(ty).and_then(|m| m.get(n)))
+                                    .collect();
+                                kept.is_some_and(|kept| evaluate(p, *t, &kept, &mut undecided, &self.stats).0)
+                            }
+                            _ => false,
+                        };
+                        (key, before)
+                    }
+                    // Evaluated at the previous state, not a candidate now.
+                    std::cmp::Ordering::Greater => {
+                        let (key, before) = last[l].clone();
+                        l += 1;
+                        indices.clear();
+                        let present =
+                            key.iter().zip(&domains).all(|(n, d)| match d.binary_search_by_key(n, |o| o.0) {
+                                Ok(k) => {
+                                    indices.push(k);
+                                    true
+                                }
+                                Err(_) => false,
+                            });
+                        match (p.gate, present) {
+                            // True before (so within the gate then), its objects still present:
+                            // with hysteresis it may still hold beyond ENTER's gate.
+                            (Gate::Own(_), true) if before => (key, before),
+                            // Beyond a chronicle's gate: not known, and no recognition needs it.
+                            (Gate::Chronicle(_), true) => continue,
+                            // Gone: false.
+                            _ => {
+                                if before {
+                                    changes.push((key, false));
+                                }
+                                continue;
+                            }
                         }
-                        _ => false,
-                    },
+                    }
                 };
                 items.clear();
-                items.extend(tuple.iter().zip(&domains).map(|(&k, d)| d[k].1));
+                items.extend(indices.iter().zip(&domains).map(|(&k, d)| d[k].1));
                 let (enter, leave) = evaluate(p, valid, &items, &mut undecided, &self.stats);
                 let value = match leave {
                     None => enter,
@@ -588,19 +638,7 @@ impl ChronicleUnit {
                     changes.push((key.clone(), value));
                 }
                 if value || p.gate.unknown_beyond() {
-                    now.insert(key, value);
-                }
-            }
-            // True at the previous state, not evaluated now: gone (false), or beyond a
-            // chronicle's gate (not known, and no recognition needs it).
-            let present = |key: &Key| {
-                key.iter()
-                    .zip(&p.slots)
-                    .all(|(n, (_, ty))| present.get(ty.as_str()).is_some_and(|o| o.contains(n)))
-            };
-            for (key, &value) in &p.last {
-                if value && !now.contains_key(key) && !(p.gate.unknown_beyond() && present(key)) {
-                    changes.push((key.clone(), false));
+                    now.push((key, value));
                 }
             }
             // By the objects' symbols, as the events of one state have always been ordered.
@@ -613,14 +651,18 @@ impl ChronicleUnit {
                 })
                 .collect();
             named.sort();
-            events.extend(named.into_iter().map(|(args, value)| Event {
-                source: p.source,
-                args,
-                value,
-                time: valid,
-            }));
+            for &source in &p.sources {
+                events.extend(named.iter().map(|(args, value)| Event {
+                    source,
+                    args: args.clone(),
+                    value: *value,
+                    time: valid,
+                }));
+            }
             p.last = now;
         }
+        // By source (stable), as when each alias was a predicate of its own.
+        events.sort_by_key(|e| e.source);
         if keep_previous {
             let kept = objects
                 .iter()
@@ -657,6 +699,7 @@ impl ChronicleUnit {
             .result("recognitions merged into an earlier one of the same situation", self.merge.merged());
         self.stats.result("partial instances at most", s.peak_instances as u64);
         self.stats.result("partial instances expired", s.expired);
+        self.stats.result("partial instances dropped (a hold failed)", s.broken);
         self.stats.result("instances refused (max_instances reached)", s.refused);
         self.stats.result("complete instances failing a hold/never condition", s.failed_conditions);
     }
@@ -716,41 +759,22 @@ fn evaluate(
 }
 
 /// The tuples of objects (indices into `domains`, one per slot, one tuple after the other in
-/// `out`) to evaluate `p` for at this state (module doc, "Gating"): every tuple of distinct
+/// `out`) to evaluate a predicate for at this state (module doc, "Gating"): every tuple of distinct
 /// objects, or with a gate over two slots the pairs within it (`within`, [`pairs_within`] of its
-/// distance and domains) and, for an own gate, the pairs that were true at the previous state
-/// (`index`: where each present object is in its type's domain). Returns the number of tuples (a
-/// predicate over no object has one, the empty tuple).
-fn candidates(
-    p: &Predicate,
-    domains: &[&[(Num, &Value)]],
-    within: Option<&[[usize; 2]]>,
-    index: &BTreeMap<&str, FxHashMap<Num, usize>>,
-    out: &mut Vec<usize>,
-) -> usize {
+/// distance and domains). Sorted, so by key, since the domains are sorted by number. Returns the
+/// number of tuples (a predicate over no object has one, the empty tuple).
+fn candidates(domains: &[&[(Num, &Value)]], within: Option<&[[usize; 2]]>, out: &mut Vec<usize>) -> usize {
     out.clear();
-    let (Some(within), [(_, ta), (_, tb)]) = (within, p.slots.as_slice()) else {
-        let mut count = 0;
-        for_each_tuple(domains, &mut |t| {
-            out.extend_from_slice(t);
-            count += 1;
-        });
-        return count;
-    };
-    out.extend(within.iter().flatten());
-    if matches!(p.gate, Gate::Own(_))
-        && !p.last.is_empty()
-        && let (Some(ia), Some(ib)) = (index.get(ta.as_str()), index.get(tb.as_str()))
-    {
-        for (key, _) in p.last.iter().filter(|(_, v)| **v) {
-            if let (Some(&i), Some(&j)) = (ia.get(&key[0]), ib.get(&key[1]))
-                && within.binary_search(&[i, j]).is_err()
-            {
-                out.extend_from_slice(&[i, j]);
-            }
-        }
+    if let (Some(within), 2) = (within, domains.len()) {
+        out.extend(within.iter().flatten());
+        return within.len();
     }
-    out.len() / 2
+    let mut count = 0;
+    for_each_tuple(domains, &mut |t| {
+        out.extend_from_slice(t);
+        count += 1;
+    });
+    count
 }
 
 /// The pairs of distinct objects `(i, j)` (indices into `da` and `db`) within `radius` of each
