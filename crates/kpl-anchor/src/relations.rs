@@ -16,7 +16,7 @@
 
 use std::f64::consts::PI;
 
-use kpl_core::{Record, Value, ValueType};
+use kpl_core::{FieldHint, Record, Value, ValueType};
 use kpl_mtl::Function;
 use kpl_roads::geom;
 use kpl_semantic::registry;
@@ -50,9 +50,18 @@ fn object<'a>(value: &'a Value, func: &str) -> Result<&'a Record, String> {
     }
 }
 
-fn float(record: &Record, name: &str, func: &str) -> Result<f64, String> {
+/// A hint of its own for the call site (`Record::get_hinted`): the relations read the same few
+/// attributes of every pair of objects, most of one type.
+macro_rules! hint {
+    () => {{
+        static HINT: FieldHint = FieldHint::new();
+        &HINT
+    }};
+}
+
+fn float(record: &Record, name: &str, hint: &FieldHint, func: &str) -> Result<f64, String> {
     record
-        .get(name)
+        .get_hinted(name, hint)
         .and_then(Value::as_f64)
         .ok_or_else(|| format!("{func} needs the attribute `{name}` (a number) of {}", who(record)))
 }
@@ -63,16 +72,20 @@ fn who(record: &Record) -> String {
 
 fn on_road<'a>(value: &'a Value, func: &str) -> Result<OnRoad<'a>, String> {
     let record = object(value, func)?;
-    let road = match record.get("road") {
+    let road = match record.get_hinted("road", hint!()) {
         Some(Value::Int(road)) => *road,
         _ => return Err(format!("{func} needs the attribute `road` (an int) of {}", who(record))),
     };
     Ok(OnRoad {
         record,
         road,
-        lane_pos: float(record, "lane_pos", func)?,
-        heading: record.get("heading").and_then(Value::as_f64),
-        length: record.get("size").and_then(Value::as_f64).filter(|s| *s > 0.0).unwrap_or(DEFAULT_LENGTH_M),
+        lane_pos: float(record, "lane_pos", hint!(), func)?,
+        heading: record.get_hinted("heading", hint!()).and_then(Value::as_f64),
+        length: record
+            .get_hinted("size", hint!())
+            .and_then(Value::as_f64)
+            .filter(|s| *s > 0.0)
+            .unwrap_or(DEFAULT_LENGTH_M),
     })
 }
 
@@ -103,7 +116,7 @@ fn overlap(a: &OnRoad<'_>, b: &OnRoad<'_>) -> f64 {
 }
 
 fn same_lane(a: &Record, b: &Record) -> bool {
-    match (a.get("lane"), b.get("lane")) {
+    match (a.get_hinted("lane", hint!()), b.get_hinted("lane", hint!())) {
         (Some(Value::Str(x)), Some(Value::Str(y))) => !x.is_empty() && x == y,
         (Some(Value::Int(x)), Some(Value::Int(y))) => *x >= 0 && x == y,
         _ => false,
@@ -130,14 +143,14 @@ fn left_of(a: &Record, b: &OnRoad<'_>, func: &str) -> Result<bool, String> {
 
 fn point(record: &Record, func: &str) -> Result<[f64; 2], String> {
     record
-        .get("pos")
+        .get_hinted("pos", hint!())
         .and_then(Value::as_vec2)
         .ok_or_else(|| format!("{func} needs the `pos` (vec2) of {}", who(record)))
 }
 
 fn vel(record: &Record, func: &str) -> Result<[f64; 2], String> {
     record
-        .get("vel")
+        .get_hinted("vel", hint!())
         .and_then(Value::as_vec2)
         .ok_or_else(|| format!("{func} needs the `vel` (vec2) of {}", who(record)))
 }
@@ -145,7 +158,7 @@ fn vel(record: &Record, func: &str) -> Result<[f64; 2], String> {
 type Pair = fn(&OnRoad<'_>, &OnRoad<'_>, &str) -> Result<bool, String>;
 
 fn pair(name: &'static str, relation: Pair) -> Function {
-    Function::new(name, (2, Some(2)), move |args| {
+    Function::borrowing(name, (2, Some(2)), move |args| {
         let a = on_road(&args[0], name)?;
         let b = on_road(&args[1], name)?;
         relation(&a, &b, name).map(Value::Bool)
@@ -160,19 +173,19 @@ pub const CLOSE_LATERAL_MARGIN_M: f64 = 15.0;
 pub fn functions() -> Vec<Function> {
     vec![
         pair("same_road", |a, b, _| Ok(same_road(a, b))),
-        Function::new("same_lane", (2, Some(2)), |args| {
+        Function::borrowing("same_lane", (2, Some(2)), |args| {
             Ok(Value::Bool(same_lane(object(&args[0], "same_lane")?, object(&args[1], "same_lane")?)))
         }),
         pair("behind", |a, b, _| Ok(behind(a, b))),
         pair("in_front", |a, b, _| Ok(behind(b, a))),
         pair("beside", |a, b, _| Ok(beside(a, b))),
         pair("beside_left", |a, b, f| Ok(beside(a, b) && left_of(a.record, b, f)?)),
-        Function::new("left_of", (2, Some(2)), |args| {
+        Function::borrowing("left_of", (2, Some(2)), |args| {
             let a = object(&args[0], "left_of")?;
             let b = on_road(&args[1], "left_of")?;
             left_of(a, &b, "left_of").map(Value::Bool)
         }),
-        Function::new("gap", (2, Some(2)), |args| {
+        Function::borrowing("gap", (2, Some(2)), |args| {
             let a = on_road(&args[0], "gap")?;
             let b = on_road(&args[1], "gap")?;
             if !same_road(&a, &b) {
@@ -181,7 +194,7 @@ pub fn functions() -> Vec<Function> {
             Ok(Value::Float(ahead(&a, &b) - overlap(&a, &b)))
         }),
         pair("beside_right", |a, b, f| Ok(beside(a, b) && !left_of(a.record, b, f)?)),
-        Function::new("close", (3, Some(3)), |args| {
+        Function::borrowing("close", (3, Some(3)), |args| {
             let a = on_road(&args[0], "close")?;
             let b = on_road(&args[1], "close")?;
             let d = args[2]
@@ -192,17 +205,17 @@ pub fn functions() -> Vec<Function> {
         // Measured along the road, between lane centres that may lie side by side: in the plane
         // the two are within `d` plus this much (the gate of a pair monitor, `kpl_mtl::gate`).
         .within(CLOSE_LATERAL_MARGIN_M),
-        Function::new("approaching", (2, Some(2)), |args| {
+        Function::borrowing("approaching", (2, Some(2)), |args| {
             let a = object(&args[0], "approaching")?;
             let b = object(&args[1], "approaching")?;
             let towards = geom::sub(point(b, "approaching")?, point(a, "approaching")?);
             let closing = geom::sub(vel(a, "approaching")?, vel(b, "approaching")?);
             Ok(Value::Bool(geom::dot(towards, closing) > 0.0))
         }),
-        Function::new("time_gap", (2, Some(2)), |args| {
+        Function::borrowing("time_gap", (2, Some(2)), |args| {
             let a = on_road(&args[0], "time_gap")?;
             let b = on_road(&args[1], "time_gap")?;
-            let speed = float(a.record, "speed", "time_gap")?;
+            let speed = float(a.record, "speed", hint!(), "time_gap")?;
             let gap = ahead(&a, &b) - overlap(&a, &b);
             if !behind(&a, &b) || speed < 0.1 {
                 return Ok(Value::Float(NO_TIME_GAP_S));
@@ -211,9 +224,9 @@ pub fn functions() -> Vec<Function> {
         }),
         Function::new("wrong_way", (1, Some(1)), |args| {
             let a = object(&args[0], "wrong_way")?;
-            let speed = float(a, "speed", "wrong_way")?;
-            let heading = float(a, "heading", "wrong_way")?;
-            let lane = float(a, "lane_heading", "wrong_way")?;
+            let speed = float(a, "speed", hint!(), "wrong_way")?;
+            let heading = float(a, "heading", hint!(), "wrong_way")?;
+            let lane = float(a, "lane_heading", hint!(), "wrong_way")?;
             Ok(Value::Bool(speed >= WRONG_WAY_MIN_SPEED_MPS && angle_between(heading, lane) > PI / 2.0))
         }),
         Function::new("angle_diff", (2, Some(2)), |args| {

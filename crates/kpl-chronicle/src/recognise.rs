@@ -265,6 +265,8 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         // The groups touched, in the order first touched (so that what completes comes out in an
         // order that does not depend on hashing).
         let mut touched: Vec<Vec<O>> = Vec::new();
+        // The same, to ask whether a group is in it (a step has as many events as changes).
+        let mut seen: HashSet<Vec<O>> = HashSet::new();
         for (event, occurrence) in batch {
             for (node, pattern) in compiled.chronicle.events.iter().enumerate() {
                 if pattern.source != event.source
@@ -303,7 +305,7 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
                     }
                 }
                 instances.len += added;
-                if added > 0 && !touched.contains(&key) {
+                if added > 0 && seen.insert(key.clone()) {
                     touched.push(key);
                 }
             }

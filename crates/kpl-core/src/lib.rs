@@ -20,5 +20,6 @@ mod value;
 pub use suggest::{closest, did_you_mean};
 pub use time::{Time, TimeUnit, format_micros, parse_duration};
 pub use value::{
-    BBox, FieldType, JsonError, OBJECT_STATUS, Record, RecordType, Value, ValueType, object_status_type,
+    BBox, FieldHint, FieldType, JsonError, OBJECT_STATUS, Record, RecordType, Value, ValueType,
+    object_status_type,
 };

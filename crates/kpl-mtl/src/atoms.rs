@@ -6,13 +6,11 @@
 //! it. A failure (a missing value, a type error) is kept and becomes the step's error only if the
 //! progression actually uses that atom's value, as `docs/mtl.md` ("Missing values") promises.
 
-use std::sync::Arc;
-
 use crate::error::EvalError;
 use crate::formula::{AtomId, Formula, WORD_ATOMS};
 use crate::residual::Env;
 use crate::state::State;
-use crate::term::{BinOp, Function, Native, SlotId, Term, TermEnv};
+use crate::term::{BinOp, FieldName, Function, Native, SlotId, Term, TermEnv};
 
 use kpl_core::Value;
 
@@ -38,7 +36,7 @@ pub(crate) enum AtomPlan {
 #[derive(Debug, Clone)]
 pub(crate) struct PointPath {
     slot: SlotId,
-    field: Option<Arc<str>>,
+    field: Option<FieldName>,
 }
 
 impl PointPath {
@@ -59,7 +57,7 @@ impl PointPath {
         let mut value = state.value(self.slot)?;
         if let Some(field) = &self.field {
             let Value::Record(record) = value else { return None };
-            value = record.get(field)?;
+            value = field.of(record)?;
         }
         match value {
             Value::Vec2(p) => Some(*p),

@@ -54,4 +54,6 @@ pub use group::{InstanceId, ProgressorGroup};
 pub use lower::{bound_in_unit, lower};
 pub use progress::{EveryMonitor, Progressor, StartVerdict};
 pub use state::{SlotState, State};
-pub use term::{BinOp, Binding, DomainId, FuncId, Function, FunctionBody, SlotId, Term, VarId, builtins};
+pub use term::{
+    BinOp, Binding, DomainId, FieldName, FuncId, Function, FunctionBody, SlotId, Term, VarId, builtins,
+};

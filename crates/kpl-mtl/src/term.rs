@@ -9,7 +9,7 @@ use std::borrow::Cow;
 use std::fmt;
 use std::sync::Arc;
 
-use kpl_core::Value;
+use kpl_core::{FieldHint, Record, Value};
 
 use crate::error::EvalError;
 use crate::state::State;
@@ -33,11 +33,45 @@ pub enum Term {
     /// The object bound by an enclosing quantifier.
     Var(VarId),
     /// Attribute access: a record field, `x`/`y` of a vector, a box's corners.
-    Field(Box<Term>, Arc<str>),
+    Field(Box<Term>, FieldName),
     Neg(Box<Term>),
     Not(Box<Term>),
     Binary(BinOp, Box<Term>, Box<Term>),
     Call(FuncId, Vec<Term>),
+}
+
+/// The name of an attribute a term reads, with where it was last found in a record
+/// ([`FieldHint`]: the objects a formula reads are mostly of one type, their fields in one order).
+/// Compares, prints and dereferences as its name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldName {
+    name: Arc<str>,
+    hint: FieldHint,
+}
+
+impl FieldName {
+    pub fn new(name: &str) -> FieldName {
+        FieldName { name: Arc::from(name), hint: FieldHint::new() }
+    }
+
+    /// The attribute of `record`, as [`Record::get`] finds it.
+    #[inline]
+    pub fn of<'r>(&self, record: &'r Record) -> Option<&'r Value> {
+        record.get_hinted(&self.name, &self.hint)
+    }
+}
+
+impl std::ops::Deref for FieldName {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.name
+    }
+}
+
+impl fmt::Display for FieldName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name)
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -88,7 +122,7 @@ impl Term {
         Term::Const(Value::Int(i))
     }
     pub fn field(self, name: &str) -> Term {
-        Term::Field(Box::new(self), Arc::from(name))
+        Term::Field(Box::new(self), FieldName::new(name))
     }
     pub fn binary(op: BinOp, lhs: Term, rhs: Term) -> Term {
         Term::Binary(op, Box::new(lhs), Box::new(rhs))
@@ -101,6 +135,9 @@ impl Term {
 /// The body of a function: its arguments in, a value or a message out.
 pub type FunctionBody = Arc<dyn Fn(&[Value]) -> Result<Value, String> + Send + Sync>;
 
+/// The body of a function that reads its arguments borrowed ([`Function::borrowing`]).
+pub type BorrowedBody = Arc<dyn Fn(&[&Value]) -> Result<Value, String> + Send + Sync>;
+
 /// A function a formula may call: a built-in or one the host registered (`on_road`).
 #[derive(Clone)]
 pub struct Function {
@@ -111,6 +148,9 @@ pub struct Function {
     /// For the distance built-ins: computed by the evaluator on borrowed arguments, with the same
     /// result as `body` (which a host's function of the same name replaces, and this with it).
     pub(crate) native: Option<Native>,
+    /// The same as `body` on borrowed arguments: what the evaluator calls when there is one, so
+    /// a relation of two objects called for every pair copies no record (`Function::borrowing`).
+    pub(crate) borrowed: Option<BorrowedBody>,
     /// For a predicate `f(a, b, d)` of two objects: true only when they are within `d + margin` of
     /// each other in the plane, which gates pairs ([`crate::gate`]).
     pub within_margin: Option<f64>,
@@ -135,7 +175,34 @@ impl Function {
         arity: (usize, Option<usize>),
         body: impl Fn(&[Value]) -> Result<Value, String> + Send + Sync + 'static,
     ) -> Function {
-        Function { name: Arc::from(name), arity, body: Arc::new(body), native: None, within_margin: None }
+        Function {
+            name: Arc::from(name),
+            arity,
+            body: Arc::new(body),
+            native: None,
+            borrowed: None,
+            within_margin: None,
+        }
+    }
+
+    /// A function whose body reads its arguments borrowed: the evaluator passes references to
+    /// the values the state holds instead of copies (for the relations called on every pair of
+    /// objects); `body` is the same function on owned arguments.
+    pub fn borrowing(
+        name: &str,
+        arity: (usize, Option<usize>),
+        body: impl Fn(&[&Value]) -> Result<Value, String> + Send + Sync + 'static,
+    ) -> Function {
+        let borrowed: BorrowedBody = Arc::new(body);
+        let by_value = borrowed.clone();
+        Function {
+            name: Arc::from(name),
+            arity,
+            body: Arc::new(move |args: &[Value]| by_value(&args.iter().collect::<Vec<&Value>>())),
+            native: None,
+            borrowed: Some(borrowed),
+            within_margin: None,
+        }
     }
 
     /// Declares `f(a, b, d)` true only when `a` and `b` are within `d + margin` of each other in
@@ -368,7 +435,7 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
                 match self.eval_ref(base)? {
                     // An attribute of a record the state holds is borrowed (`id` is computed).
                     Cow::Borrowed(Value::Record(r)) if &**field != "id" => {
-                        Cow::Borrowed(r.get(field).ok_or_else(no_field)?)
+                        Cow::Borrowed(field.of(r).ok_or_else(no_field)?)
                     }
                     value => Cow::Owned(value.field(field).ok_or_else(no_field)?),
                 }
@@ -426,13 +493,31 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
             });
         }
         let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
-        let result = match args.len() {
-            1 => (function.body)(&[arg(0)?]),
-            2 => (function.body)(&[arg(0)?, arg(1)?]),
-            3 => (function.body)(&[arg(0)?, arg(1)?, arg(2)?]),
-            n => {
-                let values = (0..n).map(arg).collect::<Result<Vec<Value>, Box<EvalError>>>()?;
-                (function.body)(&values)
+        let result = if let Some(body) = &function.borrowed {
+            match args {
+                [a] => body(&[&*self.eval_ref(a)?]),
+                [a, b] => {
+                    let (a, b) = (self.eval_ref(a)?, self.eval_ref(b)?);
+                    body(&[&*a, &*b])
+                }
+                [a, b, c] => {
+                    let (a, b, c) = (self.eval_ref(a)?, self.eval_ref(b)?, self.eval_ref(c)?);
+                    body(&[&*a, &*b, &*c])
+                }
+                _ => {
+                    let values = args.iter().map(|a| self.eval_ref(a)).collect::<Result<Vec<_>, _>>()?;
+                    body(&values.iter().map(|v| &**v).collect::<Vec<&Value>>())
+                }
+            }
+        } else {
+            match args.len() {
+                1 => (function.body)(&[arg(0)?]),
+                2 => (function.body)(&[arg(0)?, arg(1)?]),
+                3 => (function.body)(&[arg(0)?, arg(1)?, arg(2)?]),
+                n => {
+                    let values = (0..n).map(arg).collect::<Result<Vec<Value>, Box<EvalError>>>()?;
+                    (function.body)(&values)
+                }
             }
         };
         match result {

@@ -564,7 +564,7 @@ impl ChronicleUnit {
             let (mut t, mut l) = (0, 0);
             while t < count || l < last.len() {
                 let tuple = if t < count { &tuples[t * arity..(t + 1) * arity] } else { &[][..] };
-                let key: Key = tuple.iter().zip(&domains).map(|(&k, d)| d[k].0).collect();
+                let key = key_of(tuple, &domains);
                 let order = match (t < count, last.get(l)) {
                     (true, Some((kept, _))) => key.cmp(kept),
                     (true, None) => std::cmp::Ordering::Less,
@@ -756,6 +756,17 @@ fn evaluate(
     let enter = eval(&mut p.progressor);
     let leave = p.leave.as_mut().map(&mut eval);
     (enter, leave)
+}
+
+/// The key of a tuple of indices into `domains`: its objects' numbers (built directly for one or
+/// two objects, the common cases: this runs for every candidate tuple).
+#[inline]
+fn key_of(tuple: &[usize], domains: &[&[(Num, &Value)]]) -> Key {
+    match (tuple, domains) {
+        ([i], [da]) => Key::from_slice(&[da[*i].0]),
+        ([i, j], [da, db]) => Key::from_buf([da[*i].0, db[*j].0]),
+        _ => tuple.iter().zip(domains).map(|(&k, d)| d[k].0).collect(),
+    }
 }
 
 /// The tuples of objects (indices into `domains`, one per slot, one tuple after the other in
