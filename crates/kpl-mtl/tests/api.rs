@@ -343,3 +343,93 @@ fn compiled_distance_atoms_read_as_the_general_evaluator_does() {
         }
     });
 }
+
+/// A formula's attributes are read through hints (`FieldHint`: where the attribute was found last);
+/// over records whose fields come in any order, some without the attribute, each state's verdict
+/// is what reading the fields by name gives, and a missing attribute is the same error.
+#[test]
+fn attributes_read_by_hint_are_those_of_the_record_in_any_field_order() {
+    use proptest::prelude::*;
+    let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Ms);
+    let a = ctx.declare_value("a");
+    let f = Mtl::and(vec![
+        Mtl::atom(Term::binary(BinOp::Gt, Term::slot(a).field("speed"), Term::num(3.0))),
+        Mtl::atom(Term::binary(BinOp::Lt, Term::slot(a).field("lane_pos"), Term::num(100.0))),
+    ]);
+    let formula = Arc::new(Formula::new(&f, &ctx).unwrap());
+    let names = ["pos", "speed", "lane_pos", "lane", "size", "heading"];
+    // Per state: a permutation of the names (by sort keys), which to leave out, the two values.
+    let state = (proptest::collection::vec(any::<u16>(), 6), 0..8usize, 0.0..6.0f64, 0.0..200.0f64);
+    proptest!(ProptestConfig::with_cases(300), |(states in proptest::collection::vec(state, 1..40))| {
+        // One progressor, so one formula and its hints, for every record of the sequence.
+        let mut progressor = Progressor::new(formula.clone());
+        for (order, left_out, speed, lane_pos) in states {
+            let mut keyed: Vec<(u16, &str)> = order.into_iter().zip(names).collect();
+            keyed.sort();
+            let fields: Vec<(Arc<str>, Value)> = keyed
+                .into_iter()
+                .map(|(_, n)| n)
+                .filter(|n| names.get(left_out) != Some(n))
+                .map(|n| {
+                    let v = match n {
+                        "speed" => Value::Float(speed),
+                        "lane_pos" => Value::Float(lane_pos),
+                        other => Value::Str(Arc::from(other)),
+                    };
+                    (Arc::from(n), v)
+                })
+                .collect();
+            let record = Record { id: None, fields };
+            let by_name = |n: &str| record.get(n).and_then(Value::as_f64);
+            let (speed, lane_pos) = (by_name("speed"), by_name("lane_pos"));
+            progressor.reset();
+            let got = progressor.step(0, &SlotState::new(vec![Some(Value::Record(Arc::new(record.clone())))]));
+            match (speed, lane_pos, got) {
+                (Some(s), Some(l), got) => prop_assert_eq!(got, Ok(Some(s > 3.0 && l < 100.0))),
+                // With an attribute missing: its error, or false if the other conjunct decides.
+                (_, _, Err(EvalError::NoField { field, .. })) => {
+                    prop_assert!(by_name(&field).is_none(), "`{}` is there", field)
+                }
+                (Some(s), None, got) => prop_assert!(s <= 3.0 && got == Ok(Some(false)), "{got:?}"),
+                (None, _, got) => prop_assert!(false, "speed missing, yet {got:?}"),
+            }
+        }
+    });
+}
+
+/// A function declared on borrowed arguments (`Function::borrowing`) gives in a formula what its
+/// owned body gives when called directly, for one to four arguments.
+#[test]
+fn a_borrowing_function_gives_what_its_owned_body_gives() {
+    let sum = Function::borrowing("sum_x", (1, None), |args| {
+        let mut total = 0.0;
+        for a in args {
+            match a {
+                Value::Vec2([x, _]) => total += x,
+                Value::Record(r) => total += r.get("pos").and_then(Value::as_vec2).ok_or("no pos")?[0],
+                other => return Err(format!("sum_x needs positions, found {}", other.kind())),
+            }
+        }
+        Ok(Value::Float(total))
+    });
+    let object = |x: f64| {
+        Value::Record(Arc::new(Record { id: None, fields: vec![(Arc::from("pos"), Value::vec2(x, 0.0))] }))
+    };
+    for n in 1..=4usize {
+        let mut ctx = Context::new(TimeUnit::Us, TimeUnit::Ms);
+        let slots: Vec<_> = (0..n).map(|k| ctx.declare_value(&format!("o{k}"))).collect();
+        let f = ctx.register_function(sum.clone());
+        let call = Term::call(f, slots.iter().map(|&s| Term::slot(s)).collect());
+        let mtl = Mtl::atom(Term::binary(BinOp::Gt, call, Term::num(2.5)));
+        let mut progressor = Progressor::new(Arc::new(Formula::new(&mtl, &ctx).unwrap()));
+        let values: Vec<Value> = (0..n).map(|k| object(k as f64 + 0.5)).collect();
+        let owned = (sum.body)(&values).unwrap().as_f64().unwrap();
+        assert_eq!(owned, (0..n).map(|k| k as f64 + 0.5).sum::<f64>());
+        let state = SlotState::new(values.into_iter().map(Some).collect());
+        assert_eq!(progressor.step(0, &state).unwrap(), Some(owned > 2.5), "{n} arguments");
+        // An error of the body is the function's error, by name.
+        let mut progressor = Progressor::new(progressor.formula().clone());
+        let bad = SlotState::new((0..n).map(|_| Some(Value::Int(1))).collect());
+        assert!(matches!(progressor.step(0, &bad), Err(EvalError::Function { func, .. }) if func == "sum_x"));
+    }
+}
