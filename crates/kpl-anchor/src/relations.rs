@@ -159,8 +159,8 @@ type Pair = fn(&OnRoad<'_>, &OnRoad<'_>, &str) -> Result<bool, String>;
 
 fn pair(name: &'static str, relation: Pair) -> Function {
     Function::borrowing(name, (2, Some(2)), move |args| {
-        let a = on_road(&args[0], name)?;
-        let b = on_road(&args[1], name)?;
+        let a = on_road(args[0], name)?;
+        let b = on_road(args[1], name)?;
         relation(&a, &b, name).map(Value::Bool)
     })
 }
@@ -174,20 +174,20 @@ pub fn functions() -> Vec<Function> {
     vec![
         pair("same_road", |a, b, _| Ok(same_road(a, b))),
         Function::borrowing("same_lane", (2, Some(2)), |args| {
-            Ok(Value::Bool(same_lane(object(&args[0], "same_lane")?, object(&args[1], "same_lane")?)))
+            Ok(Value::Bool(same_lane(object(args[0], "same_lane")?, object(args[1], "same_lane")?)))
         }),
         pair("behind", |a, b, _| Ok(behind(a, b))),
         pair("in_front", |a, b, _| Ok(behind(b, a))),
         pair("beside", |a, b, _| Ok(beside(a, b))),
         pair("beside_left", |a, b, f| Ok(beside(a, b) && left_of(a.record, b, f)?)),
         Function::borrowing("left_of", (2, Some(2)), |args| {
-            let a = object(&args[0], "left_of")?;
-            let b = on_road(&args[1], "left_of")?;
+            let a = object(args[0], "left_of")?;
+            let b = on_road(args[1], "left_of")?;
             left_of(a, &b, "left_of").map(Value::Bool)
         }),
         Function::borrowing("gap", (2, Some(2)), |args| {
-            let a = on_road(&args[0], "gap")?;
-            let b = on_road(&args[1], "gap")?;
+            let a = on_road(args[0], "gap")?;
+            let b = on_road(args[1], "gap")?;
             if !same_road(&a, &b) {
                 return Ok(Value::Float(NO_GAP_M));
             }
@@ -195,8 +195,8 @@ pub fn functions() -> Vec<Function> {
         }),
         pair("beside_right", |a, b, f| Ok(beside(a, b) && !left_of(a.record, b, f)?)),
         Function::borrowing("close", (3, Some(3)), |args| {
-            let a = on_road(&args[0], "close")?;
-            let b = on_road(&args[1], "close")?;
+            let a = on_road(args[0], "close")?;
+            let b = on_road(args[1], "close")?;
             let d = args[2]
                 .as_f64()
                 .ok_or_else(|| format!("close needs a distance, found {}", args[2].kind()))?;
@@ -206,15 +206,15 @@ pub fn functions() -> Vec<Function> {
         // the two are within `d` plus this much (the gate of a pair monitor, `kpl_mtl::gate`).
         .within(CLOSE_LATERAL_MARGIN_M),
         Function::borrowing("approaching", (2, Some(2)), |args| {
-            let a = object(&args[0], "approaching")?;
-            let b = object(&args[1], "approaching")?;
+            let a = object(args[0], "approaching")?;
+            let b = object(args[1], "approaching")?;
             let towards = geom::sub(point(b, "approaching")?, point(a, "approaching")?);
             let closing = geom::sub(vel(a, "approaching")?, vel(b, "approaching")?);
             Ok(Value::Bool(geom::dot(towards, closing) > 0.0))
         }),
         Function::borrowing("time_gap", (2, Some(2)), |args| {
-            let a = on_road(&args[0], "time_gap")?;
-            let b = on_road(&args[1], "time_gap")?;
+            let a = on_road(args[0], "time_gap")?;
+            let b = on_road(args[1], "time_gap")?;
             let speed = float(a.record, "speed", hint!(), "time_gap")?;
             let gap = ahead(&a, &b) - overlap(&a, &b);
             if !behind(&a, &b) || speed < 0.1 {

@@ -716,7 +716,7 @@ mod tests {
         assert_eq!(call("iou", &[a.clone(), list([4.0, 0.0, 4.0, 2.0])]), Ok(Value::Float(0.0)));
         // A `box` value is [x1, y1, x2, y2]; an object stands for its `box`.
         let bbox = Value::bbox(kpl_core::BBox::new(2.0, 1.0, 6.0, 3.0));
-        let object = Value::Record(Arc::new(kpl_core::Record {
+        let object = Value::Record(Arc::new(Record {
             id: Some("t1".into()),
             fields: vec![("box".into(), b.clone())],
         }));
