@@ -526,121 +526,17 @@ impl ChronicleUnit {
         // What only a chronicle's gate needs, made only then (this runs at every state).
         let keep_previous = self.predicates.iter().any(|p| p.gate.unknown_beyond());
         let domain = |ty: &str| objects.get(ty).map_or(&[][..], Vec::as_slice);
-        // The pairs within a gate, found once per gate distance and pair of object types for
-        // every predicate gated so (`shared[within[k]]` is predicate k's).
-        let mut shared: Vec<(GateKey<'_>, Vec<[usize; 2]>)> = Vec::new();
-        let mut within: Vec<Option<usize>> = Vec::with_capacity(self.predicates.len());
-        for p in &self.predicates {
-            let radius = match p.gate {
-                Gate::Own(r) | Gate::Chronicle(r) => Some(r),
-                Gate::None => None,
-            };
-            let (Some(radius), [(_, ta), (_, tb)]) = (radius, p.slots.as_slice()) else {
-                within.push(None);
-                continue;
-            };
-            let key = (radius.to_bits(), ta.as_str(), tb.as_str());
-            let k = match shared.iter().position(|(k, _)| *k == key) {
-                Some(k) => k,
-                None => {
-                    shared.push((key, pairs_within(radius, domain(ta), domain(tb))));
-                    shared.len() - 1
-                }
-            };
-            within.push(Some(k));
-        }
-        let shared: Vec<Vec<[usize; 2]>> = shared.into_iter().map(|(_, pairs)| pairs).collect();
-        let mut tuples = Vec::new();
-        let mut indices: Vec<usize> = Vec::new();
-        let mut items: Vec<&Value> = Vec::new();
+        let (shared, within) = gate_pairs(&self.predicates, &domain);
         for (p, within) in self.predicates.iter_mut().zip(within) {
             let domains: Vec<&[(Num, &Value)]> = p.slots.iter().map(|(_, ty)| domain(ty)).collect();
-            let arity = domains.len();
-            let count = candidates(&domains, within.map(|k| shared[k].as_slice()), &mut tuples);
-            let last = std::mem::take(&mut p.last);
-            let mut now: Vec<(Key, bool)> = Vec::with_capacity(count);
-            let mut changes: Vec<(Key, bool)> = Vec::new();
-            // This state's candidates and the previous state's tuples, both sorted by key, merged.
-            let (mut t, mut l) = (0, 0);
-            while t < count || l < last.len() {
-                let tuple = if t < count { &tuples[t * arity..(t + 1) * arity] } else { &[][..] };
-                let key = key_of(tuple, &domains);
-                let order = match (t < count, last.get(l)) {
-                    (true, Some((kept, _))) => key.cmp(kept),
-                    (true, None) => std::cmp::Ordering::Less,
-                    (false, _) => std::cmp::Ordering::Greater,
-                };
-                let (key, before) = match order {
-                    std::cmp::Ordering::Equal => {
-                        t += 1;
-                        l += 1;
-                        indices.clear();
-                        indices.extend_from_slice(tuple);
-                        (key, last[l - 1].1)
-                    }
-                    // Not evaluated at the previous state: beyond an own gate (or absent) it was
-                    // false; beyond a chronicle's gate it was not known, so it is evaluated now on
-                    // the previous state's objects.
-                    std::cmp::Ordering::Less => {
-                        t += 1;
-                        indices.clear();
-                        indices.extend_from_slice(tuple);
-                        let before = match (p.gate, &previous) {
-                            (Gate::Chronicle(_), Some((t, before))) => {
-                                let kept: Option<Vec<&Value>> = key
-                                    .iter()
-                                    .zip(&p.slots)
-                                    .map(|(n, (_, ty))| before.get(ty).and_then(|m| m.get(n)))
-                                    .collect();
-                                kept.is_some_and(|kept| evaluate(p, *t, &kept, &mut undecided, &self.stats).0)
-                            }
-                            _ => false,
-                        };
-                        (key, before)
-                    }
-                    // Evaluated at the previous state, not a candidate now.
-                    std::cmp::Ordering::Greater => {
-                        let (key, before) = last[l].clone();
-                        l += 1;
-                        indices.clear();
-                        let present =
-                            key.iter().zip(&domains).all(|(n, d)| match d.binary_search_by_key(n, |o| o.0) {
-                                Ok(k) => {
-                                    indices.push(k);
-                                    true
-                                }
-                                Err(_) => false,
-                            });
-                        match (p.gate, present) {
-                            // True before (so within the gate then), its objects still present:
-                            // with hysteresis it may still hold beyond ENTER's gate.
-                            (Gate::Own(_), true) if before => (key, before),
-                            // Beyond a chronicle's gate: not known, and no recognition needs it.
-                            (Gate::Chronicle(_), true) => continue,
-                            // Gone: false.
-                            _ => {
-                                if before {
-                                    changes.push((key, false));
-                                }
-                                continue;
-                            }
-                        }
-                    }
-                };
-                items.clear();
-                items.extend(indices.iter().zip(&domains).map(|(&k, d)| d[k].1));
-                let (enter, leave) = evaluate(p, valid, &items, &mut undecided, &self.stats);
-                let value = match leave {
-                    None => enter,
-                    Some(leave) => fluent::step(before, enter, leave),
-                };
-                if value != before {
-                    changes.push((key.clone(), value));
-                }
-                if value || p.gate.unknown_beyond() {
-                    now.push((key, value));
-                }
-            }
+            let within = within.map(|k| shared[k].as_slice());
+            let mut eval = Evaluation {
+                valid,
+                previous: previous.as_ref(),
+                undecided: &mut undecided,
+                stats: &self.stats,
+            };
+            let changes = p.changes(&domains, within, &mut eval);
             // By the objects' symbols, as the events of one state have always been ordered.
             let numbers = &self.numbers;
             let mut named: Vec<(Vec<Arc<str>>, bool)> = changes
@@ -659,7 +555,6 @@ impl ChronicleUnit {
                     time: valid,
                 }));
             }
-            p.last = now;
         }
         // By source (stable), as when each alias was a predicate of its own.
         events.sort_by_key(|e| e.source);
@@ -702,6 +597,149 @@ impl ChronicleUnit {
         self.stats.result("partial instances dropped (a hold failed)", s.broken);
         self.stats.result("instances refused (max_instances reached)", s.refused);
         self.stats.result("complete instances failing a hold/never condition", s.failed_conditions);
+    }
+}
+
+/// The pairs within a gate, found once per gate distance and pair of object types for every
+/// predicate gated so: `pairs[within[k]]` is predicate k's (`None`: not gated over two objects).
+fn gate_pairs<'v>(
+    predicates: &[Predicate],
+    domain: &dyn Fn(&str) -> &'v [(Num, &'v Value)],
+) -> (Vec<Vec<[usize; 2]>>, Vec<Option<usize>>) {
+    let mut shared: Vec<(GateKey<'_>, Vec<[usize; 2]>)> = Vec::new();
+    let mut within: Vec<Option<usize>> = Vec::with_capacity(predicates.len());
+    for p in predicates {
+        let radius = match p.gate {
+            Gate::Own(r) | Gate::Chronicle(r) => Some(r),
+            Gate::None => None,
+        };
+        let (Some(radius), [(_, ta), (_, tb)]) = (radius, p.slots.as_slice()) else {
+            within.push(None);
+            continue;
+        };
+        let key = (radius.to_bits(), ta.as_str(), tb.as_str());
+        let k = match shared.iter().position(|(k, _)| *k == key) {
+            Some(k) => k,
+            None => {
+                shared.push((key, pairs_within(radius, domain(ta), domain(tb))));
+                shared.len() - 1
+            }
+        };
+        within.push(Some(k));
+    }
+    (shared.into_iter().map(|(_, pairs)| pairs).collect(), within)
+}
+
+/// What evaluating the predicates at a state needs besides their objects: its valid time, the
+/// previous state (its time and objects, kept when a predicate has a chronicle's gate), and
+/// where to count undecided predicates and report errors.
+struct Evaluation<'a> {
+    valid: Time,
+    previous: Option<&'a (Time, ObjectsByNumber)>,
+    undecided: &'a mut u64,
+    stats: &'a ProcessStats,
+}
+
+impl Predicate {
+    /// Evaluates the predicate on this state's candidate tuples ([`candidates`] of `domains` and
+    /// `within`) and returns its changes since the previous state, by key; `last` becomes this
+    /// state's. The candidates and `last` are both sorted by key and merged in one pass:
+    /// - a tuple in both: its value before is the kept one;
+    /// - a candidate only: not evaluated at the previous state, so false before (beyond an own
+    ///   gate, or absent), or beyond a chronicle's gate not known and evaluated now on the
+    ///   previous state's objects;
+    /// - kept only: true before with an own gate and its objects present, it is evaluated (with
+    ///   hysteresis it may still hold beyond ENTER's gate); beyond a chronicle's gate it is not
+    ///   known and no recognition needs it; otherwise an object is gone, and it becomes false.
+    fn changes(
+        &mut self,
+        domains: &[&[(Num, &Value)]],
+        within: Option<&[[usize; 2]]>,
+        eval: &mut Evaluation<'_>,
+    ) -> Vec<(Key, bool)> {
+        use std::cmp::Ordering;
+        let mut tuples = Vec::new();
+        let count = candidates(domains, within, &mut tuples);
+        let arity = domains.len();
+        let last = std::mem::take(&mut self.last);
+        let mut now: Vec<(Key, bool)> = Vec::with_capacity(count);
+        let mut changes: Vec<(Key, bool)> = Vec::new();
+        let mut indices: Vec<usize> = Vec::with_capacity(arity);
+        let mut items: Vec<&Value> = Vec::with_capacity(arity);
+        let (mut t, mut l) = (0, 0);
+        while t < count || l < last.len() {
+            let tuple = if t < count { &tuples[t * arity..(t + 1) * arity] } else { &[][..] };
+            let key = key_of(tuple, domains);
+            let order = match (t < count, last.get(l)) {
+                (true, Some((kept, _))) => key.cmp(kept),
+                (true, None) => Ordering::Less,
+                (false, _) => Ordering::Greater,
+            };
+            let (key, before) = match order {
+                Ordering::Equal => {
+                    t += 1;
+                    l += 1;
+                    indices.clear();
+                    indices.extend_from_slice(tuple);
+                    (key, last[l - 1].1)
+                }
+                Ordering::Less => {
+                    t += 1;
+                    indices.clear();
+                    indices.extend_from_slice(tuple);
+                    let before = match (self.gate, eval.previous) {
+                        (Gate::Chronicle(_), Some((t, before))) => {
+                            let kept: Option<Vec<&Value>> = key
+                                .iter()
+                                .zip(&self.slots)
+                                .map(|(n, (_, ty))| before.get(ty).and_then(|m| m.get(n)))
+                                .collect();
+                            kept.is_some_and(|kept| evaluate(self, *t, &kept, eval.undecided, eval.stats).0)
+                        }
+                        _ => false,
+                    };
+                    (key, before)
+                }
+                Ordering::Greater => {
+                    let (key, before) = last[l].clone();
+                    l += 1;
+                    indices.clear();
+                    let present =
+                        key.iter().zip(domains).all(|(n, d)| match d.binary_search_by_key(n, |o| o.0) {
+                            Ok(k) => {
+                                indices.push(k);
+                                true
+                            }
+                            Err(_) => false,
+                        });
+                    match (self.gate, present) {
+                        (Gate::Own(_), true) if before => (key, before),
+                        (Gate::Chronicle(_), true) => continue,
+                        _ => {
+                            if before {
+                                changes.push((key, false));
+                            }
+                            continue;
+                        }
+                    }
+                }
+            };
+            items.clear();
+            items.extend(indices.iter().zip(domains).map(|(&k, d)| d[k].1));
+            let (enter, leave) = evaluate(self, eval.valid, &items, eval.undecided, eval.stats);
+            let value = match leave {
+                None => enter,
+                Some(leave) => fluent::step(before, enter, leave),
+            };
+            if value != before {
+                changes.push((key.clone(), value));
+            }
+            if value || self.gate.unknown_beyond() {
+                now.push((key, value));
+            }
+        }
+        self.last = now;
+        changes
     }
 }
 
