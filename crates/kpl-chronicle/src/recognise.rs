@@ -105,6 +105,9 @@ struct Partial<O> {
 struct Instances<O> {
     /// The parameters every event binds, in increasing order.
     key_params: Vec<usize>,
+    /// Per `hold` of the chronicle: where each of `key_params` is among its arguments, so that a
+    /// false event of its fluent names a group (`None`: its arguments do not name one).
+    hold_keys: Vec<Option<Vec<usize>>>,
     groups: HashMap<Vec<O>, Vec<Partial<O>>>,
     len: usize,
 }
@@ -114,7 +117,13 @@ impl<O: Clone + Eq + Hash> Instances<O> {
         let events = &compiled.chronicle.events;
         let key_params: Vec<usize> =
             (0..compiled.chronicle.params).filter(|p| events.iter().all(|e| e.args.contains(p))).collect();
-        Instances { key_params, groups: HashMap::new(), len: 0 }
+        let hold_keys = compiled
+            .chronicle
+            .holds
+            .iter()
+            .map(|h| key_params.iter().map(|p| h.args.iter().position(|a| a == p)).collect())
+            .collect();
+        Instances { key_params, hold_keys, groups: HashMap::new(), len: 0 }
     }
 
     /// The group of an event matching `pattern` with these arguments.
@@ -367,22 +376,15 @@ fn drop_broken<O: Clone + Eq + Hash>(
     batch: &[(Event<O>, u64)],
 ) -> usize {
     let mut dropped = 0;
-    for hold in &compiled.chronicle.holds {
-        // Where each of the group's parameters is among the hold's arguments.
-        let Some(positions) = instances
-            .key_params
-            .iter()
-            .map(|p| hold.args.iter().position(|a| a == p))
-            .collect::<Option<Vec<usize>>>()
-        else {
-            continue;
-        };
+    let Instances { hold_keys, groups, .. } = instances;
+    for (hold, positions) in compiled.chronicle.holds.iter().zip(hold_keys.iter()) {
+        let Some(positions) = positions else { continue };
         for (event, _) in batch {
             if event.source != hold.source || event.value || event.args.len() != hold.args.len() {
                 continue;
             }
             let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
-            let Some(group) = instances.groups.get_mut(&key) else { continue };
+            let Some(group) = groups.get_mut(&key) else { continue };
             let before = group.len();
             group.retain(|p| {
                 let open = p.times[hold.from].is_some_and(|t1| t1 < time) && p.times[hold.to].is_none();
@@ -391,7 +393,7 @@ fn drop_broken<O: Clone + Eq + Hash>(
             });
             dropped += before - group.len();
             if group.is_empty() {
-                instances.groups.remove(&key);
+                groups.remove(&key);
             }
         }
     }

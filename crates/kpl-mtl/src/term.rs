@@ -492,33 +492,9 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
                 Box::new(EvalError::Function { func: function.name.to_string(), message })
             });
         }
-        let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
-        let result = if let Some(body) = &function.borrowed {
-            match args {
-                [a] => body(&[&*self.eval_ref(a)?]),
-                [a, b] => {
-                    let (a, b) = (self.eval_ref(a)?, self.eval_ref(b)?);
-                    body(&[&*a, &*b])
-                }
-                [a, b, c] => {
-                    let (a, b, c) = (self.eval_ref(a)?, self.eval_ref(b)?, self.eval_ref(c)?);
-                    body(&[&*a, &*b, &*c])
-                }
-                _ => {
-                    let values = args.iter().map(|a| self.eval_ref(a)).collect::<Result<Vec<_>, _>>()?;
-                    body(&values.iter().map(|v| &**v).collect::<Vec<&Value>>())
-                }
-            }
-        } else {
-            match args.len() {
-                1 => (function.body)(&[arg(0)?]),
-                2 => (function.body)(&[arg(0)?, arg(1)?]),
-                3 => (function.body)(&[arg(0)?, arg(1)?, arg(2)?]),
-                n => {
-                    let values = (0..n).map(arg).collect::<Result<Vec<Value>, Box<EvalError>>>()?;
-                    (function.body)(&values)
-                }
-            }
+        let result = match &function.borrowed {
+            Some(body) => self.call_borrowed(body, args)?,
+            None => self.call_owned(&function.body, args)?,
         };
         match result {
             Ok(Value::Float(x)) if !x.is_finite() => Err(Box::new(EvalError::Function {
@@ -528,6 +504,47 @@ impl<'a, S: State + ?Sized> TermEnv<'a, S> {
             Ok(v) => Ok(v),
             Err(message) => Err(Box::new(EvalError::Function { func: function.name.to_string(), message })),
         }
+    }
+
+    /// A body on borrowed arguments ([`Function::borrowing`]), on the stack for up to three.
+    fn call_borrowed(
+        &self,
+        body: &BorrowedBody,
+        args: &[Term],
+    ) -> Result<Result<Value, String>, Box<EvalError>> {
+        Ok(match args {
+            [a] => body(&[&*self.eval_ref(a)?]),
+            [a, b] => {
+                let (a, b) = (self.eval_ref(a)?, self.eval_ref(b)?);
+                body(&[&*a, &*b])
+            }
+            [a, b, c] => {
+                let (a, b, c) = (self.eval_ref(a)?, self.eval_ref(b)?, self.eval_ref(c)?);
+                body(&[&*a, &*b, &*c])
+            }
+            _ => {
+                let values = args.iter().map(|a| self.eval_ref(a)).collect::<Result<Vec<_>, _>>()?;
+                body(&values.iter().map(|v| &**v).collect::<Vec<&Value>>())
+            }
+        })
+    }
+
+    /// A body on owned arguments (copies of what the state holds), on the stack for up to three.
+    fn call_owned(
+        &self,
+        body: &FunctionBody,
+        args: &[Term],
+    ) -> Result<Result<Value, String>, Box<EvalError>> {
+        let arg = |i: usize| self.eval_ref(&args[i]).map(Cow::into_owned);
+        Ok(match args.len() {
+            1 => body(&[arg(0)?]),
+            2 => body(&[arg(0)?, arg(1)?]),
+            3 => body(&[arg(0)?, arg(1)?, arg(2)?]),
+            n => {
+                let values = (0..n).map(arg).collect::<Result<Vec<Value>, Box<EvalError>>>()?;
+                body(&values)
+            }
+        })
     }
 }
 

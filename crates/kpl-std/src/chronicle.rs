@@ -527,15 +527,11 @@ impl ChronicleUnit {
         let keep_previous = self.predicates.iter().any(|p| p.gate.unknown_beyond());
         let domain = |ty: &str| objects.get(ty).map_or(&[][..], Vec::as_slice);
         let (shared, within) = gate_pairs(&self.predicates, &domain);
+        let mut eval =
+            Evaluation { valid, previous: previous.as_ref(), undecided: &mut undecided, stats: &self.stats };
         for (p, within) in self.predicates.iter_mut().zip(within) {
             let domains: Vec<&[(Num, &Value)]> = p.slots.iter().map(|(_, ty)| domain(ty)).collect();
             let within = within.map(|k| shared[k].as_slice());
-            let mut eval = Evaluation {
-                valid,
-                previous: previous.as_ref(),
-                undecided: &mut undecided,
-                stats: &self.stats,
-            };
             let changes = p.changes(&domains, within, &mut eval);
             // By the objects' symbols, as the events of one state have always been ordered.
             let numbers = &self.numbers;
