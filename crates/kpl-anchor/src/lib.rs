@@ -75,6 +75,7 @@ pub mod predict;
 pub mod records;
 pub mod registry;
 pub mod relations;
+pub mod smoother;
 pub mod stateful;
 pub mod status;
 pub mod store;
