@@ -66,11 +66,19 @@ impl FixedLag {
 
     /// Takes in one step of the filter: `predicted`, the filter moved on to the measurement's time
     /// ([`CvFilter::predict`]), and `updated`, the filter after the measurement. The first step of
-    /// a filter is its start, both the same. A step no later than the last one (a filter started
-    /// again, or time gone back) starts the smoother over.
+    /// a filter is its start, both the same. A step at the last one's time is another measurement
+    /// taken in at that time (`anchor.fuse`'s second sensor): it replaces the last step's estimate
+    /// and keeps its prediction. A step before it (a filter started again, or time gone back)
+    /// starts the smoother over.
     pub fn push(&mut self, predicted: CvFilter, updated: CvFilter) {
-        if self.steps.back().is_some_and(|last| updated.time <= last.updated.time) {
-            self.steps.clear();
+        if let Some(last) = self.steps.back_mut() {
+            if updated.time == last.updated.time {
+                last.updated = updated;
+                return;
+            }
+            if updated.time < last.updated.time {
+                self.steps.clear();
+            }
         }
         let newest = updated.time;
         self.steps.push_back(Step { predicted, updated });
@@ -267,9 +275,20 @@ mod tests {
     }
 
     #[test]
-    fn a_step_back_in_time_starts_over_and_the_steps_are_bounded() {
+    fn a_second_measurement_at_a_time_replaces_the_estimate_a_step_back_starts_over_and_the_steps_are_bounded()
+     {
         let (mut smoother, start, ..) = run(3, 30, 500_000);
-        assert!(smoother.len() > 2);
+        let kept = smoother.len();
+        assert!(kept > 2);
+        // A second measurement at the newest time: the same step, its estimate replaced.
+        let mut again = smoother.steps.back().unwrap().updated.clone();
+        let before = smoother.smoothed().unwrap();
+        again.update(again.position(), R).unwrap();
+        smoother.push(again.clone(), again.clone());
+        assert_eq!(smoother.len(), kept);
+        assert_eq!(smoother.steps.back().unwrap().updated, again);
+        assert_ne!(smoother.smoothed().unwrap(), before);
+        // A step back in time starts over.
         smoother.push(start.clone(), start);
         assert_eq!(smoother.len(), 1);
         let mut long = FixedLag::new(Time::MAX);
