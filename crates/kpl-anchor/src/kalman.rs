@@ -114,15 +114,21 @@ impl CvFilter {
         [self.x[2], self.x[3]]
     }
 
+    /// The constant-velocity model's transition over `dt` seconds: F = [[I, dt I], [0, I]].
+    pub fn transition(dt: f64) -> Matrix4<f64> {
+        let mut f = Matrix4::identity();
+        f[(0, 2)] = dt;
+        f[(1, 3)] = dt;
+        f
+    }
+
     /// The estimate moved on to `time` (a time before the filter's leaves it where it is).
     pub fn predict(&mut self, time: Time, q: f64) {
         let dt = (time.saturating_sub(self.time)).max(0) as f64 / 1e6;
         if dt == 0.0 {
             return;
         }
-        let mut f = Matrix4::identity();
-        f[(0, 2)] = dt;
-        f[(1, 3)] = dt;
+        let f = CvFilter::transition(dt);
         let (a, b, c) = (q * dt.powi(3) / 3.0, q * dt.powi(2) / 2.0, q * dt);
         let mut noise = Matrix4::zeros();
         for axis in 0..2 {

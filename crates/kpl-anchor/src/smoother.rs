@@ -36,7 +36,6 @@
 use std::collections::VecDeque;
 
 use kpl_core::Time;
-use nalgebra::Matrix4;
 
 use crate::kalman::CvFilter;
 
@@ -90,16 +89,6 @@ impl FixedLag {
         }
     }
 
-    /// How many steps are kept.
-    pub fn len(&self) -> usize {
-        self.steps.len()
-    }
-
-    /// Whether no step is kept.
-    pub fn is_empty(&self) -> bool {
-        self.steps.is_empty()
-    }
-
     /// The oldest kept step's state given every measurement taken in since: its time is the last
     /// step's at or before the newest time minus the lag. `None` before the steps span the lag
     /// (or when a prediction's covariance cannot be inverted).
@@ -113,9 +102,7 @@ impl FixedLag {
         for j in (0..self.steps.len() - 1).rev() {
             let (step, next) = (&self.steps[j], &self.steps[j + 1]);
             let dt = (next.predicted.time.saturating_sub(step.updated.time)).max(0) as f64 / 1e6;
-            let mut f = Matrix4::identity();
-            f[(0, 2)] = dt;
-            f[(1, 3)] = dt;
+            let f = CvFilter::transition(dt);
             let gain = step.updated.p * f.transpose() * next.predicted.p.try_inverse()?;
             let x = step.updated.x + gain * (smoothed.x - next.predicted.x);
             let p = step.updated.p + gain * (smoothed.p - next.predicted.p) * gain.transpose();
@@ -129,7 +116,7 @@ impl FixedLag {
 #[allow(clippy::unwrap_used, reason = "tests")]
 mod tests {
     use super::*;
-    use nalgebra::{DMatrix, DVector, Matrix2, Vector4};
+    use nalgebra::{DMatrix, DVector, Matrix2, Matrix4, Vector4};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -278,19 +265,19 @@ mod tests {
     fn a_second_measurement_at_a_time_replaces_the_estimate_a_step_back_starts_over_and_the_steps_are_bounded()
      {
         let (mut smoother, start, ..) = run(3, 30, 500_000);
-        let kept = smoother.len();
+        let kept = smoother.steps.len();
         assert!(kept > 2);
         // A second measurement at the newest time: the same step, its estimate replaced.
         let mut again = smoother.steps.back().unwrap().updated.clone();
         let before = smoother.smoothed().unwrap();
         again.update(again.position(), R).unwrap();
         smoother.push(again.clone(), again.clone());
-        assert_eq!(smoother.len(), kept);
+        assert_eq!(smoother.steps.len(), kept);
         assert_eq!(smoother.steps.back().unwrap().updated, again);
         assert_ne!(smoother.smoothed().unwrap(), before);
         // A step back in time starts over.
         smoother.push(start.clone(), start);
-        assert_eq!(smoother.len(), 1);
+        assert_eq!(smoother.steps.len(), 1);
         let mut long = FixedLag::new(Time::MAX);
         let mut filter = CvFilter::new([0.0, 0.0], [1.0, 0.0], 1.0, 1.0, 0);
         long.push(filter.clone(), filter.clone());
@@ -300,6 +287,6 @@ mod tests {
             filter.update(filter.position(), R).unwrap();
             long.push(predicted, filter.clone());
         }
-        assert_eq!(long.len(), MAX_STEPS);
+        assert_eq!(long.steps.len(), MAX_STEPS);
     }
 }
