@@ -106,6 +106,10 @@ fn positive(params: &Params, name: &str, default: f64) -> Result<f64, String> {
     }
 }
 
+/// The longest lag `smooth` takes (µs): a minute of steps at 10 Hz, well under the smoother's
+/// bound ([`crate::smoother::MAX_STEPS`]).
+const MAX_SMOOTH: kpl_core::Time = 60_000_000;
+
 /// The filter parameters of `anchor.kalman` and `anchor.fuse`.
 fn kalman_params(params: &Params) -> Result<KalmanParams, String> {
     let defaults = KalmanParams::default();
@@ -125,6 +129,12 @@ fn kalman_params(params: &Params) -> Result<KalmanParams, String> {
                 Some(0.0) => None,
                 _ => return Err(format!("`velocity_noise_mps` must be a number, 0 or more, found {v}")),
             },
+        },
+        // 0 (the default): not smoothed.
+        smooth: match params.get("smooth") {
+            None | Some(Value::Duration(0)) => None,
+            Some(Value::Duration(lag)) if (1..=MAX_SMOOTH).contains(lag) => Some(*lag),
+            Some(v) => return Err(format!("`smooth` must be a duration from 0s to 60s, found {v}")),
         },
     })
 }

@@ -61,6 +61,13 @@ fn kalman_params(entry: Entry) -> Entry {
             Value::Float(defaults.velocity_noise_mps.unwrap_or(0.0)),
             "standard deviation of the linked-from object's `vel` as a measurement, per axis (m/s); 0: only `pos` is measured",
         ))
+        .param(Param::optional(
+            "smooth",
+            ParamType::Duration,
+            Value::Duration(0),
+            "set `smoothed_pos` and `smoothed_vel` (when the linked-to type declares them) to a fixed-lag smoother's estimate this long before the state's time (0s: not smoothed; at most 60s)",
+        )
+        .acting_on(&crate::kalman::SMOOTHED_ATTRIBUTES))
 }
 
 /// `on_road(pos)`, provided by `anchor.snap_to_lane`.
@@ -73,10 +80,10 @@ pub fn on_road_signature() -> Function {
     )
 }
 
-/// What `anchor.snap_to_lane` sets: the position, velocity, offset from the lane centre and the
-/// road attributes ([`crate::attributes::ROAD_ATTRIBUTES`]).
+/// What `anchor.snap_to_lane` sets: the position, velocity, offset from the lane centre (and the
+/// smoothed position's) and the road attributes ([`crate::attributes::ROAD_ATTRIBUTES`]).
 fn snap_computes() -> Vec<&'static str> {
-    let mut names = vec!["pos", "vel", "lane_offset"];
+    let mut names = vec!["pos", "vel", "lane_offset", crate::units::SMOOTHED_LANE_OFFSET];
     names.extend(crate::attributes::road_attribute_names());
     names
 }

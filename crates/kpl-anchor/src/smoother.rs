@@ -5,8 +5,9 @@
 //! t + lag too. With the simulated tracker's noise (1 m per axis at 10 Hz, velocity 0.5 m/s), the
 //! filter's position error has a standard deviation of about 0.22 m whatever its process noise,
 //! and a smoother with a lag of 2 s about 0.17 m (docs/situations.md#weaving, where this is what
-//! a weaving chronicle needs; a test checks both figures). Not yet driven by a link unit: its states' valid time would be
-//! `lag` before their available time.
+//! a weaving chronicle needs; a test checks both figures). `anchor.kalman(smooth: 2s)` drives it
+//! ([`crate::kalman`]): the smoothed estimate is an attribute of the object's state, for a time
+//! `lag` before the state's valid time.
 //!
 //! Each step keeps the filter's prediction to the measurement's time and its estimate after the
 //! measurement; [`FixedLag::smoothed`] runs the smoother's backward pass from the newest step to
@@ -98,6 +99,13 @@ impl FixedLag {
         if oldest.updated.time > newest.updated.time.saturating_sub(self.lag) {
             return None;
         }
+        self.smoothed_so_far()
+    }
+
+    /// As [`FixedLag::smoothed`], also before the steps span the lag: then the smoothed state of
+    /// the first step (less than `lag` before the newest).
+    pub fn smoothed_so_far(&self) -> Option<CvFilter> {
+        let newest = self.steps.back()?;
         let mut smoothed = newest.updated.clone();
         for j in (0..self.steps.len() - 1).rev() {
             let (step, next) = (&self.steps[j], &self.steps[j + 1]);

@@ -33,6 +33,17 @@ impl UnitMemory {
     pub fn set<T: Any + Send + Sync>(&mut self, value: T) {
         self.0 = Some(Arc::new(value));
     }
+
+    /// The memory as a `T` to change in place, when it holds one (copied first if it is
+    /// shared, so a change never shows through another owner).
+    pub fn get_mut<T: Any + Send + Sync + Clone>(&mut self) -> Option<&mut T> {
+        let shared = self.0.as_mut()?;
+        if Arc::get_mut(shared).is_none() {
+            let copy = shared.downcast_ref::<T>()?.clone();
+            *shared = Arc::new(copy);
+        }
+        Arc::get_mut(shared)?.downcast_mut::<T>()
+    }
 }
 
 /// One computation of a linked-to object's state.
@@ -52,4 +63,25 @@ pub struct UnitCall<'a> {
     /// The unit's memory of the linked-to object. A trial computation (an identification's
     /// candidate) gets a scratch memory that is dropped.
     pub memory: &'a mut UnitMemory,
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, reason = "tests")]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_shared_memory_is_copied_before_it_changes() {
+        let mut memory = UnitMemory::default();
+        assert_eq!(memory.get_mut::<u32>(), None);
+        memory.set(1_u32);
+        let kept = memory.clone();
+        *memory.get_mut::<u32>().unwrap() = 2;
+        assert_eq!((memory.get::<u32>(), kept.get::<u32>()), (Some(&2), Some(&1)));
+        // Not shared any more: changed in place.
+        let before = Arc::as_ptr(memory.0.as_ref().unwrap()) as *const u8;
+        *memory.get_mut::<u32>().unwrap() = 3;
+        assert_eq!(Arc::as_ptr(memory.0.as_ref().unwrap()) as *const u8, before);
+        assert_eq!(memory.get_mut::<i64>(), None, "another type");
+    }
 }

@@ -96,6 +96,10 @@ impl LinkUnit for WorldFromPercept {
 /// above 2 m/s in fewer than one frame in 2,900.
 pub const MIN_HEADING_SPEED_MPS: f64 = 2.0;
 
+/// The attribute `anchor.snap_to_lane` sets to the offset of the linked-from object's
+/// `smoothed_pos` (`anchor.kalman(smooth: ...)`) from its lane's centre.
+pub const SMOOTHED_LANE_OFFSET: &str = "smoothed_lane_offset";
+
 /// `anchor.snap_to_lane`: the object on the road network. `pos` is the point on the centre of the
 /// lane chosen by [`kpl_roads::RoadNetwork::snap`]: the nearest, counting lanes against the
 /// direction of `vel` as further away when the object moves at least `min_heading_speed`, and
@@ -106,8 +110,8 @@ pub const MIN_HEADING_SPEED_MPS: f64 = 2.0;
 /// lane centre (positive to the left). Off the network (no lane within the network's snap radius)
 /// the position and velocity are copied, `road` is -1 and `lane_offset` 0. The other road
 /// attributes the type declares (`lane_pos`, `speed`, `heading`, `speed_limit`, `in_junction`,
-/// ...: [`crate::attributes::ROAD_ATTRIBUTES`]) are set from the lane and the measured velocity.
-/// Provides `on_road(pos)`.
+/// ...: [`crate::attributes::ROAD_ATTRIBUTES`]) are set from the lane and the measured velocity,
+/// and [`SMOOTHED_LANE_OFFSET`] from a smoothed position. Provides `on_road(pos)`.
 #[derive(Debug, Clone)]
 pub struct SnapToLane {
     network: Arc<RoadNetwork>,
@@ -123,6 +127,17 @@ impl SnapToLane {
     pub fn with_min_heading_speed(mut self, mps: f64) -> SnapToLane {
         self.min_heading_speed_mps = mps;
         self
+    }
+
+    /// The smoothed position's offset from its lane's centre, as `lane_offset` is the position's
+    /// (0 without a `smoothed_pos` or off the network): the lane is the nearest to
+    /// `smoothed_pos` in the direction of `smoothed_vel` (or `vel`), chosen on its own, since the
+    /// smoothed position is an earlier time's.
+    fn smoothed_lane_offset(&self, from: &Record) -> f64 {
+        let Some(pos) = from.get("smoothed_pos").and_then(Value::as_vec2) else { return 0.0 };
+        let vel = from.get("smoothed_vel").and_then(Value::as_vec2).or_else(|| velocity(from));
+        let hint = SnapHint { heading: heading_of_velocity(vel, self.min_heading_speed_mps), previous: None };
+        self.network.snap(pos, &hint).map_or(0.0, |s| self.network.lane(s.lane).path.project(pos).lateral)
     }
 }
 
@@ -205,6 +220,11 @@ impl LinkUnit for SnapToLane {
                 set_road_attributes(&mut record, &on);
             }
             None => set_off_road_attributes(&mut record, vel),
+        }
+        if let Some((_, value)) = record.fields.iter_mut().find(|(name, _)| &**name == SMOOTHED_LANE_OFFSET)
+            && matches!(value, Value::Float(_))
+        {
+            *value = Value::Float(self.smoothed_lane_offset(from));
         }
         Ok(record)
     }
@@ -289,6 +309,28 @@ mod tests {
             unit.compute(&world([90.0, 90.0], [1.0, 0.0]), None, &onroad_type(), &"oo1".into()).unwrap();
         assert_eq!(out.get("pos"), Some(&Value::vec2(90.0, 90.0)));
         assert_eq!(out.get("road"), Some(&Value::Int(-1)));
+    }
+
+    #[test]
+    fn a_smoothed_position_gets_its_own_lane_offset() {
+        let network = Arc::new(RoadNetwork::build(&kpl_roads::scenarios::bridge()).unwrap());
+        let unit = SnapToLane::new(network);
+        let mut to = onroad_type();
+        to.fields.push(FieldType { name: SMOOTHED_LANE_OFFSET.into(), ty: ValueType::Float });
+        // Now 0.75 m left of the eastbound lane's centre (y = -1.75); 2 s ago 0.5 m right of it,
+        // 26 m back.
+        let mut from = world([-100.0, -1.0], [13.0, 0.4]);
+        let offset = |out: &Record| out.get(SMOOTHED_LANE_OFFSET).unwrap().as_f64().unwrap();
+        assert_eq!(offset(&unit.compute(&from, None, &to, &"oo1".into()).unwrap()), 0.0, "no smoothed_pos");
+        from.fields.push(("smoothed_pos".into(), Value::vec2(-126.0, -2.25)));
+        from.fields.push(("smoothed_vel".into(), Value::vec2(13.0, 0.0)));
+        let out = unit.compute(&from, None, &to, &"oo1".into()).unwrap();
+        assert!((offset(&out) + 0.5).abs() < 1e-6, "{}", offset(&out));
+        assert!((out.get("lane_offset").unwrap().as_f64().unwrap() - 0.75).abs() < 1e-6);
+        // Moving west 2 s ago, at the same place: the westbound lane (y = +1.75) is its lane.
+        from.fields.last_mut().unwrap().1 = Value::vec2(-13.0, 0.0);
+        let out = unit.compute(&from, None, &to, &"oo1".into()).unwrap();
+        assert!((offset(&out).abs() - 4.0).abs() < 1e-6, "{}", offset(&out));
     }
 
     #[test]

@@ -2,6 +2,11 @@
 //! producing its objects computes keeps its default forever (`Car.speed` stays 0 when the link
 //! unit making cars only copies what an on-road object has), so a formula reading it is silently
 //! wrong. What a link unit sets comes from its registry signature ([`Computes`]).
+//!
+//! Parameters that act on nothing (W0207): a link unit's parameter that acts on attributes of the
+//! linked-to type ([`crate::registry::Param::acts_on`]: `anchor.kalman`'s `smooth` sets
+//! `smoothed_pos` and `smoothed_vel`), given a value other than its default where the type
+//! declares none of them.
 
 use kpl_syntax::Diagnostic;
 use kpl_syntax::ast::{self, Span};
@@ -56,6 +61,39 @@ pub fn unset(spec: &ast::Spec, checked: &hir::Spec, registry: &Registry) -> Vec<
                 first.entry_name,
                 &sets,
             ));
+        }
+    }
+    out
+}
+
+/// The warnings for every link unit parameter that acts on attributes its linked-to type does
+/// not declare.
+pub fn ineffective_params(spec: &ast::Spec, checked: &hir::Spec, registry: &Registry) -> Vec<Diagnostic> {
+    let mut out = Vec::new();
+    for item in &spec.items {
+        let ast::Item::Link(decl) = item else { continue };
+        let Some(process) = checked.processes.iter().find(|p| p.name == decl.name.name) else { continue };
+        let hir::ProcessKind::Link(link) = &process.kind else { continue };
+        let (Some(entry), Some(to)) =
+            (registry.entry(EntryKind::Link, &link.via.entry), checked.types.get(&link.to_type))
+        else {
+            continue;
+        };
+        for (name, _) in decl.via.params() {
+            let Some(param) = entry.params.iter().find(|p| p.name == name.name) else { continue };
+            let given = link.via.params.get(&param.name);
+            if param.acts_on.is_empty() || given.is_none() || given == param.default.as_ref() {
+                continue;
+            }
+            if !to.fields.iter().any(|f| param.acts_on.iter().any(|a| *a == *f.name)) {
+                out.push(diag::param_ineffective(
+                    name.span,
+                    &param.name,
+                    &link.via.entry,
+                    &link.to_type,
+                    &param.acts_on,
+                ));
+            }
         }
     }
     out

@@ -115,6 +115,7 @@ pub fn check_in(spec: &ast::Spec, registry: &Registry, dir: Option<&std::path::P
     let has_errors = diagnostics.iter().any(Diagnostic::is_error);
     if !has_errors {
         diagnostics.extend(crate::attributes::unset(spec, &result, registry));
+        diagnostics.extend(crate::attributes::ineffective_params(spec, &result, registry));
     }
     diagnostics.sort_by_key(|d| (d.span.start, d.span.end));
     if has_errors {

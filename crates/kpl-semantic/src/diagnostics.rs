@@ -61,6 +61,7 @@ pub const UNUSED_OUTPUT: &str = "W0202";
 pub const BARE_BOUND: &str = "W0203";
 pub const UNSET_ATTRIBUTE: &str = "W0204";
 pub const FORGET_WHEN_INEFFECTIVE: &str = "W0206";
+pub const PARAM_INEFFECTIVE: &str = "W0207";
 
 pub fn unknown_name(span: Span, what: &str, name: &str, candidates: &[&str]) -> Diagnostic {
     Diagnostic::error(UNKNOWN_NAME, span, format!("unknown {what} `{name}`"))
@@ -559,6 +560,17 @@ pub fn chronicle_hysteresis_nested(span: Span) -> Diagnostic {
     )
     .with_label("inside another expression")
     .with_hint("write `event e = hysteresis(ENTER, LEAVE) becomes true`, with the conditions inside it: `hysteresis(close(a, b, 20.0), not close(a, b, 25.0))`")
+}
+
+pub fn param_ineffective(span: Span, param: &str, unit: &str, ty: &str, acts_on: &[String]) -> Diagnostic {
+    let names: Vec<String> = acts_on.iter().map(|a| format!("`{a}`")).collect();
+    Diagnostic::warning(
+        PARAM_INEFFECTIVE,
+        span,
+        format!("`{param}` of `{unit}` has no effect: `{ty}` declares none of {}", names.join(", ")),
+    )
+    .with_label("sets nothing")
+    .with_hint(format!("declare {} on `{ty}` to get what it sets, or remove `{param}`", names.join(" or ")))
 }
 
 pub fn forget_when_ineffective(span: Span, ty: &str) -> Diagnostic {

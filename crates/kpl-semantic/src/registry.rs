@@ -97,6 +97,11 @@ pub struct Param {
     #[serde(serialize_with = "serialize_default")]
     pub default: Option<Value>,
     pub doc: String,
+    /// The attributes of the linked-to type that the parameter acts on (a link unit's): when
+    /// it is given a value other than its default and the type declares none of them, it has no
+    /// effect (warning W0207). Empty: it always acts.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub acts_on: Vec<String>,
 }
 
 fn serialize_default<S: serde::Serializer>(value: &Option<Value>, s: S) -> Result<S::Ok, S::Error> {
@@ -108,10 +113,15 @@ fn serialize_default<S: serde::Serializer>(value: &Option<Value>, s: S) -> Resul
 
 impl Param {
     pub fn required(name: &str, ty: ParamType, doc: &str) -> Param {
-        Param { name: name.into(), ty, default: None, doc: doc.into() }
+        Param { name: name.into(), ty, default: None, doc: doc.into(), acts_on: Vec::new() }
     }
     pub fn optional(name: &str, ty: ParamType, default: Value, doc: &str) -> Param {
-        Param { name: name.into(), ty, default: Some(default), doc: doc.into() }
+        Param { name: name.into(), ty, default: Some(default), doc: doc.into(), acts_on: Vec::new() }
+    }
+    /// Declares the linked-to type's attributes the parameter acts on ([`Param::acts_on`]).
+    pub fn acting_on(mut self, attributes: &[&str]) -> Param {
+        self.acts_on = attributes.iter().map(|a| a.to_string()).collect();
+        self
     }
 }
 
