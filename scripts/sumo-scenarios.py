@@ -741,7 +741,8 @@ def weaving(s, duration):
 # its lane's centre line; not from KPL's relations): a vehicle *departs* its lane when its centre
 # comes more than WEAVE_OUT_M from the lane's centre line (on a 3.2 m lane, a 1.8 m wide car is
 # then 0.3 m over the marking; a lane change is a departure too: SUMO switches `lane` as the
-# centre crosses the marking, and the offset stays over WEAVE_OUT_M on the other side) and
+# centre crosses the marking, 1.6 m from the lane's centre, which counts even when neither
+# sample on either side of the switch, 0.5 s apart, is over WEAVE_OUT_M) and
 # *returns* when its centre is again within WEAVE_IN_M of a lane's centre line. It weaves when
 # WEAVE_COUNT departures and returns follow one another within WEAVE_WINDOW_S (the first
 # departure to the last return); a sober overtake is two (out and back). Overlapping weaving
@@ -766,16 +767,19 @@ def weaving_truth(folder):
         origin = time if origin is None else origin
         for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
             a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
-            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"]))))
+            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"])), a["lane"]))
     lines = []
     for vehicle, samples in series.items():
         first = samples[0][0]
         swings = []  # (departure, return)
         out = None
-        for time, offset in samples:
+        lane = None
+        for time, offset, now_on in samples:
+            crossed = lane is not None and now_on != lane  # the centre crossed a marking
+            lane = now_on
             if time - first < SETTLE_S:
                 continue
-            if out is None and offset > WEAVE_OUT_M:
+            if out is None and (offset > WEAVE_OUT_M or crossed):
                 out = time
             elif out is not None and offset < WEAVE_IN_M:
                 swings.append((out, time))

@@ -406,10 +406,11 @@ fn hysteresis_keeps_a_jittering_relation_from_flickering() {
 }
 
 /// `weaving(c)` of sumo_weaving.kpl for the pure recogniser: source 0 is the fluent
-/// `hysteresis(abs(c.lane_offset) > 1.3, abs(c.lane_offset) < 0.5)`; out1, in1, out2, in2, out3,
-/// in3 alternate its becoming true and false, each at least 1 s after the one before, all within
-/// 30 s.
+/// `hysteresis(abs(c.smoothed_lane_offset) > 1.3, abs(c.smoothed_lane_offset) < 0.5)`; out1, in1,
+/// out2, in2, out3, in3 alternate its becoming true and false, each at least 0.5 s after the one
+/// before, all within 30 s.
 fn weaving_model() -> Chronicle {
+    const HALF_S: Time = S / 2;
     let c = |later, earlier, lo| Constraint { later, earlier, lo: Some(lo), hi: Some(30 * S) };
     let event = |value| Pattern { source: SourceId(0), args: vec![0], value };
     Chronicle {
@@ -417,7 +418,14 @@ fn weaving_model() -> Chronicle {
         source: SourceId(1),
         params: 1,
         events: vec![event(true), event(false), event(true), event(false), event(true), event(false)],
-        constraints: vec![c(1, 0, S), c(2, 1, S), c(3, 2, S), c(4, 3, S), c(5, 4, S), c(5, 0, 0)],
+        constraints: vec![
+            c(1, 0, HALF_S),
+            c(2, 1, HALF_S),
+            c(3, 2, HALF_S),
+            c(4, 3, HALF_S),
+            c(5, 4, HALF_S),
+            c(5, 0, 0),
+        ],
         holds: vec![],
         nevers: vec![],
     }
@@ -426,7 +434,7 @@ fn weaving_model() -> Chronicle {
 /// The weaving of sumo_weaving.kpl on the first 120 s of its traffic (the truth of
 /// scripts/sumo-scenarios.py has two drunk drivers weaving in them): the recognitions recorded
 /// are those of the pure recogniser on the fluent computed here from each recorded car's
-/// `lane_offset` (a car that is gone is out of the fluent).
+/// `smoothed_lane_offset` (a car that is gone is out of the fluent).
 #[test]
 fn the_weaving_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     let (snapshots, got) = run_spec_with("sumo_weaving", "weaving", 120, &["c"]);
@@ -439,7 +447,7 @@ fn the_weaving_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     for (valid, cars) in &snapshots {
         let mut now = BTreeMap::new();
         for (id, car) in cars {
-            let offset = Relations::num(car, "lane_offset").abs();
+            let offset = Relations::num(car, "smoothed_lane_offset").abs();
             let was = out.get(id).copied().unwrap_or(false);
             now.insert(id.clone(), if was { offset >= 0.5 } else { offset > 1.3 });
         }
