@@ -44,11 +44,15 @@ const SHIPPED: [&str; 3] = [
     include_str!("../../../specs/traffic/sumo_weaving.kpl"),
 ];
 
-/// The spec of a run: the object types of the first shipped spec, every chronicle of the shipped
-/// specs (each name once) as written there, over the synthetic cars, and a sink counting the
+/// The shipped spec whose object types a run declares: sumo_weaving.kpl's have every attribute
+/// the others' have, and the smoothed ones its chronicle reads.
+const TYPES_FROM: usize = 2;
+
+/// The spec of a run: the object types of [`TYPES_FROM`], every chronicle of the shipped specs
+/// (each name once) as written there, over the synthetic cars, and a sink counting the
 /// recognitions.
 pub fn spec_text(cars: u32, seconds: u32) -> Result<String, String> {
-    let mut text = String::new();
+    let (mut types, mut text) = (String::new(), String::new());
     let mut names: Vec<String> = Vec::new();
     for (k, (path, shipped)) in SPEC_PATHS.iter().zip(SHIPPED).enumerate() {
         let parse = kpl_syntax::parse(shipped);
@@ -58,17 +62,19 @@ pub fn spec_text(cars: u32, seconds: u32) -> Result<String, String> {
         for item in &parse.spec.items {
             let span = item.span();
             let source = &shipped[span.start as usize..span.end as usize];
-            match item {
-                kpl_syntax::ast::Item::Type(_) if k == 0 => {}
+            let into = match item {
+                kpl_syntax::ast::Item::Type(_) if k == TYPES_FROM => &mut types,
                 kpl_syntax::ast::Item::Chronicle(c) if !names.contains(&c.name.name) => {
                     names.push(c.name.name.clone());
+                    &mut text
                 }
                 _ => continue,
-            }
-            text.push_str(source);
-            text.push('\n');
+            };
+            into.push_str(source);
+            into.push('\n');
         }
     }
+    let mut text = types + &text;
     if names.is_empty() {
         return Err("the shipped specs have no chronicles".into());
     }
