@@ -337,17 +337,25 @@ fn remember(
     filter: CvFilter,
     lag: Option<Time>,
 ) -> Option<CvFilter> {
-    if memory.get::<Estimate>().is_none() {
-        memory.set(Estimate { filter: filter.clone(), smoother: None });
-    }
-    let estimate = memory.get_mut::<Estimate>()?;
-    estimate.filter = filter.clone();
+    let Some(estimate) = memory.get_mut::<Estimate>() else {
+        // The object's first state: its smoother, if any, starts with it.
+        let smoother = lag.map(|lag| {
+            let mut smoother = FixedLag::new(lag);
+            smoother.push(predicted, filter.clone());
+            smoother
+        });
+        let smoothed = smoother.as_ref().and_then(FixedLag::smoothed_so_far);
+        memory.set(Estimate { filter, smoother });
+        return smoothed;
+    };
     if estimate.smoother.is_none() {
         estimate.smoother = lag.map(FixedLag::new);
     }
-    let smoother = estimate.smoother.as_mut()?;
-    smoother.push(predicted, filter);
-    lag.and_then(|_| smoother.smoothed_so_far())
+    if let Some(smoother) = &mut estimate.smoother {
+        smoother.push(predicted, filter.clone());
+    }
+    estimate.filter = filter;
+    lag.and(estimate.smoother.as_ref()).and_then(FixedLag::smoothed_so_far)
 }
 
 /// The position of the object in `objects` (a list of records with `pos`, or one record)

@@ -137,7 +137,7 @@ impl SnapToLane {
         let Some(pos) = from.get("smoothed_pos").and_then(Value::as_vec2) else { return 0.0 };
         let vel = from.get("smoothed_vel").and_then(Value::as_vec2).or_else(|| velocity(from));
         let hint = SnapHint { heading: heading_of_velocity(vel, self.min_heading_speed_mps), previous: None };
-        self.network.snap(pos, &hint).map_or(0.0, |s| self.network.lane(s.lane).path.project(pos).lateral)
+        self.network.snap(pos, &hint).map_or(0.0, |s| s.lateral_m)
     }
 }
 
@@ -198,6 +198,9 @@ impl LinkUnit for SnapToLane {
                     }
                 }
                 "lane_offset" if matches!(value, Value::Float(_)) => *value = Value::Float(lane_offset),
+                SMOOTHED_LANE_OFFSET if matches!(value, Value::Float(_)) => {
+                    *value = Value::Float(self.smoothed_lane_offset(from));
+                }
                 _ => {}
             }
         }
@@ -220,11 +223,6 @@ impl LinkUnit for SnapToLane {
                 set_road_attributes(&mut record, &on);
             }
             None => set_off_road_attributes(&mut record, vel),
-        }
-        if let Some((_, value)) = record.fields.iter_mut().find(|(name, _)| &**name == SMOOTHED_LANE_OFFSET)
-            && matches!(value, Value::Float(_))
-        {
-            *value = Value::Float(self.smoothed_lane_offset(from));
         }
         Ok(record)
     }

@@ -84,12 +84,13 @@ impl Highway {
                         field("heading", Value::Float(0.0)),
                         field("lane_heading", Value::Float(0.0)),
                         field("lane_offset", Value::Float(0.0)),
-                        // Where it was 2 s ago (`anchor.kalman(smooth: 2s)`; sumo_weaving.kpl).
+                        field("in_junction", Value::Bool(false)),
+                        field("measured", Value::Bool(true)),
+                        // Where it was 2 s ago (`anchor.kalman(smooth: 2s)`; sumo_weaving.kpl),
+                        // last: the situation monitors never read them.
                         field("smoothed_pos", Value::vec2((s - 2.0 * speed).rem_euclid(length), y)),
                         field("smoothed_vel", Value::vec2(speed, 0.0)),
                         field("smoothed_lane_offset", Value::Float(0.0)),
-                        field("in_junction", Value::Bool(false)),
-                        field("measured", Value::Bool(true)),
                     ],
                 }))
             })
