@@ -9,7 +9,8 @@
 //! - an object is removed as forgotten only once it has not been anchored for its type's forget
 //!   time, and every object that has not been anchored for that long is gone; a percept its
 //!   source stops listing is removed exactly when it has not been listed for its type's forget
-//!   time (0 for radar percepts, 300 ms for vision percepts);
+//!   time (0 for radar percepts, 300 ms for vision percepts); a branch object (a hypothesis of a
+//!   predicted object) has been unanchored since its owner was last anchored;
 //! - the same trace gives the same structures (determinism).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests fail loudly
 
@@ -147,6 +148,12 @@ fn run(tracks: &[Track], steps: usize) -> Result<Vec<String>, TestCaseError> {
 
         // Removal only after the forget time.
         for change in &output.changes {
+            if change.kind == ChangeKind::Created && change.cause == Cause::Branch {
+                // A branch is a hypothesis of its owner: unanchored for as long as the owner.
+                let owner = change.branch_of.as_deref().expect("a branch names its owner");
+                let since = last_anchored[&(change.ty.to_string(), owner.to_string())];
+                last_anchored.insert((change.ty.to_string(), change.symbol.to_string()), since);
+            }
             if change.kind == ChangeKind::Removed && change.cause == Cause::Forgotten {
                 forgotten += 1;
                 let key = (change.ty.to_string(), change.symbol.to_string());
