@@ -336,11 +336,12 @@ fn remember(
     predicted: CvFilter,
     filter: CvFilter,
     lag: Option<Time>,
+    q: f64,
 ) -> Option<CvFilter> {
     let Some(estimate) = memory.get_mut::<Estimate>() else {
         // The object's first state: its smoother, if any, starts with it.
         let smoother = lag.map(|lag| {
-            let mut smoother = FixedLag::new(lag);
+            let mut smoother = FixedLag::new(lag, q);
             smoother.push(predicted, filter.clone());
             smoother
         });
@@ -349,7 +350,7 @@ fn remember(
         return smoothed;
     };
     if estimate.smoother.is_none() {
-        estimate.smoother = lag.map(FixedLag::new);
+        estimate.smoother = lag.map(|lag| FixedLag::new(lag, q));
     }
     if let Some(smoother) = &mut estimate.smoother {
         smoother.push(predicted, filter.clone());
@@ -395,7 +396,8 @@ impl LinkUnit for Kalman {
         let (predicted, filter) = self.filter(call, pos)?;
         let mut record = fill(call.to, call.symbol, call.from, call.previous);
         let (position, velocity) = (filter.position(), filter.velocity());
-        let smoothed = remember(call.memory, predicted, filter, self.params.smooth);
+        let smoothed =
+            remember(call.memory, predicted, filter, self.params.smooth, self.params.acceleration_noise);
         for (name, value) in &mut record.fields {
             match (&**name, &smoothed) {
                 ("pos", _) => *value = Value::Vec2(position),

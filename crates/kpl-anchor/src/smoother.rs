@@ -11,16 +11,19 @@
 //!
 //! Each step keeps the filter's prediction to the measurement's time and its estimate after the
 //! measurement; [`FixedLag::smoothed`] runs the smoother's backward pass from the newest step to
-//! the oldest kept one (the last step at or before the newest time minus the lag). The result is
-//! the mean and covariance of that step's state given every measurement taken in, the same as a
-//! batch solution of the whole linear-Gaussian problem (the tests check it against one).
+//! the oldest kept one (the last step at or before the newest time minus the lag), and from there
+//! to exactly the newest time minus the lag: that time need not be a step's (a missed detection,
+//! an occlusion), so the oldest step's estimate is first predicted on to it with the filter's own
+//! motion model. The result is the mean and covariance of the state at that time given every
+//! measurement taken in, the same as a batch solution of the whole linear-Gaussian problem with a
+//! state at that time (the tests check it against one).
 //!
 //! ```
 //! use kpl_anchor::kalman::CvFilter;
 //! use kpl_anchor::smoother::FixedLag;
 //!
 //! let mut filter = CvFilter::new([0.0, 0.0], [10.0, 0.0], 1.0, 1.0, 0);
-//! let mut smoother = FixedLag::new(1_000_000); // 1 s
+//! let mut smoother = FixedLag::new(1_000_000, 2.0); // 1 s, the filter's acceleration noise
 //! smoother.push(filter.clone(), filter.clone());
 //! for k in 1..=20_i64 {
 //!     let time = k * 100_000; // 10 Hz
@@ -55,13 +58,16 @@ struct Step {
 #[derive(Debug, Clone, PartialEq)]
 pub struct FixedLag {
     lag: Time,
+    /// The filter's acceleration noise (its `predict`'s `q`), to predict between steps.
+    q: f64,
     steps: VecDeque<Step>,
 }
 
 impl FixedLag {
-    /// A smoother whose estimate is `lag` (µs) older than the newest measurement.
-    pub fn new(lag: Time) -> FixedLag {
-        FixedLag { lag: lag.max(0), steps: VecDeque::new() }
+    /// A smoother whose estimate is `lag` (µs) older than the newest measurement, over a filter
+    /// that predicts with the acceleration noise `q` ([`CvFilter::predict`]).
+    pub fn new(lag: Time, q: f64) -> FixedLag {
+        FixedLag { lag: lag.max(0), q, steps: VecDeque::new() }
     }
 
     /// Takes in one step of the filter: `predicted`, the filter moved on to the measurement's time
@@ -90,9 +96,8 @@ impl FixedLag {
         }
     }
 
-    /// The oldest kept step's state given every measurement taken in since: its time is the last
-    /// step's at or before the newest time minus the lag. `None` before the steps span the lag
-    /// (or when a prediction's covariance cannot be inverted).
+    /// The state at the newest time minus the lag given every measurement taken in. `None`
+    /// before the steps span the lag (or when a prediction's covariance cannot be inverted).
     pub fn smoothed(&self) -> Option<CvFilter> {
         let oldest = self.steps.front()?;
         let newest = self.steps.back()?;
@@ -106,18 +111,33 @@ impl FixedLag {
     /// the first step (less than `lag` before the newest).
     pub fn smoothed_so_far(&self) -> Option<CvFilter> {
         let newest = self.steps.back()?;
+        let at = newest.updated.time.saturating_sub(self.lag);
         let mut smoothed = newest.updated.clone();
         for j in (0..self.steps.len() - 1).rev() {
             let (step, next) = (&self.steps[j], &self.steps[j + 1]);
-            let dt = (next.predicted.time.saturating_sub(step.updated.time)).max(0) as f64 / 1e6;
-            let f = CvFilter::transition(dt);
-            let gain = step.updated.p * f.transpose() * next.predicted.p.try_inverse()?;
-            let x = step.updated.x + gain * (smoothed.x - next.predicted.x);
-            let p = step.updated.p + gain * (smoothed.p - next.predicted.p) * gain.transpose();
-            smoothed = CvFilter { x, p, time: step.updated.time };
+            smoothed = if j == 0 && step.updated.time < at {
+                // The oldest step is before `at`: its estimate predicted on to `at` is the
+                // filtered state there, which the backward pass refines as any other.
+                let mut between = step.updated.clone();
+                between.predict(at, self.q);
+                backward(&between, next, &smoothed)?
+            } else {
+                backward(&step.updated, next, &smoothed)?
+            };
         }
         Some(smoothed)
     }
+}
+
+/// One step of the backward pass: the state of `filtered` (the filter's estimate at its time)
+/// given every measurement, from the smoothed state of the `next` step.
+fn backward(filtered: &CvFilter, next: &Step, smoothed: &CvFilter) -> Option<CvFilter> {
+    let dt = (next.predicted.time.saturating_sub(filtered.time)).max(0) as f64 / 1e6;
+    let f = CvFilter::transition(dt);
+    let gain = filtered.p * f.transpose() * next.predicted.p.try_inverse()?;
+    let x = filtered.x + gain * (smoothed.x - next.predicted.x);
+    let p = filtered.p + gain * (smoothed.p - next.predicted.p) * gain.transpose();
+    Some(CvFilter { x, p, time: filtered.time })
 }
 
 #[cfg(test)]
@@ -146,7 +166,7 @@ mod tests {
             0,
         );
         let mut filter = start.clone();
-        let mut smoother = FixedLag::new(lag);
+        let mut smoother = FixedLag::new(lag, Q);
         smoother.push(start.clone(), start.clone());
         let (mut times, mut zs) = (Vec::new(), Vec::new());
         let mut time = 0;
@@ -165,9 +185,11 @@ mod tests {
     }
 
     /// The mean of every state given every measurement, solved at once: the information matrix
-    /// of the prior, the motion model and the measurements, written out block by block.
-    fn batch(start: &CvFilter, times: &[Time], zs: &[Vector4<f64>]) -> Vec<Vector4<f64>> {
-        let n = times.len() + 1;
+    /// of the prior, the motion model and the measurements, written out block by block. The
+    /// states are the start's and one at each time of `nodes` (increasing), measured where it has
+    /// a measurement.
+    fn batch(start: &CvFilter, nodes: &[(Time, Option<Vector4<f64>>)]) -> Vec<Vector4<f64>> {
+        let n = nodes.len() + 1;
         let mut info = DMatrix::<f64>::zeros(4 * n, 4 * n);
         let mut vector = DVector::<f64>::zeros(4 * n);
         let add = |info: &mut DMatrix<f64>, i: usize, j: usize, block: &Matrix4<f64>| {
@@ -179,7 +201,7 @@ mod tests {
         vector.rows_mut(0, 4).copy_from(&(prior * start.x));
         let measurement = Matrix4::from_diagonal(&Vector4::new(1.0 / R, 1.0 / R, 1.0 / R_V, 1.0 / R_V));
         let mut previous = 0;
-        for (k, (&time, z)) in times.iter().zip(zs).enumerate() {
+        for (k, &(time, z)) in nodes.iter().enumerate() {
             let dt = (time - previous) as f64 / 1e6;
             previous = time;
             let mut f = Matrix4::identity();
@@ -198,9 +220,11 @@ mod tests {
             add(&mut info, k, k + 1, &(-(f.transpose() * qi)));
             add(&mut info, k + 1, k, &(-(qi * f)));
             add(&mut info, k + 1, k + 1, &qi);
-            add(&mut info, k + 1, k + 1, &measurement);
-            let mut rows = vector.rows_mut(4 * (k + 1), 4);
-            rows += measurement * z;
+            if let Some(z) = z {
+                add(&mut info, k + 1, k + 1, &measurement);
+                let mut rows = vector.rows_mut(4 * (k + 1), 4);
+                rows += measurement * z;
+            }
         }
         let mean = info.lu().solve(&vector).unwrap();
         (0..n).map(|k| Vector4::from_iterator(mean.rows(4 * k, 4).iter().copied())).collect()
@@ -208,18 +232,29 @@ mod tests {
 
     #[test]
     fn the_smoothed_state_is_the_batch_solution_given_every_measurement() {
-        for seed in 0..20 {
+        for seed in 0..40 {
             let n = 60;
-            // Lags from about the whole run (60 steps of 50 to 150 ms) to a few steps.
-            let lag = [2_900_000, 2_000_000, 700_000, 150_000][seed as usize % 4];
+            // Lags from about the whole run (60 steps of 50 to 150 ms) to a few steps; the state
+            // at the newest time minus the lag falls between two steps (a batch state without a
+            // measurement there) except for the lag of exactly the measurements' first time.
+            let (_, _, times, _) = run(seed, n, 0);
+            let newest = *times.last().unwrap();
+            let lag = [2_900_000, 2_000_000, 700_000, 150_000, newest - times[0]][seed as usize % 5];
             let (smoother, start, times, zs) = run(seed, n, lag);
             let smoothed = smoother.smoothed().unwrap();
-            let all = batch(&start, &times, &zs);
-            let newest = *times.last().unwrap();
-            let all_times: Vec<Time> = std::iter::once(0).chain(times.iter().copied()).collect();
-            let index = all_times.iter().rposition(|&t| t <= newest - lag).unwrap();
-            let expected_time = if index == 0 { 0 } else { times[index - 1] };
-            assert_eq!(smoothed.time, expected_time, "seed {seed}");
+            let at = newest - lag;
+            assert_eq!(smoothed.time, at, "seed {seed}");
+            let mut nodes: Vec<(Time, Option<Vector4<f64>>)> =
+                times.iter().zip(&zs).map(|(&t, &z)| (t, Some(z))).collect();
+            let index = match nodes.iter().position(|&(t, _)| t >= at) {
+                Some(i) if nodes[i].0 == at => i + 1,
+                Some(i) => {
+                    nodes.insert(i, (at, None));
+                    i + 1
+                }
+                None => unreachable!("the lag is not negative"),
+            };
+            let all = batch(&start, &nodes);
             let error = (smoothed.x - all[index]).abs().max();
             assert!(
                 error < 1e-6,
@@ -228,6 +263,43 @@ mod tests {
                 all[index]
             );
         }
+    }
+
+    /// A missed step just after the newest time minus the lag: the estimate is still of that
+    /// time (not the step before it), and the state's position there.
+    #[test]
+    fn a_missed_step_does_not_make_the_estimate_older() {
+        let mut filter = CvFilter::new([0.0, 0.0], [14.0, 0.0], R, 1.0, 0);
+        let mut smoother = FixedLag::new(2_000_000, Q);
+        smoother.push(filter.clone(), filter.clone());
+        for k in (1..=40_i64).filter(|k| *k != 21) {
+            let time = k * 100_000;
+            filter.predict(time, Q);
+            let predicted = filter.clone();
+            filter.update([14.0 * time as f64 / 1e6, 0.0], R).unwrap();
+            smoother.push(predicted, filter.clone());
+        }
+        // Newest 4.0 s, the estimate of 2.0 s, steps at 2.0 and 2.2 s.
+        let smoothed = smoother.smoothed().unwrap();
+        assert_eq!(smoothed.time, 2_000_000);
+        assert!((smoothed.position()[0] - 28.0).abs() < 0.05, "{:?}", smoothed.position());
+        smoother.push(
+            {
+                let mut p = filter.clone();
+                p.predict(4_100_000, Q);
+                p
+            },
+            {
+                let mut u = filter.clone();
+                u.predict(4_100_000, Q);
+                u.update([57.4, 0.0], R).unwrap();
+                u
+            },
+        );
+        // Newest 4.1 s: 2.1 s was missed; the estimate is of 2.1 s, between the steps.
+        let smoothed = smoother.smoothed().unwrap();
+        assert_eq!(smoothed.time, 2_100_000);
+        assert!((smoothed.position()[0] - 29.4).abs() < 0.05, "{:?}", smoothed.position());
     }
 
     #[test]
@@ -255,7 +327,7 @@ mod tests {
     #[test]
     fn at_the_trackers_noise_a_two_second_lag_takes_the_error_from_0_22_to_0_17_m() {
         let mut filter = CvFilter::new([0.0, 0.0], [20.0, 0.0], R, 1.0, 0);
-        let mut smoother = FixedLag::new(2_000_000);
+        let mut smoother = FixedLag::new(2_000_000, Q);
         smoother.push(filter.clone(), filter.clone());
         for k in 1..=300_i64 {
             filter.predict(k * 100_000, Q);
@@ -286,7 +358,7 @@ mod tests {
         // A step back in time starts over.
         smoother.push(start.clone(), start);
         assert_eq!(smoother.steps.len(), 1);
-        let mut long = FixedLag::new(Time::MAX);
+        let mut long = FixedLag::new(Time::MAX, Q);
         let mut filter = CvFilter::new([0.0, 0.0], [1.0, 0.0], 1.0, 1.0, 0);
         long.push(filter.clone(), filter.clone());
         for k in 1..(MAX_STEPS as i64 + 100) {
