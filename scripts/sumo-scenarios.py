@@ -54,8 +54,9 @@ Scenarios:
             traffic file.
   weaving   a straight 3 km road, two lanes one way at 25 m/s (300 s), with SUMO's sublane model
             (lateral resolution 0.8 m): sober cars, trucks and drunk drivers whose lateral
-            position wanders across the lane marking and whose speed swings; truth.jsonl: the
-            weaving, computed here from the floating car data's posLat (weaving_truth).
+            position wanders across the lane marking and whose speed swings (under TraCI);
+            truth.jsonl: weaving, speed swings and the two together (drunk driving), computed
+            here from the floating car data's posLat and speed (weaving_truth).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -709,8 +710,9 @@ def reckless_truth(folder):
 # Weaving (probable drunk driving): SUMO's sublane model (lateral resolution 0.8 m) with
 # `drunk` drivers whose lateral position wanders (SL2015's lcSigma 1.5: they drift across the
 # lane marking and back every 5 to 20 s, at up to 2.5 m/s sideways) and whose speed swings
-# (sigma 0.9, speedDev 0.1), beside sober cars (lcSigma 0: they keep to their lane's centre and
-# change lanes to overtake) and trucks.
+# (SpeedSwings below; SUMO's own sigma 0.9 and speedDev 0.1 only make it jitter by a few tenths
+# of a m/s), beside sober cars (lcSigma 0: they keep to their lane's centre and change lanes to
+# overtake) and trucks.
 WEAVING_VTYPES = """<additional>
     <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.05" lcSpeedGain="2" laneChangeModel="SL2015"/>
     <vType id="drunk" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.1" sigma="0.9" lcSigma="1.5" maxSpeedLat="2.5" laneChangeModel="SL2015" latAlignment="arbitrary"/>
@@ -733,8 +735,44 @@ def weaving(s, duration):
              'departLane="0" departSpeed="max"/>' % duration]
     s.write("routes.rou.xml", '<routes>\n    <route id="r" edges="eastbound"/>\n' + "\n".join(flows) + "\n</routes>\n")
     s.simulate("net.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml",
-               lateral_resolution=WEAVING_LATERAL_RESOLUTION_M)
+               lateral_resolution=WEAVING_LATERAL_RESOLUTION_M, control=SpeedSwings(s.seed))
     return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+# A drunk driver's speed swings: SWING_EVERY_S after it appears, and again that long after each
+# swing, it slows down by SWING_DROP_MPS over SWING_FALL_S (TraCI's slowDown) and then drives on
+# as SUMO's car-following model lets it, speeding up again at its acceleration (2.6 m/s^2, less
+# its dawdling). The cars behind it slow down with it.
+SWING_EVERY_S = (5.0, 12.0)
+SWING_DROP_MPS = (3.0, 6.0)
+SWING_FALL_S = (1.5, 3.0)
+SWING_MIN_MPS = 8.0
+
+
+class SpeedSwings:
+    def __init__(self, seed):
+        self.rng = random.Random(seed)
+        self.next = {}  # drunk driver -> when its next swing starts
+        self.falling = {}  # drunk driver -> when its slowing down ends
+
+    def __call__(self, traci, time):
+        for v in traci.simulation.getDepartedIDList():
+            if traci.vehicle.getTypeID(v) == "drunk":
+                self.next[v] = time + self.rng.uniform(*SWING_EVERY_S)
+        for v in traci.simulation.getArrivedIDList():
+            self.next.pop(v, None)
+            self.falling.pop(v, None)
+        for v, until in list(self.falling.items()):
+            if time >= until:
+                traci.vehicle.setSpeed(v, -1)  # back to SUMO's car following
+                del self.falling[v]
+        for v, at in self.next.items():
+            if time >= at and v not in self.falling:
+                fall = self.rng.uniform(*SWING_FALL_S)
+                target = max(traci.vehicle.getSpeed(v) - self.rng.uniform(*SWING_DROP_MPS), SWING_MIN_MPS)
+                traci.vehicle.slowDown(v, target, fall)
+                self.falling[v] = time + fall
+                self.next[v] = time + fall + self.rng.uniform(*SWING_EVERY_S)
 
 
 # The truth of weaving, from SUMO's floating car data alone (`posLat`: the centre's offset from
@@ -752,12 +790,60 @@ WEAVE_OUT_M = 1.3
 WEAVE_IN_M = 0.5
 WEAVE_COUNT = 3
 WEAVE_WINDOW_S = 30.0
+# Speed swings, from the floating car data's `speed` alone: a vehicle's speed falls by at least
+# SWING_MPS from a peak within SWING_LEG_S and rises again by SWING_MPS from the lowest speed
+# within SWING_LEG_S (the swing lasts from the peak to when the rise reached SWING_MPS). It swings
+# when SWING_COUNT swings follow one another within SWING_WINDOW_S (first peak to last rise);
+# overlapping windows are one situation. A car behind a drunk driver swings with it; a car that
+# slows down behind a truck and speeds up to overtake it swings once.
+SWING_MPS = 2.0
+SWING_LEG_S = 8.0
+SWING_COUNT = 2
+SWING_WINDOW_S = 30.0
+# Probable drunk driving: a vehicle's weaving while its speed swings (a speed-swing situation at
+# most DRUNK_WITHIN_S before or after it); the situation is the weaving's.
+DRUNK_WITHIN_S = 30.0
+
+
+def episodes_of(events, count, window):
+    """[start, end, n] windows of `count` consecutive (start, end) events within `window`
+    seconds (first start to last end), overlapping windows merged (n: events in it)."""
+    episodes = []
+    for i in range(len(events) - count + 1):
+        start, end = events[i][0], events[i + count - 1][1]
+        if end - start > window:
+            continue
+        if episodes and start <= episodes[-1][1]:
+            episodes[-1][1] = end
+            episodes[-1][2] += 1
+        else:
+            episodes.append([start, end, count])
+    return episodes
+
+
+def speed_swings(samples):
+    """The (peak, risen) times of a vehicle's speed swings in [(time, speed)] (comment above)."""
+    swings = []
+    peak, trough, falling = None, None, False
+    for time, speed in samples:
+        if not falling:
+            if peak is None or speed >= peak[1]:
+                peak = (time, speed)
+            elif peak[1] - speed >= SWING_MPS:
+                falling, trough = True, (time, speed)
+        elif speed <= trough[1]:
+            trough = (time, speed)
+        elif speed - trough[1] >= SWING_MPS:
+            if trough[0] - peak[0] <= SWING_LEG_S and time - trough[0] <= SWING_LEG_S:
+                swings.append((peak[0], time))
+            falling, peak = False, (time, speed)
+    return swings
 
 
 def weaving_truth(folder):
-    """Writes truth.jsonl in a scenario folder: one line per weaving situation (comment above),
-    `kind` weaving, `objects` [vehicle], `start` and `end` in seconds from the recording's first
-    time, `departures` (how many in it)."""
+    """Writes truth.jsonl in a scenario folder: one line per situation (comments above), `kind`
+    weaving (`departures`: how many in it), speed_swings (`swings`) or drunk_driving, `objects`
+    [vehicle], `start` and `end` in seconds from the recording's first time."""
     with gzip.open(os.path.join(folder, "fcd.xml.gz"), "rt") as f:
         text = f.read()
     origin = None
@@ -767,14 +853,14 @@ def weaving_truth(folder):
         origin = time if origin is None else origin
         for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
             a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
-            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"])), a["lane"]))
+            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"])), a["lane"], float(a["speed"])))
     lines = []
     for vehicle, samples in series.items():
         first = samples[0][0]
         swings = []  # (departure, return)
         out = None
         lane = None
-        for time, offset, now_on in samples:
+        for time, offset, now_on, _ in samples:
             crossed = lane is not None and now_on != lane  # the centre crossed a marking
             lane = now_on
             if time - first < SETTLE_S:
@@ -784,24 +870,25 @@ def weaving_truth(folder):
             elif out is not None and offset < WEAVE_IN_M:
                 swings.append((out, time))
                 out = None
-        episodes = []
-        for i in range(len(swings) - WEAVE_COUNT + 1):
-            start, end = swings[i][0], swings[i + WEAVE_COUNT - 1][1]
-            if end - start > WEAVE_WINDOW_S:
-                continue
-            if episodes and start <= episodes[-1][1]:
-                episodes[-1][1] = end
-                episodes[-1][2] += 1
-            else:
-                episodes.append([start, end, WEAVE_COUNT])
-        for start, end, count in episodes:
-            lines.append({"kind": "weaving", "objects": [vehicle], "start": round(start - origin, 3),
-                          "end": round(end - origin, 3), "departures": count})
-    lines.sort(key=lambda line: (line["start"], line["objects"]))
+        weaving = episodes_of(swings, WEAVE_COUNT, WEAVE_WINDOW_S)
+        speed = speed_swings([(t, v) for t, _, _, v in samples if t - first >= SETTLE_S])
+        swinging = episodes_of(speed, SWING_COUNT, SWING_WINDOW_S)
+        drunk = [w for w in weaving
+                 if any(sw[0] <= w[1] + DRUNK_WITHIN_S and w[0] - DRUNK_WITHIN_S <= sw[1] for sw in swinging)]
+        for kind, found, extra in [("weaving", weaving, "departures"), ("speed_swings", swinging, "swings"),
+                                   ("drunk_driving", drunk, "departures")]:
+            for episode in found:
+                lines.append({"kind": kind, "objects": [vehicle], "start": round(episode[0] - origin, 3),
+                              "end": round(episode[1] - origin, 3), extra: episode[2]})
+    lines.sort(key=lambda line: (line["start"], line["objects"], line["kind"]))
     with open(os.path.join(folder, "truth.jsonl"), "w") as f:
         for line in lines:
             f.write(json.dumps(line) + "\n")
-    return "truth.jsonl: %d weaving, by %d vehicles" % (len(lines), len({l["objects"][0] for l in lines}))
+    counts = {}
+    for line in lines:
+        counts.setdefault(line["kind"], set()).add(line["objects"][0])
+    return "truth.jsonl: " + ", ".join("%d %s (%d vehicles)" % (sum(1 for l in lines if l["kind"] == k), k, len(v))
+                                       for k, v in sorted(counts.items()))
 
 
 # The scenarios whose truth is computed here (truth.jsonl), not by kpl situations.

@@ -134,7 +134,7 @@ def main():
     for seed in args.seeds.split(","):
         folder = os.path.join(args.dir, "s" + seed)
         with open(os.path.join(folder, "sumo", "weaving", "truth.jsonl")) as f:
-            truth = [json.loads(line) for line in f]
+            truth = [x for x in map(json.loads, f) if x["kind"] == "weaving"]
         for vehicle, series in trajectories(os.path.join(folder, "out", "sumo_weaving", "tracks.jsonl")).items():
             a = np.array(series)
             if len(a) < 30:
