@@ -1,6 +1,6 @@
 //! Chronicles on the runtime, as `kpl run specs/traffic/sumo_chronicles.kpl` (and
 //! `sumo_reckless.kpl`, `sumo_weaving.kpl`) run them: the spec's `overtake` (`reckless_overtake`,
-//! `weaving`) chronicle is
+//! `weaving`, `speed_swings`) chronicle is
 //! recognised over the cars that anchoring makes of recorded SUMO traffic seen by the simulated
 //! tracker, and every recognition it recorded is what the pure
 //! recogniser (`kpl-chronicle`) gives on the events computed here, independently of the adapter,
@@ -225,7 +225,7 @@ fn run_spec_with(spec_name: &str, stream: &str, seconds: Time, params: &[&str]) 
     let registry = kpl_std::registry();
     let text = std::fs::read_to_string(traffic_dir().join(format!("{spec_name}.kpl"))).unwrap();
     let spec = kpl_std::check_text(&text).unwrap();
-    let out_dir = fresh_dir(spec_name);
+    let out_dir = fresh_dir(&format!("{spec_name}-{stream}"));
     let config = RunConfig {
         duration: Some(seconds * S),
         seed: 3,
@@ -256,10 +256,10 @@ fn run_spec_with(spec_name: &str, stream: &str, seconds: Time, params: &[&str]) 
     }
     assert!(snapshots.len() > 500, "{} car snapshots", snapshots.len());
 
-    let recorded = read_samples(&out_dir.join(format!("{spec_name}/situations.jsonl")));
+    let mut recorded = read_samples(&out_dir.join(format!("{spec_name}/situations.jsonl")));
+    recorded.retain(|(name, _, _)| name == stream);
     let mut got = BTreeSet::new();
-    for (name, valid, value) in &recorded {
-        assert_eq!(name, stream);
+    for (_, valid, value) in &recorded {
         assert_eq!(value["verdict"], true);
         let times: Vec<Time> =
             value["times"].as_array().unwrap().iter().map(|t| t.as_i64().unwrap()).collect();
@@ -431,6 +431,60 @@ fn weaving_model() -> Chronicle {
     }
 }
 
+/// A fluent over one car: its new value from the car and its value before.
+type Fluent<'a> = dyn Fn(&Value, bool) -> bool + 'a;
+
+/// What the pure recogniser recognises of `chronicle` (merged as the adapter merges) on events
+/// computed here from the recorded cars: source `k` is `fluents[k]` of each car, an event at each
+/// change of it (a car that is gone is out of the fluent: false); and how many events there were.
+fn recognise_fluents(
+    snapshots: &Snapshots,
+    chronicle: Chronicle,
+    fluents: &[&Fluent<'_>],
+) -> (usize, Recognised) {
+    let mut recogniser: Recogniser<Arc<str>> =
+        Recogniser::new(vec![chronicle.compile().unwrap()], Config::default()).unwrap();
+    let mut merge = Merge::new(recogniser.chronicles()[0].window);
+    let mut was: Vec<BTreeMap<String, bool>> = vec![BTreeMap::new(); fluents.len()];
+    let mut want = BTreeSet::new();
+    let mut events_total = 0;
+    for (valid, cars) in snapshots {
+        let mut events: Vec<Event<Arc<str>>> = Vec::new();
+        for (k, fluent) in fluents.iter().enumerate() {
+            let now: BTreeMap<String, bool> = cars
+                .iter()
+                .map(|(id, car)| (id.clone(), fluent(car, was[k].get(id).copied().unwrap_or(false))))
+                .collect();
+            let mut changes: Vec<(String, bool)> = Vec::new();
+            for (id, &value) in &now {
+                if was[k].get(id).copied().unwrap_or(false) != value {
+                    changes.push((id.clone(), value));
+                }
+            }
+            for (id, &value) in &was[k] {
+                if value && !now.contains_key(id) {
+                    changes.push((id.clone(), false));
+                }
+            }
+            changes.sort();
+            events.extend(changes.into_iter().map(|(id, value)| Event {
+                source: SourceId(u32::try_from(k).unwrap()),
+                args: vec![Arc::from(id.as_str())],
+                value,
+                time: *valid,
+            }));
+            was[k] = now;
+        }
+        events_total += events.len();
+        for r in recogniser.step(*valid, events).unwrap() {
+            if merge.admit(&r) {
+                want.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
+            }
+        }
+    }
+    (events_total, want)
+}
+
 /// The weaving of sumo_weaving.kpl on the first 120 s of its traffic (the truth of
 /// scripts/sumo-scenarios.py has two drunk drivers weaving in them): the recognitions recorded
 /// are those of the pure recogniser on the fluent computed here from each recorded car's
@@ -438,50 +492,55 @@ fn weaving_model() -> Chronicle {
 #[test]
 fn the_weaving_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     let (snapshots, got) = run_spec_with("sumo_weaving", "weaving", 120, &["c"]);
-    let mut recogniser: Recogniser<Arc<str>> =
-        Recogniser::new(vec![weaving_model().compile().unwrap()], Config::default()).unwrap();
-    let mut merge = Merge::new(recogniser.chronicles()[0].window);
-    let mut out: BTreeMap<String, bool> = BTreeMap::new();
-    let mut want = BTreeSet::new();
-    let mut events_total = 0;
-    for (valid, cars) in &snapshots {
-        let mut now = BTreeMap::new();
-        for (id, car) in cars {
-            let offset = Relations::num(car, "smoothed_lane_offset").abs();
-            let was = out.get(id).copied().unwrap_or(false);
-            now.insert(id.clone(), if was { offset >= 0.5 } else { offset > 1.3 });
-        }
-        let mut changes: Vec<(String, bool)> = Vec::new();
-        for (id, &value) in &now {
-            if out.get(id).copied().unwrap_or(false) != value {
-                changes.push((id.clone(), value));
-            }
-        }
-        for (id, &value) in &out {
-            if value && !now.contains_key(id) {
-                changes.push((id.clone(), false));
-            }
-        }
-        changes.sort();
-        let events: Vec<Event<Arc<str>>> = changes
-            .into_iter()
-            .map(|(id, value)| Event {
-                source: SourceId(0),
-                args: vec![Arc::from(id.as_str())],
-                value,
-                time: *valid,
-            })
-            .collect();
-        events_total += events.len();
-        for r in recogniser.step(*valid, events).unwrap() {
-            if merge.admit(&r) {
-                want.insert((r.binding.iter().map(|o| o.to_string()).collect(), r.times, r.valid_time));
-            }
-        }
-        out = now;
-    }
+    let out = |car: &Value, was: bool| {
+        let offset = Relations::num(car, "smoothed_lane_offset").abs();
+        if was { offset >= 0.5 } else { offset > 1.3 }
+    };
+    let (events_total, want) = recognise_fluents(&snapshots, weaving_model(), &[&out]);
     assert!(events_total > 20, "only {events_total} events");
     assert!(!want.is_empty(), "the scenario's weaving");
+    assert_eq!(got, want);
+}
+
+/// `speed_swings(c)` of sumo_weaving.kpl for the pure recogniser: source 0 is the fluent of a
+/// fall (`norm(c.smoothed_vel) - norm(c.vel)` over 2 m/s, until under 0.5), source 1 of a rise
+/// (the same the other way); fall1, rise1, fall2, rise2 within 10 s, 20 s and 10 s of the one
+/// before, 30 s in all.
+fn speed_swings_model() -> Chronicle {
+    let c = |later, earlier, hi| Constraint { later, earlier, lo: Some(0), hi: Some(hi * S) };
+    let event = |source| Pattern { source: SourceId(source), args: vec![0], value: true };
+    Chronicle {
+        name: "speed_swings".into(),
+        source: SourceId(2),
+        params: 1,
+        events: vec![event(0), event(1), event(0), event(1)],
+        constraints: vec![c(1, 0, 10), c(2, 1, 20), c(3, 2, 10), c(3, 0, 30)],
+        holds: vec![],
+        nevers: vec![],
+    }
+}
+
+/// The speed swings of sumo_weaving.kpl on the first 120 s of its traffic (drunk drivers slow
+/// down and speed up again every 5 to 12 s, and the cars behind them with them): the recordings
+/// are those of the pure recogniser on the fluents computed here from each recorded car's
+/// `vel` and `smoothed_vel`.
+#[test]
+fn the_speed_swings_chronicle_runs_as_the_pure_recogniser_recognises_it() {
+    let (snapshots, got) = run_spec_with("sumo_weaving", "speed_swings", 120, &["c"]);
+    let norm = |car: &Value, field: &str| match car {
+        Value::Record(r) => match r.get(field) {
+            Some(Value::Vec2([x, y])) => x.hypot(*y),
+            _ => f64::NAN,
+        },
+        _ => f64::NAN,
+    };
+    // `hysteresis(d > 2.0, d < 0.5)` of the drop `d` (fall) or the gain (rise) over 2 s.
+    let fluent = |d: f64, was: bool| if was { d >= 0.5 } else { d > 2.0 };
+    let fall = |car: &Value, was: bool| fluent(norm(car, "smoothed_vel") - norm(car, "vel"), was);
+    let rise = |car: &Value, was: bool| fluent(norm(car, "vel") - norm(car, "smoothed_vel"), was);
+    let (events_total, want) = recognise_fluents(&snapshots, speed_swings_model(), &[&fall, &rise]);
+    assert!(events_total > 20, "only {events_total} events");
+    assert!(!want.is_empty(), "the scenario's speed swings");
     assert_eq!(got, want);
 }
 
