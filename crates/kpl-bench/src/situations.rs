@@ -11,7 +11,9 @@
 //!
 //! The traffic (every attribute of the spec's `Car`): a straight one-way road with four lanes, a car every 30 m of each lane, lane k
 //! driving at 20 + 3k m/s with a few per cent of spread per car, wrapping around at the road's
-//! end, so faster cars keep passing slower ones on the neighbouring lanes.
+//! end, so faster cars keep passing slower ones on the neighbouring lanes. Every tenth car's
+//! speed swings by 3 m/s either way over 5 s (so that sumo_weaving.kpl's `speed_swings` has
+//! something to recognise), moving it at most 4.8 m from where a steady car would be.
 
 use std::io::Write;
 use std::sync::Arc;
@@ -47,6 +49,21 @@ pub struct Args {
 const LANES: u32 = 4;
 const SPACING_M: f64 = 30.0;
 const PERIOD_US: Time = 100_000;
+/// Every `SWINGING`-th car's speed swings by `SWING_MPS` either way over `SWING_PERIOD_S`.
+const SWINGING: u32 = 10;
+const SWING_MPS: f64 = 3.0;
+const SWING_PERIOD_S: f64 = 5.0;
+
+/// How far car `i` with the steady speed `base` has driven after `seconds`, and its speed then.
+fn motion(i: u32, base: f64, seconds: f64) -> (f64, f64) {
+    if !i.is_multiple_of(SWINGING) {
+        return (base * seconds, base);
+    }
+    let w = std::f64::consts::TAU / SWING_PERIOD_S;
+    let phase = f64::from(i % 17) * 0.37;
+    let driven = base * seconds - SWING_MPS / w * ((w * seconds + phase).cos() - phase.cos());
+    (driven, base + SWING_MPS * (w * seconds + phase).sin())
+}
 
 /// Synthetic cars at 10 Hz (module doc).
 pub(crate) struct Highway {
@@ -65,8 +82,10 @@ impl Highway {
                 let k = i / LANES;
                 // A deterministic spread of -3 % to +3 % per car.
                 let spread = 1.0 + (f64::from((i * 7919) % 61) - 30.0) / 1000.0;
-                let speed = (20.0 + 3.0 * f64::from(lane)) * spread;
-                let s = (f64::from(k) * SPACING_M + speed * seconds).rem_euclid(length);
+                let base = (20.0 + 3.0 * f64::from(lane)) * spread;
+                let (driven, speed) = motion(i, base, seconds);
+                let (driven_before, speed_before) = motion(i, base, seconds - 2.0);
+                let s = (f64::from(k) * SPACING_M + driven).rem_euclid(length);
                 let y = -1.6 - 3.2 * f64::from(lane);
                 let field = |name: &str, v: Value| (Arc::<str>::from(name), v);
                 Value::Record(Arc::new(Record {
@@ -88,8 +107,11 @@ impl Highway {
                         field("measured", Value::Bool(true)),
                         // Where it was 2 s ago (`anchor.kalman(smooth: 2s)`; sumo_weaving.kpl),
                         // last: the situation monitors never read them.
-                        field("smoothed_pos", Value::vec2((s - 2.0 * speed).rem_euclid(length), y)),
-                        field("smoothed_vel", Value::vec2(speed, 0.0)),
+                        field(
+                            "smoothed_pos",
+                            Value::vec2((f64::from(k) * SPACING_M + driven_before).rem_euclid(length), y),
+                        ),
+                        field("smoothed_vel", Value::vec2(speed_before, 0.0)),
                         field("smoothed_lane_offset", Value::Float(0.0)),
                     ],
                 }))
