@@ -857,7 +857,7 @@ def weaving_truth(folder):
     lines = []
     for vehicle, samples in series.items():
         first = samples[0][0]
-        swings = []  # (departure, return)
+        departures = []  # (departure, return)
         out = None
         lane = None
         for time, offset, now_on, _ in samples:
@@ -868,9 +868,9 @@ def weaving_truth(folder):
             if out is None and (offset > WEAVE_OUT_M or crossed):
                 out = time
             elif out is not None and offset < WEAVE_IN_M:
-                swings.append((out, time))
+                departures.append((out, time))
                 out = None
-        weaving = episodes_of(swings, WEAVE_COUNT, WEAVE_WINDOW_S)
+        weaving = episodes_of(departures, WEAVE_COUNT, WEAVE_WINDOW_S)
         speed = speed_swings([(t, v) for t, _, _, v in samples if t - first >= SETTLE_S])
         swinging = episodes_of(speed, SWING_COUNT, SWING_WINDOW_S)
         drunk = [w for w in weaving

@@ -37,6 +37,7 @@
 //! assert!(smoothed.p[(0, 0)] < 1.0);
 //! ```
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 
 use kpl_core::Time;
@@ -115,15 +116,16 @@ impl FixedLag {
         let mut smoothed = newest.updated.clone();
         for j in (0..self.steps.len() - 1).rev() {
             let (step, next) = (&self.steps[j], &self.steps[j + 1]);
-            smoothed = if j == 0 && step.updated.time < at {
-                // The oldest step is before `at`: its estimate predicted on to `at` is the
-                // filtered state there, which the backward pass refines as any other.
+            // The oldest step is before `at`: its estimate predicted on to `at` is the filtered
+            // state there, which the backward pass refines as any other.
+            let filtered = if j == 0 && step.updated.time < at {
                 let mut between = step.updated.clone();
                 between.predict(at, self.q);
-                backward(&between, next, &smoothed)?
+                Cow::Owned(between)
             } else {
-                backward(&step.updated, next, &smoothed)?
+                Cow::Borrowed(&step.updated)
             };
+            smoothed = backward(&filtered, next, &smoothed)?;
         }
         Some(smoothed)
     }

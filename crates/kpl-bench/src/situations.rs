@@ -85,7 +85,8 @@ impl Highway {
                 let base = (20.0 + 3.0 * f64::from(lane)) * spread;
                 let (driven, speed) = motion(i, base, seconds);
                 let (driven_before, speed_before) = motion(i, base, seconds - 2.0);
-                let s = (f64::from(k) * SPACING_M + driven).rem_euclid(length);
+                let start = f64::from(k) * SPACING_M;
+                let s = (start + driven).rem_euclid(length);
                 let y = -1.6 - 3.2 * f64::from(lane);
                 let field = |name: &str, v: Value| (Arc::<str>::from(name), v);
                 Value::Record(Arc::new(Record {
@@ -107,10 +108,7 @@ impl Highway {
                         field("measured", Value::Bool(true)),
                         // Where it was 2 s ago (`anchor.kalman(smooth: 2s)`; sumo_weaving.kpl),
                         // last: the situation monitors never read them.
-                        field(
-                            "smoothed_pos",
-                            Value::vec2((f64::from(k) * SPACING_M + driven_before).rem_euclid(length), y),
-                        ),
+                        field("smoothed_pos", Value::vec2((start + driven_before).rem_euclid(length), y)),
                         field("smoothed_vel", Value::vec2(speed_before, 0.0)),
                         field("smoothed_lane_offset", Value::Float(0.0)),
                     ],

@@ -64,6 +64,11 @@ impl Relations {
         let Value::Record(r) = car else { return f64::NAN };
         r.get(field).and_then(Value::as_f64).unwrap_or(f64::NAN)
     }
+    /// The length of a `vec2` attribute.
+    fn norm(car: &Value, field: &str) -> f64 {
+        let Value::Record(r) = car else { return f64::NAN };
+        r.get(field).and_then(Value::as_vec2).map_or(f64::NAN, |[x, y]| x.hypot(y))
+    }
     fn flag(car: &Value, field: &str) -> bool {
         let Value::Record(r) = car else { return false };
         matches!(r.get(field), Some(Value::Bool(true)))
@@ -527,17 +532,11 @@ fn speed_swings_model() -> Chronicle {
 #[test]
 fn the_speed_swings_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     let (snapshots, got) = run_spec_with("sumo_weaving", "speed_swings", 120, &["c"]);
-    let norm = |car: &Value, field: &str| match car {
-        Value::Record(r) => match r.get(field) {
-            Some(Value::Vec2([x, y])) => x.hypot(*y),
-            _ => f64::NAN,
-        },
-        _ => f64::NAN,
-    };
     // `hysteresis(d > 2.0, d < 0.5)` of the drop `d` (fall) or the gain (rise) over 2 s.
     let fluent = |d: f64, was: bool| if was { d >= 0.5 } else { d > 2.0 };
-    let fall = |car: &Value, was: bool| fluent(norm(car, "smoothed_vel") - norm(car, "vel"), was);
-    let rise = |car: &Value, was: bool| fluent(norm(car, "vel") - norm(car, "smoothed_vel"), was);
+    let drop = |car: &Value| Relations::norm(car, "smoothed_vel") - Relations::norm(car, "vel");
+    let fall = |car: &Value, was: bool| fluent(drop(car), was);
+    let rise = |car: &Value, was: bool| fluent(-drop(car), was);
     let (events_total, want) = recognise_fluents(&snapshots, speed_swings_model(), &[&fall, &rise]);
     assert!(events_total > 20, "only {events_total} events");
     assert!(!want.is_empty(), "the scenario's speed swings");
