@@ -236,6 +236,8 @@ pub(crate) fn parts_of(file: &NetworkFile) -> Result<Parts, NetworkError> {
                 successors: Vec::new(),
                 predecessors: Vec::new(),
                 turnaround: false,
+                may_change_left: !lane_spec.solid_left,
+                may_change_right: !lane_spec.solid_right,
             });
             road_lanes.push(RoadLane {
                 width_m: lane_spec.width_m,
@@ -471,6 +473,8 @@ fn connect(lanes: &mut Vec<Lane>, node: &Node, k: usize, from: LaneId, to: LaneI
         successors: vec![to],
         predecessors: vec![from],
         turnaround: false,
+        may_change_left: true,
+        may_change_right: true,
     });
     lanes[from.0 as usize].successors.push(id);
     lanes[to.0 as usize].predecessors.push(id);

@@ -72,10 +72,7 @@ fn is_zero(level: &i32) -> bool {
 
 /// One lane each way, 3.5 m wide, driving on the right.
 pub fn default_lanes() -> Vec<LaneSpec> {
-    vec![
-        LaneSpec { width_m: 3.5, direction: LaneDirection::Backward },
-        LaneSpec { width_m: 3.5, direction: LaneDirection::Forward },
-    ]
+    vec![LaneSpec::new(3.5, LaneDirection::Backward), LaneSpec::new(3.5, LaneDirection::Forward)]
 }
 
 /// 50 km/h.
@@ -89,6 +86,20 @@ pub struct LaneSpec {
     #[serde(default = "default_lane_width_m")]
     pub width_m: f64,
     pub direction: LaneDirection,
+    /// A solid line on the lane's left, looking in its direction of travel: a car on it may not
+    /// change to the lane there.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub solid_left: bool,
+    /// The same on its right.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub solid_right: bool,
+}
+
+impl LaneSpec {
+    /// A lane of this width and direction, with dashed lines on both sides.
+    pub fn new(width_m: f64, direction: LaneDirection) -> LaneSpec {
+        LaneSpec { width_m, direction, solid_left: false, solid_right: false }
+    }
 }
 
 fn default_lane_width_m() -> f64 {

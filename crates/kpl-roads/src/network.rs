@@ -138,6 +138,11 @@ pub struct Lane {
     /// A connector of a U-turn (SUMO's `dir="t"`): neither prediction nor simulated traffic takes
     /// it.
     pub turnaround: bool,
+    /// Whether a car on this lane may change to the neighbouring lane on its left (false: a
+    /// solid line; SUMO's `changeLeft`, JSON's `solid_left`).
+    pub may_change_left: bool,
+    /// The same to its right (SUMO's `changeRight`, JSON's `solid_right`).
+    pub may_change_right: bool,
 }
 
 /// Where on the network something is.
@@ -465,6 +470,30 @@ impl RoadNetwork {
 
     pub fn lane_by_name(&self, name: &str) -> Option<&Lane> {
         self.lane_names.get(name).map(|&id| self.lane(id))
+    }
+
+    /// Whether a car that was on lane `from` and is now on lane `to` at `at` (a point of `to`)
+    /// changed lanes across a solid line: both are lanes of one road going one way, and `from`
+    /// forbids changing to the side `to` lies on (its `may_change_left` or `may_change_right`).
+    /// A change over more than one lane counts the first marking only.
+    pub fn crosses_solid_line(&self, from: LaneId, to: LaneId, at: Point) -> bool {
+        let (old, new) = (self.lane(from), self.lane(to));
+        let (LaneKind::Road { road: old_road, .. }, LaneKind::Road { road: new_road, .. }) =
+            (old.kind, new.kind)
+        else {
+            return false;
+        };
+        if from == to || old_road != new_road {
+            return false;
+        }
+        let there = old.path.project(at);
+        let new_heading = new.path.heading_at(new.path.project(at).offset);
+        if geom::heading_difference(old.path.heading_at(there.offset), new_heading)
+            >= std::f64::consts::FRAC_PI_2
+        {
+            return false; // the other direction of a two-way road
+        }
+        if there.lateral > 0.0 { !old.may_change_left } else { !old.may_change_right }
     }
 
     /// The bounding box of everything drivable, as `(min, max)`.

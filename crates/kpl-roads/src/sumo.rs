@@ -7,7 +7,9 @@
 //! - `edge` without a `function` (or `function="normal"`): a road from `from` to `to`; its `lane`s
 //!   keep their `shape` (each direction of a street is its own edge, on its own side), `width`
 //!   (SUMO's default 3.2 m when absent), `speed`, and `allow` / `disallow`: only lanes that
-//!   passenger cars may use are kept (sidewalks, bicycle lanes and rails are left out).
+//!   passenger cars may use are kept (sidewalks, bicycle lanes and rails are left out);
+//!   `changeLeft` / `changeRight` (the classes that may change to the neighbouring lane) say
+//!   whether a car may cross the marking on that side (not: a solid line).
 //! - `edge function="internal"`: its lanes are connector lanes inside the junction whose
 //!   `intLanes` lists them; edges of other functions (`walkingarea`, `crossing`, `connector`) are
 //!   left out.
@@ -623,6 +625,10 @@ fn read_lane(e: &Element, problems: &mut Problems, kind: LaneKind) -> Option<Lan
         successors: Vec::new(),
         predecessors: Vec::new(),
         turnaround: false,
+        // SUMO's lane change restrictions: the classes that may change to the left / right
+        // neighbour (a solid line when cars are not among them); every class when absent.
+        may_change_left: e.get("changeLeft").is_none_or(|c| permits(Some(c), None, VEHICLE_CLASS)),
+        may_change_right: e.get("changeRight").is_none_or(|c| permits(Some(c), None, VEHICLE_CLASS)),
     })
 }
 

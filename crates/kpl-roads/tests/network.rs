@@ -236,7 +236,7 @@ fn every_problem_of_a_bad_file_is_reported_at_once() {
     file.add_node("d", [100.0, f64::NAN]);
     file.add_road("ab", "a", "nowhere", Vec::new());
     file.add_road("bad_lanes", "a", "c", Vec::new());
-    file.roads[1].lanes = vec![LaneSpec { width_m: -1.0, direction: LaneDirection::Forward }];
+    file.roads[1].lanes = vec![LaneSpec::new(-1.0, LaneDirection::Forward)];
     file.add_road("empty", "a", "c", Vec::new());
     file.roads[2].lanes.clear();
     let err = RoadNetwork::build(&file).unwrap_err();
@@ -274,6 +274,44 @@ fn every_problem_of_a_bad_file_is_reported_at_once() {
     assert_eq!(err.to_string().lines().count(), 4, "{err}"); // header + format + version + empty
 }
 
+/// A solid line forbids the change from the lane it is drawn on to that side only, between lanes
+/// of one road going one way; it survives the JSON form.
+#[test]
+fn solid_lines_forbid_lane_changes_one_way() {
+    let mut file = NetworkFile::new();
+    file.add_node("w", [0.0, 0.0]);
+    file.add_node("e", [300.0, 0.0]);
+    file.add_node("n", [300.0, 300.0]);
+    // Looking from w to e: one lane west, then three lanes east; the left eastbound lane may not
+    // change right (the middle one may change left: a line solid on one side only), and a solid
+    // line between the directions.
+    file.add_road("we", "w", "e", Vec::new());
+    let mut west = LaneSpec::new(3.5, LaneDirection::Backward);
+    west.solid_left = true;
+    let mut east = [0, 1, 2].map(|_| LaneSpec::new(3.5, LaneDirection::Forward));
+    east[0].solid_right = true;
+    east[0].solid_left = true;
+    file.roads[0].lanes = vec![west, east[0].clone(), east[1].clone(), east[2].clone()];
+    file.add_road("en", "e", "n", Vec::new());
+    let text = serde_json::to_string_pretty(&file).unwrap();
+    assert!(text.contains("\"solid_right\": true") && !text.contains("\"solid_right\": false"), "{text}");
+    let net = RoadNetwork::from_json_str(&text).unwrap();
+    let lanes: Vec<_> = net.road_by_name("we").unwrap().lanes.iter().map(|l| l.lane).collect();
+    let at = |lane| net.lane(lane).path.point_at(100.0);
+    let crosses = |from, to| net.crosses_solid_line(lanes[from], lanes[to], at(lanes[to]));
+    assert!(crosses(1, 2), "left eastbound lane to the right");
+    assert!(!crosses(2, 1), "middle to the left: the line is on the other lane's side");
+    assert!(!crosses(2, 3) && !crosses(3, 2), "dashed between middle and right");
+    assert!(crosses(1, 3), "across two lanes, the first line solid");
+    assert!(!crosses(1, 0) && !crosses(0, 1), "the other direction is no lane change");
+    assert!(!crosses(1, 1), "no change");
+    let other = net.road_by_name("en").unwrap().lanes[0].lane;
+    assert!(!net.crosses_solid_line(lanes[1], other, at(other)), "another road");
+    let (left, right) = (net.lane(lanes[1]), net.lane(lanes[3]));
+    assert_eq!((left.may_change_left, left.may_change_right), (false, false));
+    assert_eq!((right.may_change_left, right.may_change_right), (true, true));
+}
+
 #[test]
 fn curved_roads_and_multi_lane_roads_connect() {
     // A bent two-lane-each-way road into a crossing with a one-lane-each-way road.
@@ -284,10 +322,10 @@ fn curved_roads_and_multi_lane_roads_connect() {
     file.add_node("d", [0.0, 100.0]);
     file.add_road("bent", "a", "c", vec![[-60.0, 0.0]]);
     file.roads[0].lanes = vec![
-        LaneSpec { width_m: 3.0, direction: LaneDirection::Backward },
-        LaneSpec { width_m: 3.0, direction: LaneDirection::Backward },
-        LaneSpec { width_m: 3.0, direction: LaneDirection::Forward },
-        LaneSpec { width_m: 3.0, direction: LaneDirection::Forward },
+        LaneSpec::new(3.0, LaneDirection::Backward),
+        LaneSpec::new(3.0, LaneDirection::Backward),
+        LaneSpec::new(3.0, LaneDirection::Forward),
+        LaneSpec::new(3.0, LaneDirection::Forward),
     ];
     file.add_road("cb", "c", "b", Vec::new());
     file.add_road("cd", "c", "d", Vec::new());
@@ -418,9 +456,11 @@ fn arb_network_file() -> impl Strategy<Value = NetworkFile> {
                 );
                 file.roads[i].lanes = lanes
                     .into_iter()
-                    .map(|(width_m, forward)| LaneSpec {
-                        width_m,
-                        direction: if forward { LaneDirection::Forward } else { LaneDirection::Backward },
+                    .map(|(width_m, forward)| {
+                        LaneSpec::new(
+                            width_m,
+                            if forward { LaneDirection::Forward } else { LaneDirection::Backward },
+                        )
                     })
                     .collect();
             }

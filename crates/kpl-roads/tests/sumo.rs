@@ -277,3 +277,82 @@ for e in net.getEdges(withInternal=False):
         }
     }
 }
+
+/// SUMO itself and this reader agree on where a car may change lanes (SUMO's `changeLeft` /
+/// `changeRight`, lists of vehicle classes): on the shipped no-passing network and on one that
+/// `netconvert` makes here with restrictions of every form (classes with and without cars,
+/// `all`, a class of no vehicle), asked of SUMO through TraCI (`lane.getChangePermissions`).
+#[test]
+fn sumo_agrees_on_solid_lines() {
+    let Some(python) = python() else { return };
+    let dir = std::env::temp_dir().join(format!("kpl-roads-solid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shipped = sumo_dir().join("no_passing").join("net.xml.gz");
+    let code = format!(
+        r#"
+import os, subprocess, traci
+d = {dir:?}
+with open(os.path.join(d, 'n.nod.xml'), 'w') as f:
+    f.write('<nodes><node id="w" x="0" y="0"/><node id="m" x="300" y="0"/><node id="e" x="600" y="0"/></nodes>')
+with open(os.path.join(d, 'n.edg.xml'), 'w') as f:
+    f.write('''<edges>
+  <edge id="a" from="w" to="m" numLanes="3" speed="25.0">
+    <lane index="0" changeLeft="emergency authority"/>
+    <lane index="1" changeRight="passenger" changeLeft="truck bus"/>
+    <lane index="2" changeRight="all"/>
+  </edge>
+  <edge id="b" from="m" to="e" numLanes="3" speed="25.0">
+    <lane index="0" changeLeft="custom1"/>
+    <lane index="1" changeRight="passenger truck" changeLeft="private"/>
+  </edge>
+</edges>''')
+made = os.path.join(d, 'made.net.xml')
+subprocess.run([os.path.join(sumo.SUMO_HOME, 'bin', 'netconvert'), '-n', os.path.join(d, 'n.nod.xml'),
+                '-e', os.path.join(d, 'n.edg.xml'), '-o', made], check=True, capture_output=True)
+for net in (made, {shipped:?}):
+    traci.start([os.path.join(sumo.SUMO_HOME, 'bin', 'sumo'), '-n', net, '--no-step-log', '--end', '1'],
+                stdout=subprocess.DEVNULL)
+    for lane in sorted(traci.lane.getIDList()):
+        if not lane.startswith(':'):
+            left = 'passenger' in traci.lane.getChangePermissions(lane, 1)
+            right = 'passenger' in traci.lane.getChangePermissions(lane, -1)
+            print(net, lane, left, right)
+    traci.close()
+"#,
+        dir = dir.to_string_lossy(),
+        shipped = shipped.to_string_lossy()
+    );
+    let theirs = run_python(&python, &code);
+    let mut checked = 0;
+    let mut solid = 0;
+    for path in [dir.join("made.net.xml"), shipped] {
+        let net = RoadNetwork::load(&path).unwrap();
+        let mut ours: Vec<String> = net
+            .lanes()
+            .iter()
+            .filter(|l| !l.name.starts_with(':'))
+            .map(|l| {
+                format!(
+                    "{} {} {} {}",
+                    path.display(),
+                    l.name,
+                    py_bool(l.may_change_left),
+                    py_bool(l.may_change_right)
+                )
+            })
+            .collect();
+        ours.sort();
+        let prefix = format!("{} ", path.display());
+        let mut sumo: Vec<&str> = theirs.lines().filter(|l| l.starts_with(&prefix)).collect();
+        sumo.sort_unstable();
+        assert_eq!(ours, sumo, "{}", path.display());
+        checked += ours.len();
+        solid += ours.iter().filter(|l| l.contains("False")).count();
+    }
+    assert_eq!((checked, solid), (13, 6), "lanes checked, lanes with a solid line");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn py_bool(b: bool) -> &'static str {
+    if b { "True" } else { "False" }
+}
