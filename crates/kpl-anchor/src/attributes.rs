@@ -6,7 +6,7 @@
 //! ([`crate::relations`]) are functions of these attributes.
 
 use kpl_core::{Record, Value};
-use kpl_roads::{LaneKind, LanePosition, Place, RoadNetwork, geom};
+use kpl_roads::{LaneId, LaneKind, LanePosition, Place, RoadNetwork, geom};
 
 /// Every attribute [`set_road_attributes`] may set, with its type as a spec declares it.
 pub const ROAD_ATTRIBUTES: &[(&str, &str, &str)] = &[
@@ -15,6 +15,11 @@ pub const ROAD_ATTRIBUTES: &[(&str, &str, &str)] = &[
     ("lane_pos", "float", "distance along the lane from its start, in its direction of travel (m)"),
     ("lane_length", "float", "the lane's length (m)"),
     ("in_junction", "bool", "whether the lane is a connection inside a junction"),
+    (
+        "crossed_solid_line",
+        "bool",
+        "whether the lane is new since the last state and was reached across a solid line (the lane left may not change to that side)",
+    ),
     ("speed_limit", "float", "the lane's speed limit (m/s)"),
     ("speed", "float", "the speed: the length of `vel` (m/s)"),
     (
@@ -47,6 +52,9 @@ pub struct OnLane<'a> {
     /// The direction of the lane the object physically lies on (for `lane_heading`); the lane's
     /// own when not given.
     pub lane_heading: Option<f64>,
+    /// The lane of the object's previous state, when it was measured on one (for
+    /// `crossed_solid_line`; `None` for a prediction, which never changes lanes across one).
+    pub previous_lane: Option<LaneId>,
 }
 
 /// Sets the road attributes of `record` that its type declares (see [`ROAD_ATTRIBUTES`]).
@@ -69,6 +77,10 @@ pub fn set_road_attributes(record: &mut Record, on: &OnLane<'_>) {
             ("lane_pos", Value::Float(_)) => Value::Float(on.at.offset_m),
             ("lane_length", Value::Float(_)) => Value::Float(lane.path.length()),
             ("in_junction", Value::Bool(_)) => Value::Bool(matches!(lane.kind, LaneKind::Connector { .. })),
+            ("crossed_solid_line", Value::Bool(_)) => Value::Bool(
+                on.previous_lane
+                    .is_some_and(|from| on.network.crosses_solid_line(from, on.at.lane, on.at.point)),
+            ),
             ("speed_limit", Value::Float(_)) => Value::Float(lane.speed_limit_mps),
             ("speed", Value::Float(_)) => Value::Float(speed),
             ("heading", Value::Float(_)) => Value::Float(heading),
@@ -88,7 +100,7 @@ pub fn set_off_road_attributes(record: &mut Record, vel: Option<[f64; 2]>) {
             ("road", Value::Int(_)) => *value = Value::Int(-1),
             ("lane", Value::Str(_)) => *value = Value::str(""),
             ("lane", Value::Int(_)) => *value = Value::Int(-1),
-            ("in_junction", Value::Bool(_)) => *value = Value::Bool(false),
+            ("in_junction" | "crossed_solid_line", Value::Bool(_)) => *value = Value::Bool(false),
             ("speed", Value::Float(_)) => {
                 if let Some(speed) = speed {
                     *value = Value::Float(speed);
@@ -148,6 +160,7 @@ mod tests {
                 vel: Some(vel),
                 min_heading_speed_mps: 2.0,
                 lane_heading: None,
+                previous_lane: None,
             },
         );
         assert_eq!(r.get("road"), Some(&Value::Int(i64::from(main.id.0))));
@@ -168,6 +181,7 @@ mod tests {
                 vel: Some([0.3, -0.2]),
                 min_heading_speed_mps: 2.0,
                 lane_heading: None,
+                previous_lane: None,
             },
         );
         assert!((r.get("heading").unwrap().as_f64().unwrap() - at.heading).abs() < 1e-9);

@@ -200,6 +200,7 @@ impl AlongRoads {
             vel: Some(vel),
             min_heading_speed_mps: self.min_heading_speed_mps,
             lane_heading: None,
+            previous_lane: None,
         };
         set_road_attributes(&mut record, &on);
         out.push(record);
@@ -260,6 +261,7 @@ impl PredictionModel for AlongRoads {
                 vel: Some(vel),
                 min_heading_speed_mps: self.min_heading_speed_mps,
                 lane_heading: None,
+                previous_lane: None,
             };
             set_road_attributes(&mut record, &on);
             out.push(record);
@@ -364,10 +366,8 @@ mod tests {
         file.add_node("w", [0.0, 0.0]);
         file.add_node("e", [200.0, 0.0]);
         file.add_road("main", "w", "e", Vec::new());
-        file.roads[0].lanes = vec![kpl_roads::format::LaneSpec {
-            width_m: 3.5,
-            direction: kpl_roads::format::LaneDirection::Forward,
-        }];
+        file.roads[0].lanes =
+            vec![kpl_roads::format::LaneSpec::new(3.5, kpl_roads::format::LaneDirection::Forward)];
         let network = Arc::new(RoadNetwork::build(&file).unwrap());
         let model = AlongRoads::new(network.clone(), DEFAULT_MAX_HYPOTHESES);
         let mut s = (*state([150.0, -1.75], [-20.0, 0.0])).clone();

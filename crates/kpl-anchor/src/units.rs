@@ -219,6 +219,7 @@ impl LinkUnit for SnapToLane {
                     vel: velocity(from),
                     min_heading_speed_mps: self.min_heading_speed_mps,
                     lane_heading,
+                    previous_lane,
                 };
                 set_road_attributes(&mut record, &on);
             }
@@ -285,6 +286,36 @@ mod tests {
             id: Some("wo1".into()),
             fields: vec![("pos".into(), Value::Vec2(pos)), ("vel".into(), Value::Vec2(vel))],
         }
+    }
+
+    /// `crossed_solid_line` is true on the one state whose lane was reached across a solid line,
+    /// in the direction the line forbids only.
+    #[test]
+    fn a_lane_reached_across_a_solid_line_is_marked_on_that_state() {
+        use kpl_roads::format::{LaneDirection, LaneSpec};
+        let mut file = kpl_roads::NetworkFile::new();
+        file.add_node("w", [0.0, 0.0]);
+        file.add_node("e", [400.0, 0.0]);
+        file.add_road("we", "w", "e", Vec::new());
+        // Two lanes east (left one at y = 1.75); the left one may not change to the right.
+        let mut left = LaneSpec::new(3.5, LaneDirection::Forward);
+        left.solid_right = true;
+        file.roads[0].lanes = vec![left, LaneSpec::new(3.5, LaneDirection::Forward)];
+        let unit = SnapToLane::new(Arc::new(RoadNetwork::build(&file).unwrap()));
+        let mut to = onroad_type();
+        to.fields.push(FieldType { name: "lane".into(), ty: ValueType::Str });
+        to.fields.push(FieldType { name: "crossed_solid_line".into(), ty: ValueType::Bool });
+        let mut previous: Option<Record> = None;
+        let mut marked = Vec::new();
+        for (x, y) in
+            [(100.0, 1.75), (120.0, 1.6), (140.0, -1.75), (160.0, -1.8), (180.0, 1.75), (200.0, -1.75)]
+        {
+            let out =
+                unit.compute(&world([x, y], [20.0, 0.0]), previous.as_ref(), &to, &"oo1".into()).unwrap();
+            marked.push(out.get("crossed_solid_line") == Some(&Value::Bool(true)));
+            previous = Some(out);
+        }
+        assert_eq!(marked, [false, false, true, false, false, true]);
     }
 
     #[test]
