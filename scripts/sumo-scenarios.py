@@ -57,6 +57,11 @@ Scenarios:
             position wanders across the lane marking and whose speed swings (under TraCI);
             truth.jsonl: weaving, speed swings and the two together (drunk driving), computed
             here from the floating car data's posLat and speed (weaving_truth).
+  no_passing a straight 2 km road, two lanes one way at 25 m/s (600 s), with a solid line
+            between the lanes on the 600 m before a priority junction where a side road joins:
+            cars and trucks keep to their lane there, reckless drivers overtake across the line
+            and through the junction; truth.jsonl: the solid-line and junction overtakes, computed
+            here from the floating car data and the network (no_passing_truth).
   town400   only a network: a 20 x 20 grid (400 junctions) with traffic lights, for the benchmark
             of reading SUMO networks (crates/kpl-roads/benches/roads.rs).
 """
@@ -645,6 +650,14 @@ def vtype_lengths(vtypes_xml):
     return {m.group(1): float(m.group(2)) for m in re.finditer(r'<vType id="([^"]*)"[^>]*length="([^"]*)"', text)}
 
 
+def write_truth(folder, lines):
+    """Writes the true situations (dicts with `kind`, `objects`, `start`, `end`, ...) to
+    truth.jsonl in a scenario folder, one JSON object a line, in the order given."""
+    with open(os.path.join(folder, "truth.jsonl"), "w") as f:
+        for line in lines:
+            f.write(json.dumps(line) + "\n")
+
+
 def reckless_truth(folder):
     """Writes truth.jsonl in a scenario folder: one line per reckless cut-in (module comment
     above; the safe ones are counted, not written), with `kind` reckless_overtake,
@@ -881,9 +894,7 @@ def weaving_truth(folder):
                 lines.append({"kind": kind, "objects": [vehicle], "start": round(episode[0] - origin, 3),
                               "end": round(episode[1] - origin, 3), extra: episode[2]})
     lines.sort(key=lambda line: (line["start"], line["objects"], line["kind"]))
-    with open(os.path.join(folder, "truth.jsonl"), "w") as f:
-        for line in lines:
-            f.write(json.dumps(line) + "\n")
+    write_truth(folder, lines)
     counts = {}
     for line in lines:
         counts.setdefault(line["kind"], set()).add(line["objects"][0])
@@ -892,7 +903,185 @@ def weaving_truth(folder):
 
 
 # The scenarios whose truth is computed here (truth.jsonl), not by kpl situations.
-TRUTHS = {"reckless": reckless_truth, "weaving": weaving_truth}
+# No passing: a straight 2 km road, two lanes one way at 25 m/s, in three edges: `approach`
+# (700 m), `no_passing` (600 m: a solid line between the lanes, SUMO's changeLeft/changeRight
+# allowing only emergency vehicles to cross it) up to a priority junction `j` where a side road
+# from the south joins, and `exit` (700 m) after it. Sober cars and trucks keep to their lane on
+# `no_passing` (a car that pulled out before it passes there on the left lane and stays on it
+# until `exit`); `reckless` drivers overtake wherever SUMO's lane-change model has them, across
+# the solid line and through the junction. SUMO itself honours the line, for its drivers and for
+# TraCI's lane changes alike, so the traffic is simulated on a copy of the network without it
+# (NoPassing keeps the sober drivers to their lane there); the shipped network has it, and the
+# two are the same but for the lanes' changeLeft/changeRight (checked).
+NO_PASSING_VTYPES = """<additional>
+    <vType id="car" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.0" speedDev="0.06" lcSpeedGain="2" tau="1.2"/>
+    <vType id="reckless" vClass="passenger" length="4.6" width="1.8" maxSpeed="40" speedFactor="1.25" speedDev="0.04" lcSpeedGain="10" lcKeepRight="5" lcAssertive="5" tau="0.6" minGap="1.0"/>
+    <vType id="truck" vClass="truck" length="12.0" width="2.5" maxSpeed="17" speedFactor="1.0" speedDev="0.03"/>
+</additional>
+"""
+NO_PASSING_EDGES = """<edges>
+    <edge id="approach" from="west" to="zone" numLanes="2" speed="25.0" priority="3"/>
+    <edge id="no_passing" from="zone" to="j" numLanes="2" speed="25.0" priority="3">%s
+    </edge>
+    <edge id="exit" from="j" to="east" numLanes="2" speed="25.0" priority="3"/>
+    <edge id="side" from="south" to="j" numLanes="1" speed="13.9" priority="1"/>
+</edges>
+"""
+SOLID_LINE = """
+        <lane index="0" changeLeft="emergency authority"/>
+        <lane index="1" changeRight="emergency authority"/>"""
+NO_PASSING_LANE_CHANGE_S = 1.0
+
+
+def no_passing(s, duration):
+    """Overtakes across a solid line and through a junction (module comment above)."""
+    s.write("nodes.nod.xml", '<nodes>\n    <node id="west" x="0" y="0"/>\n    <node id="zone" x="700" y="0"/>\n'
+            '    <node id="j" x="1300" y="0" type="priority"/>\n    <node id="east" x="2000" y="0"/>\n'
+            '    <node id="south" x="1300" y="-400"/>\n</nodes>\n')
+    s.write("vtypes.xml", NO_PASSING_VTYPES)
+    s.write("marked.edg.xml", NO_PASSING_EDGES % SOLID_LINE)
+    s.write("unmarked.edg.xml", NO_PASSING_EDGES % "")
+    for edges, net in (("marked.edg.xml", "net.net.xml"), ("unmarked.edg.xml", "unmarked.net.xml")):
+        s.netconvert(net, "-n", "nodes.nod.xml", "-e", edges, "--no-turnarounds")
+    unmark = lambda text: re.sub(r' change(Left|Right)="[^"]*"', "", re.sub(r"<!--.*?-->", "", text, flags=re.S))
+    with open(os.path.join(s.work, "net.net.xml")) as a, open(os.path.join(s.work, "unmarked.net.xml")) as b:
+        marked, unmarked = a.read(), b.read()
+    assert marked != unmarked and unmark(marked) == unmark(unmarked), "the networks differ beyond the solid line"
+    flows = ['    <flow id="cars" type="car" route="main" begin="0" end="%d" vehsPerHour="300" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="reckless" type="reckless" route="main" begin="0" end="%d" vehsPerHour="300" '
+             'departLane="random" departSpeed="max"/>' % duration,
+             '    <flow id="trucks" type="truck" route="main" begin="0" end="%d" vehsPerHour="500" '
+             'departLane="0" departSpeed="max"/>' % duration,
+             '    <flow id="side" type="car" route="side" begin="0" end="%d" vehsPerHour="120" '
+             'departSpeed="max"/>' % duration]
+    s.write("routes.rou.xml", '<routes>\n    <route id="main" edges="approach no_passing exit"/>\n'
+            '    <route id="side" edges="side exit"/>\n' + "\n".join(flows) + "\n</routes>\n")
+    s.simulate("unmarked.net.xml", "routes.rou.xml", "fcd.xml", duration, additional="vtypes.xml",
+               lane_change_duration=NO_PASSING_LANE_CHANGE_S, control=NoPassing())
+    return ["net.net.xml", "fcd.xml"], "vtypes.xml"
+
+
+class NoPassing:
+    """Keeps every vehicle but the reckless drivers to its lane on `no_passing` (lane change mode
+    HELD_LANE_MODE there, SUMO's default elsewhere)."""
+
+    def __init__(self):
+        self.held = set()
+
+    def __call__(self, traci, time):
+        import traci.constants as tc
+        for v in traci.simulation.getDepartedIDList():
+            traci.vehicle.subscribe(v, [tc.VAR_ROAD_ID, tc.VAR_TYPE])
+        for v, r in traci.vehicle.getAllSubscriptionResults().items():
+            hold = r[tc.VAR_ROAD_ID] == "no_passing" and r[tc.VAR_TYPE] != "reckless"
+            if hold != (v in self.held):
+                traci.vehicle.setLaneChangeMode(v, HELD_LANE_MODE if hold else DEFAULT_LANE_MODE)
+                (self.held.add if hold else self.held.discard)(v)
+
+
+# The truth of the no-passing scenario, from SUMO's floating car data and the shipped network
+# alone (not from KPL's relations). `a` passes `b` when a's front goes from behind b's back (the
+# last such sample: `start`) to a's back in front of b's front (the first such sample after it:
+# `end`) within PASS_WINDOW_S, both on the main road (not the side road) all along, b moving at
+# RECKLESS_MIN_SPEED or more at the end. The road runs along x, so "in front" compares the
+# front bumpers' x (the floating car data's position) less the vehicles' lengths. A pass is a
+# `solid_line_overtake` when a changes lanes across a solid line (from lane L of an edge to
+# another lane of it, L's changeLeft or changeRight in the network not allowing passenger cars
+# that way) from SOLID_BEFORE_S before `start` to SOLID_AFTER_S after `end` (the pull-out or the
+# cut-in of that overtake), and a `junction_overtake` when a crosses the junction alongside b:
+# the pass (from `start` to `end`) overlaps a's crossing, from its first sample off the
+# `no_passing` edge to its first on `exit` (samples are 0.5 s apart: a car crosses the 11 m
+# junction in about 0.4 s, often between two). Passes by vehicles present for less than
+# SETTLE_S are `entering`.
+PASS_WINDOW_S = 30.0
+SOLID_BEFORE_S = 10.0
+SOLID_AFTER_S = 10.0
+
+
+def solid_lines(net_gz):
+    """{(lane id, +1 left / -1 right)} of the lane changes the network forbids passenger cars."""
+    with gzip.open(net_gz, "rt") as f:
+        text = f.read()
+    forbidden = set()
+    for attributes in re.findall(r"<lane ([^>]*)>", text):
+        a = dict(re.findall(r'(\w+)="([^"]*)"', attributes))
+        for name, side in (("changeLeft", 1), ("changeRight", -1)):
+            if name in a and not ({"passenger", "all"} & set(a[name].split())):
+                forbidden.add((a["id"], side))
+    return forbidden
+
+
+def no_passing_truth(folder):
+    """Writes truth.jsonl in a scenario folder: the solid-line and junction overtakes (the comment
+    above), each with `kind`, `objects` [a, b], `start`, `end` (seconds from the recording's first
+    time) and `entering`."""
+    forbidden = solid_lines(os.path.join(folder, "net.xml.gz"))
+    lengths = vtype_lengths(os.path.join(folder, "vtypes.xml"))
+    samples = []  # (time, {vehicle: (x, edge, lane, speed, length)})
+    with gzip.open(os.path.join(folder, "fcd.xml.gz"), "rt") as f:
+        text = f.read()
+    for block in re.finditer(r'<timestep time="([^"]*)"(.*?)</timestep>', text, re.S):
+        vehicles = {}
+        for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
+            a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
+            vehicles[a["id"]] = (float(a["x"]), a["lane"].rsplit("_", 1)[0], a["lane"], float(a["speed"]),
+                                 lengths.get(a.get("type", ""), 5.0))
+        samples.append((float(block.group(1)), vehicles))
+    origin = samples[0][0] if samples else 0.0
+    first_seen, crossings, junction_at, exit_at = {}, {}, {}, {}
+    previous = {}
+    for time, vehicles in samples:
+        for v, (x, edge, lane, _, _) in vehicles.items():
+            first_seen.setdefault(v, time)
+            was = previous.get(v)
+            if was and was[0] == edge and was[1] != lane:
+                side = 1 if int(lane.rsplit("_", 1)[1]) > int(was[1].rsplit("_", 1)[1]) else -1
+                if (was[1], side) in forbidden:
+                    crossings.setdefault(v, []).append(time)
+            if was and was[0] == "no_passing" and edge != "no_passing":
+                junction_at[v] = time
+            if was and was[0] != "exit" and edge == "exit":
+                exit_at[v] = time
+        previous = {v: (d[1], d[2]) for v, d in vehicles.items()}
+    main = lambda d: d[1] != "side" and not d[1].startswith(":j_0")
+    behind_at = {}  # (a, b) -> the last time a's front was behind b's back
+    lines = []
+    for time, vehicles in samples:
+        for a, da in vehicles.items():
+            for b, db in vehicles.items():
+                if a == b:
+                    continue
+                key = (a, b)
+                if not (main(da) and main(db)):
+                    behind_at.pop(key, None)
+                    continue
+                if da[0] < db[0] - db[4]:
+                    behind_at[key] = time
+                elif da[0] - da[4] > db[0] and key in behind_at:
+                    start = behind_at.pop(key)
+                    if time - start > PASS_WINDOW_S or db[3] < RECKLESS_MIN_SPEED:
+                        continue
+                    entering = min(start - first_seen[a], start - first_seen[b]) < SETTLE_S
+                    crossed = [t for t in crossings.get(a, []) if start - SOLID_BEFORE_S <= t <= time + SOLID_AFTER_S]
+                    if crossed:
+                        lines.append({"kind": "solid_line_overtake", "objects": [a, b],
+                                      "start": round(min(start, crossed[0]) - origin, 3),
+                                      "end": round(max(time, crossed[-1]) - origin, 3), "entering": entering})
+                    if start < exit_at.get(a, -1.0) and junction_at.get(a, float("inf")) <= time:
+                        lines.append({"kind": "junction_overtake", "objects": [a, b],
+                                      "start": round(start - origin, 3), "end": round(time - origin, 3),
+                                      "entering": entering})
+    lines.sort(key=lambda line: (line["end"], line["kind"], line["objects"]))
+    write_truth(folder, lines)
+    counts = {}
+    for line in lines:
+        counts[line["kind"]] = counts.get(line["kind"], 0) + 1
+    return "truth.jsonl: %s; %d solid-line crossings" % (
+        ", ".join("%d %s" % (n, k) for k, n in sorted(counts.items())), sum(map(len, crossings.values())))
+
+
+TRUTHS = {"reckless": reckless_truth, "weaving": weaving_truth, "no_passing": no_passing_truth}
 
 # The scenarios with occluders (and whether they get a horizontal bridge too).
 OCCLUDED = {"grid": True, "random": True, "highway": False}
@@ -901,10 +1090,10 @@ OCCLUDED = {"grid": True, "random": True, "highway": False}
 SCENARIOS = {"grid": grid, "random": random_net, "highway": highway, "overtake": overtake,
              "motorway": motorway, "wrong_way": wrong_way, "town400": town400,
              "tls_grid": tls_grid, "spider": spider, "reckless": reckless,
-             "weaving": weaving}
+             "weaving": weaving, "no_passing": no_passing}
 DURATION_S = {"grid": 300, "random": 300, "highway": 240, "overtake": 240, "motorway": 240,
               "wrong_way": 180, "town400": 0, "tls_grid": 240, "spider": 240, "reckless": 600,
-              "weaving": 300}
+              "weaving": 300, "no_passing": 600}
 
 
 def main():

@@ -301,6 +301,11 @@ fn the_reckless_overtake_chronicle_runs_as_the_pure_recogniser_recognises_it() {
     assert_eq!(got, want);
 }
 
+/// One line of a `cars` stream for `file.jsonl`: the cars (JSON objects) at `valid`.
+fn cars_line(valid: Time, cars: &[String]) -> String {
+    format!("{{\"stream\": \"cars\", \"valid\": {valid}, \"value\": [{}]}}\n", cars.join(", "))
+}
+
 /// Runs a spec written in the test, with `dir` as its folder (its data) and output folder; what
 /// its sink recorded in `out.jsonl`.
 fn run_text(dir: &Path, name: &str, text: &str) -> Vec<(String, Time, serde_json::Value)> {
@@ -352,11 +357,7 @@ fn the_reckless_overtake_is_the_cutters_lane_change_not_the_overtaken_ones() {
             car("a2", 1, 1, pos_a, 0.0, 25.0),
             car("b2", 1, if cut { 1 } else { 0 }, pos_b, b2_offset, 17.0),
         ];
-        data.push_str(&format!(
-            "{{\"stream\": \"cars\", \"valid\": {}, \"value\": [{}]}}\n",
-            k * S / 10,
-            cars.join(", ")
-        ));
+        data.push_str(&cars_line(k * S / 10, &cars));
     }
     std::fs::write(dir.join("cars.jsonl"), data).unwrap();
     let text = format!(
@@ -372,6 +373,85 @@ fn the_reckless_overtake_is_the_cutters_lane_change_not_the_overtaken_ones() {
         })
         .collect();
     assert_eq!(pairs, [("a1".to_string(), "b1".to_string(), 42 * S / 10)], "{recorded:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The chronicle `name` as a shipped spec writes it.
+fn shipped_chronicle(spec: &str, name: &str) -> String {
+    let shipped = std::fs::read_to_string(traffic_dir().join(spec)).unwrap();
+    let start = shipped.find(&format!("chronicle {name}(")).unwrap();
+    shipped[start..start + shipped[start..].find("\n}\n").unwrap() + 3].to_string()
+}
+
+/// The two reckless overtakes of sumo_no_passing.kpl as the spec writes them, on hand-made pairs
+/// at 10 Hz, each `a` at 25 m/s starting 20 m behind its `b` at 17 m/s (beside it from 2.0 s, in
+/// front from 3.1 s): on road 0 `a1` cuts in at 4.2 s across a solid line, on road 1 `a2` the
+/// same across a dashed one; on road 3 `a4` and `b4` cross a junction (road -1, `in_junction`)
+/// from 2.6 s to 3.0 s, onto road 4, while `a4` passes `b4`; on road 5 `a5` has passed `b5`
+/// before they cross a junction at 4.0 s (in front of it again on road 6 after). Only `a1`
+/// overtakes across a solid line and only `a4` through a junction.
+#[test]
+fn overtakes_across_a_solid_line_and_through_a_junction() {
+    let dir = fresh_dir("no-passing");
+    let solid = shipped_chronicle("sumo_no_passing.kpl", "solid_line_overtake");
+    let junction = shipped_chronicle("sumo_no_passing.kpl", "junction_overtake");
+    // road, lane (0 right, 1 left), x, speed, in a junction, crossed a solid line
+    let car = |id: &str, road: i64, lane: i64, x: f64, speed: f64, crossed: bool| {
+        let y = 100.0 * road as f64 + 3.2 * lane as f64;
+        let (lane_name, in_junction) =
+            if road < 0 { (format!(":j_{lane}"), true) } else { (format!("r{road}_{lane}"), false) };
+        format!(
+            "{{\"id\": \"{id}\", \"pos\": [{x}, {y}], \"vel\": [{speed}, 0.0], \"size\": 4.5, \"road\": {road}, \
+             \"lane\": \"{lane_name}\", \"lane_pos\": {x}, \"speed\": {speed}, \"in_junction\": {in_junction}, \
+             \"crossed_solid_line\": {crossed}}}"
+        )
+    };
+    let mut data = String::new();
+    for k in 0..80 {
+        let t = k as f64 / 10.0;
+        let (x_a, x_b) = (-20.0 + 25.0 * t, 17.0 * t);
+        let lane_a = if k >= 42 { 0 } else { 1 };
+        let crossing = |from: i64, to: i64, range: std::ops::Range<i64>| {
+            if range.contains(&k) {
+                -1
+            } else if k < range.start {
+                from
+            } else {
+                to
+            }
+        };
+        let (road4, road5) = (crossing(3, 4, 26..30), crossing(5, 6, 40..44));
+        let cars = [
+            car("a1", 0, lane_a, x_a, 25.0, k == 42),
+            car("b1", 0, 0, x_b, 17.0, false),
+            car("a2", 1, lane_a, x_a, 25.0, false),
+            car("b2", 1, 0, x_b, 17.0, false),
+            car("a4", road4, 1, x_a, 25.0, false),
+            car("b4", road4, 0, x_b, 17.0, false),
+            car("a5", road5, 1, x_a, 25.0, false),
+            car("b5", road5, 0, x_b, 17.0, false),
+        ];
+        data.push_str(&cars_line(k * S / 10, &cars));
+    }
+    std::fs::write(dir.join("cars.jsonl"), data).unwrap();
+    let text = format!(
+        "type Car symbol co {{ pos: vec2, vel: vec2, size: float, road: int, lane: string, lane_pos: float, speed: float, \
+         in_junction: bool, crossed_solid_line: bool }}\n\
+         source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n{solid}\n{junction}\n\
+         sink out = file.jsonl(solid_line_overtake, junction_overtake, path: \"out.jsonl\")\n"
+    );
+    let recorded = run_text(&dir, "no_passing", &text);
+    let got: Vec<(&str, &str, &str, Time)> = recorded
+        .iter()
+        .map(|(stream, valid, v)| {
+            (stream.as_str(), v["a"].as_str().unwrap(), v["b"].as_str().unwrap(), *valid)
+        })
+        .collect();
+    assert_eq!(
+        got,
+        [("junction_overtake", "a4", "b4", 31 * S / 10), ("solid_line_overtake", "a1", "b1", 42 * S / 10)],
+        "{recorded:?}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
