@@ -7,7 +7,8 @@
 //! the instance it extends, and starts a new one. An instance is dropped as soon as its deadline
 //! passes (the latest time its earliest-due open node may still occur), so an instance never lives
 //! longer than the chronicle's window, and as soon as one of its `hold`s fails before its `to`
-//! event (it could only complete into a failure). Instances are grouped by the objects bound to the
+//! event, or an event one of its `never`s forbids occurs after its `from` event while its `to`
+//! event is still open (it could only complete into a failure). Instances are grouped by the objects bound to the
 //! parameters that every event binds, so an event is tried only against the instances of its own
 //! objects. A complete instance is checked against its `hold` and
 //! `never` conditions when its step is done (so every event at that instant is known), and each
@@ -65,7 +66,8 @@ pub struct Stats {
     /// Partial instances dropped because their deadline passed.
     pub expired: u64,
     /// Partial instances dropped because a `hold` already failed (its fluent became false after
-    /// its `from` event, before its `to` event): they could only complete into a failure.
+    /// its `from` event, before its `to` event) or a `never`'s event occurred after its `from`
+    /// event with its `to` event still open: they could only complete into a failure.
     pub broken: u64,
     /// Instances not started or extended because a chronicle had `max_instances` already.
     pub refused: u64,
@@ -108,6 +110,11 @@ struct Instances<O> {
     /// Per `hold` of the chronicle: where each of `key_params` is among its arguments, so that a
     /// false event of its fluent names a group (`None`: its arguments do not name one).
     hold_keys: Vec<Option<Vec<usize>>>,
+    /// The same per `never`, for an event of its pattern.
+    never_keys: Vec<Option<Vec<usize>>>,
+    /// The events of the last instant that a `never` forbids, by the `never`'s index: applied
+    /// ([`drop_forbidden`]) once a step at a later instant comes.
+    forbidden: Vec<(usize, Event<O>)>,
     groups: HashMap<Vec<O>, Vec<Partial<O>>>,
     len: usize,
 }
@@ -117,13 +124,11 @@ impl<O: Clone + Eq + Hash> Instances<O> {
         let events = &compiled.chronicle.events;
         let key_params: Vec<usize> =
             (0..compiled.chronicle.params).filter(|p| events.iter().all(|e| e.args.contains(p))).collect();
-        let hold_keys = compiled
-            .chronicle
-            .holds
-            .iter()
-            .map(|h| key_params.iter().map(|p| h.args.iter().position(|a| a == p)).collect())
-            .collect();
-        Instances { key_params, hold_keys, groups: HashMap::new(), len: 0 }
+        let positions =
+            |args: &[usize]| key_params.iter().map(|p| args.iter().position(|a| a == p)).collect();
+        let hold_keys = compiled.chronicle.holds.iter().map(|h| positions(&h.args)).collect();
+        let never_keys = compiled.chronicle.nevers.iter().map(|n| positions(&n.pattern.args)).collect();
+        Instances { key_params, hold_keys, never_keys, forbidden: Vec::new(), groups: HashMap::new(), len: 0 }
     }
 
     /// The group of an event matching `pattern` with these arguments.
@@ -268,7 +273,8 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         });
         instances.len = instances.groups.values().map(Vec::len).sum();
         self.stats.expired += (before - instances.len) as u64;
-        let broken = drop_broken(compiled, instances, time, batch);
+        let broken =
+            drop_broken(compiled, instances, time, batch) + drop_forbidden(compiled, instances, time);
         instances.len -= broken;
         self.stats.broken += broken as u64;
         // The groups touched, in the order first touched (so that what completes comes out in an
@@ -331,6 +337,15 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
             }
         }
         instances.len -= done.len();
+        for (k, never) in compiled.chronicle.nevers.iter().enumerate() {
+            let pattern = &never.pattern;
+            let matching = batch.iter().filter(|(e, _)| {
+                e.source == pattern.source && e.value == pattern.value && e.args.len() == pattern.args.len()
+            });
+            if instances.never_keys[k].is_some() {
+                instances.forbidden.extend(matching.map(|(e, _)| (k, e.clone())));
+            }
+        }
         done
     }
 
@@ -395,6 +410,44 @@ fn drop_broken<O: Clone + Eq + Hash>(
             if group.is_empty() {
                 groups.remove(&key);
             }
+        }
+    }
+    dropped
+}
+
+/// Drops the partial instances of a chronicle that a `never` already fails: an event of its
+/// pattern occurred at an earlier instant than `time` (kept in `forbidden` by the step that saw
+/// it), after the instance's `from` event, on the objects the instance binds, and the instance's
+/// `to` event is still open. It can only get its `to` event at `time` or later, with the forbidden
+/// event strictly between the two (`Recogniser::conditions_hold`), so dropping it changes no
+/// recognition (at the forbidden event's own instant a `to` event could still come, in a later
+/// step at that instant: hence the wait). A `never` whose arguments do not name the instances'
+/// group is left to the check at completion. Returns how many were dropped.
+fn drop_forbidden<O: Clone + Eq + Hash>(
+    compiled: &Compiled,
+    instances: &mut Instances<O>,
+    time: Time,
+) -> usize {
+    let mut dropped = 0;
+    let Instances { never_keys, forbidden, groups, .. } = instances;
+    let (due, waiting): (Vec<_>, Vec<_>) =
+        std::mem::take(forbidden).into_iter().partition(|(_, e)| e.time < time);
+    *forbidden = waiting;
+    for (k, event) in due {
+        let never = &compiled.chronicle.nevers[k];
+        let Some(positions) = &never_keys[k] else { continue };
+        let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
+        let Some(group) = groups.get_mut(&key) else { continue };
+        let before = group.len();
+        group.retain(|p| {
+            let open = p.times[never.from].is_some_and(|t1| t1 < event.time) && p.times[never.to].is_none();
+            let same =
+                never.pattern.args.iter().zip(&event.args).all(|(a, o)| p.binding[*a].as_ref() == Some(o));
+            !(open && same)
+        });
+        dropped += before - group.len();
+        if group.is_empty() {
+            groups.remove(&key);
         }
     }
     dropped

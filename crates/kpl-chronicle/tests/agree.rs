@@ -317,6 +317,30 @@ fn an_instance_whose_hold_failed_is_dropped_at_once() {
     assert_eq!(run(Some(1)), (0, 1, 0));
 }
 
+/// A partial instance after whose `from` event an event its `never` forbids occurs is dropped at
+/// the next instant (it could only complete into a failure), not kept to its deadline; at the
+/// forbidden event's own instant a `to` event may still come (the event is then not strictly
+/// between the two), and a forbidden event on other objects keeps it.
+#[test]
+fn an_instance_that_a_never_forbids_is_dropped_at_the_next_instant() {
+    let mut c = two_step(1, 1000);
+    c.nevers =
+        vec![Never { pattern: Pattern { source: SourceId(4), args: vec![0], value: true }, from: 0, to: 1 }];
+    let run = |forbidden: Option<u8>, to_at: Time| {
+        let mut r = Recogniser::new(vec![c.clone().compile().unwrap()], Config::default()).unwrap();
+        r.step(0, vec![ev(2, 1)]).unwrap();
+        r.step(5, forbidden.map(|o| ev(4, o)).into_iter().collect()).unwrap();
+        let instances = r.stats().instances;
+        // A second step at the same instant, or a later one, with the `to` event.
+        let found = r.step(to_at, vec![ev(3, 1)]).unwrap();
+        (instances, r.stats().broken, found.len())
+    };
+    assert_eq!(run(None, 6), (1, 0, 1));
+    assert_eq!(run(Some(2), 6), (1, 0, 1));
+    assert_eq!(run(Some(1), 5), (1, 0, 1), "the `to` event at the forbidden event's instant");
+    assert_eq!(run(Some(1), 6), (1, 1, 0));
+}
+
 #[test]
 fn late_steps_are_refused() {
     let mut r = Recogniser::new(vec![two_step(1, 5).compile().unwrap()], Config::default()).unwrap();

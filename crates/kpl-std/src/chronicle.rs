@@ -590,7 +590,7 @@ impl ChronicleUnit {
             .result("recognitions merged into an earlier one of the same situation", self.merge.merged());
         self.stats.result("partial instances at most", s.peak_instances as u64);
         self.stats.result("partial instances expired", s.expired);
-        self.stats.result("partial instances dropped (a hold failed)", s.broken);
+        self.stats.result("partial instances dropped (a hold failed, or a never's event came)", s.broken);
         self.stats.result("instances refused (max_instances reached)", s.refused);
         self.stats.result("complete instances failing a hold/never condition", s.failed_conditions);
     }
