@@ -105,6 +105,7 @@ impl Highway {
                         field("lane_heading", Value::Float(0.0)),
                         field("lane_offset", Value::Float(0.0)),
                         field("in_junction", Value::Bool(false)),
+                        field("crossed_solid_line", Value::Bool(false)),
                         field("measured", Value::Bool(true)),
                         // Where it was 2 s ago (`anchor.kalman(smooth: 2s)`; sumo_weaving.kpl),
                         // last: the situation monitors never read them.
