@@ -1,7 +1,7 @@
 //! Qualitative relations between objects on the road network (the DyKnow traffic relations), as
 //! functions formulas may call: `behind(a, b)`, `in_front(a, b)`, `beside(a, b)`,
 //! `beside_left(a, b)`, `beside_right(a, b)`, `left_of(a, b)`, `same_lane(a, b)`,
-//! `same_road(a, b)`, `close(a, b, d)`, `gap(a, b)`, `approaching(a, b)`, `time_gap(a, b)`,
+//! `same_road(a, b)`, `close(a, b, d)`, `gap(a, b)`, `ahead_of(a, b)`, `approaching(a, b)`, `time_gap(a, b)`,
 //! `wrong_way(a)` and `angle_diff(h1, h2)`. A chronicle gives any of them hysteresis with
 //! `hysteresis(ENTER, LEAVE)` (docs/situations.md#qualitative-relations).
 //!
@@ -205,6 +205,13 @@ pub fn functions() -> Vec<Function> {
         // Measured along the road, between lane centres that may lie side by side: in the plane
         // the two are within `d` plus this much (the gate of a pair monitor, `kpl_mtl::gate`).
         .within(CLOSE_LATERAL_MARGIN_M),
+        Function::borrowing("ahead_of", (2, Some(2)), |args| {
+            let a = object(args[0], "ahead_of")?;
+            let b = object(args[1], "ahead_of")?;
+            let heading = float(a, "heading", hint!(), "ahead_of")?;
+            let towards = geom::sub(point(b, "ahead_of")?, point(a, "ahead_of")?);
+            Ok(Value::Float(geom::dot(geom::unit(heading), towards)))
+        }),
         Function::borrowing("approaching", (2, Some(2)), |args| {
             let a = object(args[0], "approaching")?;
             let b = object(args[1], "approaching")?;
@@ -264,6 +271,12 @@ pub fn signatures() -> Vec<registry::Function> {
         ),
         f("beside_right", vec![Any, Any], Bool, "a beside b, on b's right"),
         f("close", vec![Any, Any, Float], Bool, "same road and within d metres along it"),
+        f(
+            "ahead_of",
+            vec![Any, Any],
+            Float,
+            "metres b's centre lies ahead of a's along a's heading, in the plane (any road, in a junction too; negative: behind)",
+        ),
         f("approaching", vec![Any, Any], Bool, "the distance between a and b shrinks (from `pos` and `vel`)"),
         f(
             "time_gap",
@@ -345,7 +358,21 @@ mod tests {
             let r = Arc::make_mut(r);
             r.fields.iter_mut().filter(|(n, _)| &**n == "road").for_each(|(_, v)| *v = Value::Int(7));
         }
-        assert_eq!(call("gap", &[a.clone(), other_road]).as_f64(), Some(NO_GAP_M));
+        assert_eq!(call("gap", &[a.clone(), other_road.clone()]).as_f64(), Some(NO_GAP_M));
+        // ahead_of: in the plane, along a's heading, whatever the roads (a junction: road -1).
+        assert_eq!(call("ahead_of", &[a.clone(), b.clone()]).as_f64(), Some(20.0));
+        assert_eq!(call("ahead_of", &[a.clone(), other_road]).as_f64(), Some(20.0), "another road");
+        assert_eq!(call("ahead_of", &[b.clone(), c.clone()]).as_f64(), Some(-18.0));
+        let mut north = c.clone();
+        if let Value::Record(r) = &mut north {
+            let r = Arc::make_mut(r);
+            r.fields
+                .iter_mut()
+                .filter(|(n, _)| &**n == "heading")
+                .for_each(|(_, v)| *v = Value::Float(PI / 2.0));
+        }
+        let along = call("ahead_of", &[north, a.clone()]).as_f64().unwrap();
+        assert!((along + 3.2).abs() < 1e-9, "looking north from y = -1.6, y = -4.8 is 3.2 m behind: {along}");
         // Gap 16 m (20 m between centres, 4 m of lengths) at 30 m/s.
         let gap = call("time_gap", &[a.clone(), b.clone()]).as_f64().unwrap();
         assert!((gap - 16.0 / 30.0).abs() < 1e-9, "{gap}");
