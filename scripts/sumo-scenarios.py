@@ -990,10 +990,12 @@ class NoPassing:
 # another lane of it, L's changeLeft or changeRight in the network not allowing passenger cars
 # that way) from SOLID_BEFORE_S before `start` to SOLID_AFTER_S after `end` (the pull-out or the
 # cut-in of that overtake), and a `junction_overtake` when a crosses the junction alongside b:
-# the pass (from `start` to `end`) overlaps a's crossing, from its first sample off the
-# `no_passing` edge to its first on `exit` (samples are 0.5 s apart: a car crosses the 11 m
-# junction in about 0.4 s, often between two). Passes by vehicles present for less than
-# SETTLE_S are `entering`.
+# the pass overlaps a's crossing. Samples are 0.5 s apart and a car crosses the 11 m junction in
+# about 0.4 s, often between two, so these times are interpolated linearly between samples: the
+# pass from the instant a's front reaches b's back to the instant a's back clears b's front, the
+# crossing from the instant a's centre (its front less half its length) passes the end of the
+# `no_passing` lanes to the instant it passes the start of the `exit` lanes (x of the lanes'
+# shapes in the network). Passes by vehicles present for less than SETTLE_S are `entering`.
 PASS_WINDOW_S = 30.0
 SOLID_BEFORE_S = 10.0
 SOLID_AFTER_S = 10.0
@@ -1012,11 +1014,26 @@ def solid_lines(net_gz):
     return forbidden
 
 
+def junction_span(net_gz):
+    """The x where the `no_passing` lanes end and the `exit` lanes begin (the junction between)."""
+    with gzip.open(net_gz, "rt") as f:
+        text = f.read()
+    shapes = dict(re.findall(r'<lane id="([^"]*)"[^>]*shape="([^"]*)"', text))
+    x = lambda lane, point: float(shapes[lane].split()[point].split(",")[0])
+    return max(x("no_passing_0", -1), x("no_passing_1", -1)), min(x("exit_0", 0), x("exit_1", 0))
+
+
+def crossing_time(t0, f0, t1, f1):
+    """When a quantity that was f0 at t0 and f1 at t1 (f0 < 0 <= f1) reached 0, linearly."""
+    return t0 + (t1 - t0) * (-f0) / (f1 - f0)
+
+
 def no_passing_truth(folder):
     """Writes truth.jsonl in a scenario folder: the solid-line and junction overtakes (the comment
     above), each with `kind`, `objects` [a, b], `start`, `end` (seconds from the recording's first
     time) and `entering`."""
     forbidden = solid_lines(os.path.join(folder, "net.xml.gz"))
+    x_in, x_out = junction_span(os.path.join(folder, "net.xml.gz"))
     lengths = vtype_lengths(os.path.join(folder, "vtypes.xml"))
     samples = []  # (time, {vehicle: (x, edge, lane, speed, length)})
     with gzip.open(os.path.join(folder, "fcd.xml.gz"), "rt") as f:
@@ -1032,18 +1049,22 @@ def no_passing_truth(folder):
     first_seen, crossings, junction_at, exit_at = {}, {}, {}, {}
     previous = {}
     for time, vehicles in samples:
-        for v, (x, edge, lane, _, _) in vehicles.items():
+        for v, (x, edge, lane, _, length) in vehicles.items():
             first_seen.setdefault(v, time)
             was = previous.get(v)
             if was and was[0] == edge and was[1] != lane:
                 side = 1 if int(lane.rsplit("_", 1)[1]) > int(was[1].rsplit("_", 1)[1]) else -1
                 if (was[1], side) in forbidden:
                     crossings.setdefault(v, []).append(time)
-            if was and was[0] == "no_passing" and edge != "no_passing":
-                junction_at[v] = time
-            if was and was[0] != "exit" and edge == "exit":
-                exit_at[v] = time
-        previous = {v: (d[1], d[2]) for v, d in vehicles.items()}
+            centre = x - length / 2
+            if was and was[2] < x_in <= centre and was[0] != "side":
+                junction_at[v] = crossing_time(was[3], was[2] - x_in, time, centre - x_in)
+            if was and was[2] < x_out <= centre and was[0] != "side":
+                exit_at[v] = crossing_time(was[3], was[2] - x_out, time, centre - x_out)
+        previous = {v: (d[1], d[2], d[0] - d[4] / 2, time) for v, d in vehicles.items()}
+    at = {time: vehicles for time, vehicles in samples}
+    following = {samples[i][0]: samples[i + 1][0] for i in range(len(samples) - 1)}
+    preceding = {later: earlier for earlier, later in following.items()}
     main = lambda d: d[1] != "side" and not d[1].startswith(":j_0")
     behind_at = {}  # (a, b) -> the last time a's front was behind b's back
     lines = []
@@ -1068,7 +1089,12 @@ def no_passing_truth(folder):
                         lines.append({"kind": "solid_line_overtake", "objects": [a, b],
                                       "start": round(min(start, crossed[0]) - origin, 3),
                                       "end": round(max(time, crossed[-1]) - origin, 3), "entering": entering})
-                    if start < exit_at.get(a, -1.0) and junction_at.get(a, float("inf")) <= time:
+                    # The pass's interpolated ends: a's front at b's back, a's back at b's front.
+                    gap = lambda t: at[t][a][0] - (at[t][b][0] - at[t][b][4])
+                    clear = lambda t: at[t][a][0] - at[t][a][4] - at[t][b][0]
+                    begins = crossing_time(start, gap(start), following[start], gap(following[start]))
+                    ends = crossing_time(preceding[time], clear(preceding[time]), time, clear(time))
+                    if begins <= exit_at.get(a, -1.0) and junction_at.get(a, float("inf")) <= ends:
                         lines.append({"kind": "junction_overtake", "objects": [a, b],
                                       "start": round(start - origin, 3), "end": round(time - origin, 3),
                                       "entering": entering})

@@ -384,25 +384,25 @@ fn shipped_chronicle(spec: &str, name: &str) -> String {
 }
 
 /// The two reckless overtakes of sumo_no_passing.kpl as the spec writes them, on hand-made pairs
-/// at 10 Hz, each `a` at 25 m/s starting 20 m behind its `b` at 17 m/s (beside it from 2.0 s, in
-/// front from 3.1 s): on road 0 `a1` cuts in at 4.2 s across a solid line, on road 1 `a2` the
-/// same across a dashed one; on road 3 `a4` and `b4` cross a junction (road -1, `in_junction`)
-/// from 2.6 s to 3.0 s, onto road 4, while `a4` passes `b4`; on road 5 `a5` has passed `b5`
-/// before they cross a junction at 4.0 s (in front of it again on road 6 after). Only `a1`
+/// at 10 Hz on four streets 100 m apart, each `a` at 25 m/s starting 20 m behind its `b` at 17
+/// m/s (beside it from 2.0 s, in front from 3.1 s): on road 0 `a1` cuts in at 4.2 s across a
+/// solid line, on road 1 `a2` the same across a dashed one; on road 3 `a4` and `b4` cross a
+/// junction (road -1, `in_junction`) from 2.6 s to 3.0 s, onto road 4, while `a4` passes `b4`;
+/// on road 5 `a5` has passed `b5` before they cross a junction at 4.0 s (onto road 6). Only `a1`
 /// overtakes across a solid line and only `a4` through a junction.
 #[test]
 fn overtakes_across_a_solid_line_and_through_a_junction() {
     let dir = fresh_dir("no-passing");
     let solid = shipped_chronicle("sumo_no_passing.kpl", "solid_line_overtake");
     let junction = shipped_chronicle("sumo_no_passing.kpl", "junction_overtake");
-    // road, lane (0 right, 1 left), x, speed, in a junction, crossed a solid line
-    let car = |id: &str, road: i64, lane: i64, x: f64, speed: f64, crossed: bool| {
-        let y = 100.0 * road as f64 + 3.2 * lane as f64;
+    // street, road (-1: in a junction), lane (0 right, 1 left), x, speed, crossed a solid line
+    let car = |id: &str, (street, road): (i64, i64), lane: i64, x: f64, speed: f64, crossed: bool| {
+        let y = 100.0 * street as f64 + 3.2 * lane as f64;
         let (lane_name, in_junction) =
             if road < 0 { (format!(":j_{lane}"), true) } else { (format!("r{road}_{lane}"), false) };
         format!(
             "{{\"id\": \"{id}\", \"pos\": [{x}, {y}], \"vel\": [{speed}, 0.0], \"size\": 4.5, \"road\": {road}, \
-             \"lane\": \"{lane_name}\", \"lane_pos\": {x}, \"speed\": {speed}, \"in_junction\": {in_junction}, \
+             \"lane\": \"{lane_name}\", \"lane_pos\": {x}, \"speed\": {speed}, \"heading\": 0.0, \"in_junction\": {in_junction}, \
              \"crossed_solid_line\": {crossed}}}"
         )
     };
@@ -420,23 +420,23 @@ fn overtakes_across_a_solid_line_and_through_a_junction() {
                 to
             }
         };
-        let (road4, road5) = (crossing(3, 4, 26..30), crossing(5, 6, 40..44));
+        let (street4, street5) = ((3, crossing(3, 4, 26..30)), (5, crossing(5, 6, 40..44)));
         let cars = [
-            car("a1", 0, lane_a, x_a, 25.0, k == 42),
-            car("b1", 0, 0, x_b, 17.0, false),
-            car("a2", 1, lane_a, x_a, 25.0, false),
-            car("b2", 1, 0, x_b, 17.0, false),
-            car("a4", road4, 1, x_a, 25.0, false),
-            car("b4", road4, 0, x_b, 17.0, false),
-            car("a5", road5, 1, x_a, 25.0, false),
-            car("b5", road5, 0, x_b, 17.0, false),
+            car("a1", (0, 0), lane_a, x_a, 25.0, k == 42),
+            car("b1", (0, 0), 0, x_b, 17.0, false),
+            car("a2", (1, 1), lane_a, x_a, 25.0, false),
+            car("b2", (1, 1), 0, x_b, 17.0, false),
+            car("a4", street4, 1, x_a, 25.0, false),
+            car("b4", street4, 0, x_b, 17.0, false),
+            car("a5", street5, 1, x_a, 25.0, false),
+            car("b5", street5, 0, x_b, 17.0, false),
         ];
         data.push_str(&cars_line(k * S / 10, &cars));
     }
     std::fs::write(dir.join("cars.jsonl"), data).unwrap();
     let text = format!(
         "type Car symbol co {{ pos: vec2, vel: vec2, size: float, road: int, lane: string, lane_pos: float, speed: float, \
-         in_junction: bool, crossed_solid_line: bool }}\n\
+         heading: float, in_junction: bool, crossed_solid_line: bool }}\n\
          source cars : list<Car> = file.jsonl(path: \"cars.jsonl\")\n{solid}\n{junction}\n\
          sink out = file.jsonl(solid_line_overtake, junction_overtake, path: \"out.jsonl\")\n"
     );
