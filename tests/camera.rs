@@ -47,13 +47,13 @@ fn idf1(scores: &[(String, Value)], stream: &str) -> f64 {
 }
 
 /// The image-plane spec in a folder of its own with `tracker` as its tracker.txt; the run's output.
-fn image_plane_run(name: &str, tracker: &Path) -> PathBuf {
+fn image_plane_run(name: &str, tracker: &Path) -> common::InTestDir {
     let dir = fresh_dir("camera", name);
     std::fs::copy(root().join("specs/mot/image_plane.kpl"), dir.join("image_plane.kpl")).unwrap();
     std::fs::copy(tracker, dir.join("tracker.txt")).unwrap();
     let out = dir.join("out");
     run_ok(&["run", dir.join("image_plane.kpl").to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    out
+    dir.holding(out)
 }
 
 #[test]

@@ -193,7 +193,7 @@ impl Drop for Network {
 /// The runs of the three hosts: each host's current process and every output folder it had.
 struct Deployment {
     network: Network,
-    dir: PathBuf,
+    dir: common::TestDir,
     spec: PathBuf,
     config: PathBuf,
     params: Params,
@@ -427,7 +427,7 @@ struct Run {
 
 /// A case's hosts on loopback ports from `base`, with keys made on first use under `dir/state`.
 struct Case {
-    dir: PathBuf,
+    dir: common::TestDir,
     spec: PathBuf,
     base: u16,
     env: Vec<(String, String)>,

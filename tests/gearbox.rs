@@ -13,7 +13,6 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
 
 use common::{kpl, root};
 
@@ -21,7 +20,7 @@ use kpl_aapa::gearbox;
 use kpl_aapa::{Aapa, WorldState};
 use serde_json::Value;
 
-fn temp_dir(name: &str) -> PathBuf {
+fn temp_dir(name: &str) -> common::TestDir {
     common::fresh_dir("gearbox", name)
 }
 

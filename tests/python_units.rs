@@ -15,7 +15,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Output;
 
 use common::{fresh_dir, kpl, kpl_command, lines, root};
@@ -64,12 +64,12 @@ fn summary(output: &Output) -> Value {
 }
 
 /// A folder with `units.py` and a spec `NAME.kpl` of `body`.
-fn fixture(name: &str, body: &str) -> PathBuf {
+fn fixture(name: &str, body: &str) -> common::InTestDir {
     let dir = fresh_dir("pyunits", name);
     std::fs::write(dir.join("units.py"), UNITS).unwrap();
     let spec = dir.join(format!("{name}.kpl"));
     std::fs::write(&spec, body).unwrap();
-    spec
+    dir.holding(spec)
 }
 
 /// The units of the fixtures: each misbehaves at one input, on purpose.

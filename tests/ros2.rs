@@ -397,7 +397,8 @@ fn oracle_reads_bag(python: &str, bag: &Path, tracks: &Path) {
 /// ended it. (Counted from simulated time 0, it ended before the first message, with nothing.)
 #[test]
 fn for_counts_from_the_first_stamp_of_a_dated_bag() {
-    let out = common::fresh_dir("ros2", "replay-for").join("out");
+    let base = common::fresh_dir("ros2", "replay-for");
+    let out = base.join("out");
     let run = common::kpl(&["run", "specs/ros2/replay.kpl", "--for", "10s", "--out", out.to_str().unwrap()]);
     let said = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{said}");

@@ -13,14 +13,14 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 use common::{kpl_command as kpl, lines};
 
 use serde_json::Value;
 
-fn out_dir(name: &str) -> PathBuf {
+fn out_dir(name: &str) -> common::TestDir {
     common::fresh_dir("run", name)
 }
 
@@ -206,7 +206,7 @@ fn for_ends_a_wall_clock_run() {
 
 /// Runs the endless spec on the wall clock until it has written samples, then sends it `signal`
 /// (`INT`, `TERM`); returns its exit status, standard error and output folder.
-fn interrupt_with(signal: &str) -> (Option<i32>, String, PathBuf) {
+fn interrupt_with(signal: &str) -> (Option<i32>, String, common::TestDir) {
     let out = out_dir(&format!("interrupt-{signal}"));
     let mut child = kpl(&["run", "specs/run/endless.kpl", "--clock", "wall", "--out", out.to_str().unwrap()])
         .stderr(std::process::Stdio::piped())

@@ -13,7 +13,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -126,7 +126,7 @@ fn examples(help: &str) -> Vec<Example> {
 }
 
 /// A folder with a copy of the shipped specs (commands may write beside them) and `bin/kpl`.
-fn workspace(name: &str) -> PathBuf {
+fn workspace(name: &str) -> common::TestDir {
     let dir = common::fresh_dir("tour", name);
     copy_dir(&root().join("specs"), &dir.join("specs"));
     std::fs::create_dir_all(dir.join("bin")).unwrap();

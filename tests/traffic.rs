@@ -13,20 +13,20 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use common::{kpl, lines};
 use serde_json::Value;
 
-fn run(spec: &str, name: &str) -> PathBuf {
+fn run(spec: &str, name: &str) -> common::TestDir {
     run_with(spec, name, &[])
 }
 
-fn run_for(spec: &str, name: &str, time: &str) -> PathBuf {
+fn run_for(spec: &str, name: &str, time: &str) -> common::TestDir {
     run_with(spec, name, &["--for", time])
 }
 
-fn run_with(spec: &str, name: &str, extra: &[&str]) -> PathBuf {
+fn run_with(spec: &str, name: &str, extra: &[&str]) -> common::TestDir {
     let out = common::fresh_dir("traffic", name);
     let mut args = vec!["run", "--quiet", spec, "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);

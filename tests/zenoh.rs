@@ -22,7 +22,7 @@
 mod common;
 
 use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
@@ -31,7 +31,7 @@ use serde_json::Value;
 
 const HANG: Duration = Duration::from_secs(180);
 
-fn out_dir(name: &str) -> PathBuf {
+fn out_dir(name: &str) -> common::TestDir {
     common::fresh_dir("zenoh", name)
 }
 

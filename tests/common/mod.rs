@@ -24,12 +24,74 @@ pub fn kpl(args: &[&str]) -> Output {
     kpl_command(args).output().unwrap()
 }
 
-/// An empty folder `kpl-{prefix}-{name}-{pid}` in the system's temporary folder.
-pub fn fresh_dir(prefix: &str, name: &str) -> PathBuf {
+/// A test's folder in the system's temporary folder, removed with everything in it when the
+/// value is dropped, unless the test is failing then (the folder is kept to look at). It derefs
+/// to its `Path`; keep it alive as long as the folder is used (a `fresh_dir(..).join(..)` would
+/// drop it at once).
+#[derive(Debug)]
+pub struct TestDir(PathBuf);
+
+impl std::ops::Deref for TestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TestDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TestDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+impl TestDir {
+    /// `path` (a file or folder in this one), keeping this folder as long as it lives.
+    pub fn holding(self, path: PathBuf) -> InTestDir {
+        InTestDir { path, _dir: self }
+    }
+}
+
+/// A path in a [`TestDir`] that keeps the folder alive; derefs to the path.
+#[derive(Debug)]
+pub struct InTestDir {
+    path: PathBuf,
+    _dir: TestDir,
+}
+
+impl std::ops::Deref for InTestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for InTestDir {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// An empty folder `kpl-{prefix}-{name}-{pid}` in the system's temporary folder, removed when
+/// the returned [`TestDir`] is dropped.
+pub fn fresh_dir(prefix: &str, name: &str) -> TestDir {
     let dir = std::env::temp_dir().join(format!("kpl-{prefix}-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    TestDir(dir)
 }
 
 /// The JSON values of a JSON lines file.
