@@ -32,6 +32,13 @@ pub struct Pattern {
     pub value: bool,
 }
 
+impl Pattern {
+    /// Whether `event` is one of this pattern's: its source, its value, as many objects.
+    pub fn matches<O>(&self, event: &Event<O>) -> bool {
+        self.source == event.source && self.value == event.value && self.args.len() == event.args.len()
+    }
+}
+
 /// The fluent `source(args)` is true throughout `[time(from), time(to)]`: its last event at or
 /// before `time(from)` says true, and none in `(time(from), time(to)]` says false.
 #[derive(Debug, Clone, PartialEq, Eq)]

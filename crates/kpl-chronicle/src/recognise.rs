@@ -284,10 +284,7 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         let mut seen: HashSet<Vec<O>> = HashSet::new();
         for (event, occurrence) in batch {
             for (node, pattern) in compiled.chronicle.events.iter().enumerate() {
-                if pattern.source != event.source
-                    || pattern.value != event.value
-                    || pattern.args.len() != event.args.len()
-                {
+                if !pattern.matches(event) {
                     continue;
                 }
                 let key = instances.key(pattern, &event.args);
@@ -338,11 +335,8 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
         }
         instances.len -= done.len();
         for (k, never) in compiled.chronicle.nevers.iter().enumerate() {
-            let pattern = &never.pattern;
-            let matching = batch.iter().filter(|(e, _)| {
-                e.source == pattern.source && e.value == pattern.value && e.args.len() == pattern.args.len()
-            });
             if instances.never_keys[k].is_some() {
+                let matching = batch.iter().filter(|(e, _)| never.pattern.matches(e));
                 instances.forbidden.extend(matching.map(|(e, _)| (k, e.clone())));
             }
         }
@@ -398,19 +392,34 @@ fn drop_broken<O: Clone + Eq + Hash>(
             if event.source != hold.source || event.value || event.args.len() != hold.args.len() {
                 continue;
             }
-            let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
-            let Some(group) = groups.get_mut(&key) else { continue };
-            let before = group.len();
-            group.retain(|p| {
-                let open = p.times[hold.from].is_some_and(|t1| t1 < time) && p.times[hold.to].is_none();
-                let same = hold.args.iter().zip(&event.args).all(|(a, o)| p.binding[*a].as_ref() == Some(o));
-                !(open && same)
-            });
-            dropped += before - group.len();
-            if group.is_empty() {
-                groups.remove(&key);
-            }
+            dropped += drop_failing(groups, positions, (&hold.args, hold.from, hold.to), event, time);
         }
+    }
+    dropped
+}
+
+/// Drops from the group of `event`'s objects (`positions`: where the group's key parameters are
+/// among the condition's `args`) the instances whose condition over `args` from node `from` to node
+/// `to` already fails through `event`: `from` matched before `since`, `to` still open, and `args`
+/// bound to `event`'s objects. Returns how many were dropped.
+fn drop_failing<O: Clone + Eq + Hash>(
+    groups: &mut HashMap<Vec<O>, Vec<Partial<O>>>,
+    positions: &[usize],
+    (args, from, to): (&[usize], usize, usize),
+    event: &Event<O>,
+    since: Time,
+) -> usize {
+    let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
+    let Some(group) = groups.get_mut(&key) else { return 0 };
+    let before = group.len();
+    group.retain(|p| {
+        let open = p.times[from].is_some_and(|t1| t1 < since) && p.times[to].is_none();
+        let same = args.iter().zip(&event.args).all(|(a, o)| p.binding[*a].as_ref() == Some(o));
+        !(open && same)
+    });
+    let dropped = before - group.len();
+    if group.is_empty() {
+        groups.remove(&key);
     }
     dropped
 }
@@ -436,19 +445,8 @@ fn drop_forbidden<O: Clone + Eq + Hash>(
     for (k, event) in due {
         let never = &compiled.chronicle.nevers[k];
         let Some(positions) = &never_keys[k] else { continue };
-        let key: Vec<O> = positions.iter().map(|&k| event.args[k].clone()).collect();
-        let Some(group) = groups.get_mut(&key) else { continue };
-        let before = group.len();
-        group.retain(|p| {
-            let open = p.times[never.from].is_some_and(|t1| t1 < event.time) && p.times[never.to].is_none();
-            let same =
-                never.pattern.args.iter().zip(&event.args).all(|(a, o)| p.binding[*a].as_ref() == Some(o));
-            !(open && same)
-        });
-        dropped += before - group.len();
-        if group.is_empty() {
-            groups.remove(&key);
-        }
+        let condition = (never.pattern.args.as_slice(), never.from, never.to);
+        dropped += drop_failing(groups, positions, condition, &event, event.time);
     }
     dropped
 }

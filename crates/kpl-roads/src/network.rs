@@ -477,13 +477,16 @@ impl RoadNetwork {
     /// forbids changing to the side `to` lies on (its `may_change_left` or `may_change_right`).
     /// A change over more than one lane counts the first marking only.
     pub fn crosses_solid_line(&self, from: LaneId, to: LaneId, at: Point) -> bool {
+        if from == to {
+            return false;
+        }
         let (old, new) = (self.lane(from), self.lane(to));
         let (LaneKind::Road { road: old_road, .. }, LaneKind::Road { road: new_road, .. }) =
             (old.kind, new.kind)
         else {
             return false;
         };
-        if from == to || old_road != new_road {
+        if old_road != new_road {
             return false;
         }
         let there = old.path.project(at);

@@ -330,9 +330,7 @@ fn run_text(dir: &Path, name: &str, text: &str) -> Vec<(String, Time, serde_json
 #[test]
 fn the_reckless_overtake_is_the_cutters_lane_change_not_the_overtaken_ones() {
     let dir = fresh_dir("reckless-lane-change");
-    let shipped = std::fs::read_to_string(traffic_dir().join("sumo_reckless.kpl")).unwrap();
-    let start = shipped.find("chronicle reckless_overtake").unwrap();
-    let chronicle = &shipped[start..start + shipped[start..].find("\n}\n").unwrap() + 3];
+    let chronicle = shipped_chronicle("sumo_reckless.kpl", "reckless_overtake");
     let car = |id: &str, road: i64, lane: i64, lane_pos: f64, offset: f64, speed: f64| {
         let y = 1000.0 * road as f64 - 1.6 - 3.2 * (1 - lane) as f64 + offset;
         format!(
