@@ -804,11 +804,12 @@ WEAVE_IN_M = 0.5
 WEAVE_COUNT = 3
 WEAVE_WINDOW_S = 30.0
 # Speed swings, from the floating car data's `speed` alone: a vehicle's speed falls by at least
-# SWING_MPS from a peak within SWING_LEG_S and rises again by SWING_MPS from the lowest speed
-# within SWING_LEG_S (the swing lasts from the peak to when the rise reached SWING_MPS). It swings
-# when SWING_COUNT swings follow one another within SWING_WINDOW_S (first peak to last rise);
-# overlapping windows are one situation. A car behind a drunk driver swings with it; a car that
-# slows down behind a truck and speeds up to overtake it swings once.
+# SWING_MPS from its highest speed of the SWING_LEG_S before the lowest one (and since the last
+# swing) and rises again by SWING_MPS from the lowest speed within SWING_LEG_S. The swing lasts from
+# when the fall reached SWING_MPS to when the rise did (so a plateau's length or jitter does not
+# move it). It swings when SWING_COUNT swings follow one another within SWING_WINDOW_S (first
+# fall to last rise); overlapping windows are one situation. A car behind a drunk driver swings
+# with it; a car that slows down behind a truck and speeds up to overtake it swings once.
 SWING_MPS = 2.0
 SWING_LEG_S = 8.0
 SWING_COUNT = 2
@@ -835,21 +836,47 @@ def episodes_of(events, count, window):
 
 
 def speed_swings(samples):
-    """The (peak, risen) times of a vehicle's speed swings in [(time, speed)] (comment above)."""
+    """The (fallen, risen) times of a vehicle's speed swings in [(time, speed)] (comment above).
+    Both legs are measured where they happened, not from a plateau's first or last sample: the
+    fall from the highest speed of the SWING_LEG_S before the lowest one, the rise from the last
+    sample at the lowest speed; a swing lasts from when the fall reached SWING_MPS to when the
+    rise did, as a chronicle's fall and rise events would time it.
+
+    A plateau at 30 m/s whose highest sample (30.1) is 11 s before a fall to 25 m/s over 2 s:
+    one swing, from 1 s into the fall (28 m/s) to the rise back to 27 m/s.
+
+    >>> plateau = [(t * 0.5, 30.1 if t == 0 else 30.0) for t in range(23)]
+    >>> fall = [(11.5, 29.0), (12.0, 28.0), (12.5, 27.0), (13.0, 25.0), (13.5, 25.0)]
+    >>> speed_swings(plateau + fall + [(14.0, 26.0), (14.5, 27.0), (15.0, 29.0)])
+    [(12.0, 14.5)]
+
+    A fall by 2 m/s that takes 10 s, or a rise that does, is not a swing.
+
+    >>> slow = [(t * 0.5, 30.0 - 0.1 * t) for t in range(21)] + [(10.5, 28.0), (11.0, 29.0)]
+    >>> speed_swings(slow)
+    []
+    >>> speed_swings([(0.0, 30.0), (1.0, 27.0), (2.0, 28.0), (6.0, 28.5), (10.0, 29.0)])
+    []
+    """
     swings = []
-    peak, trough, falling = None, None, False
-    for time, speed in samples:
-        if not falling:
-            if peak is None or speed >= peak[1]:
-                peak = (time, speed)
-            elif peak[1] - speed >= SWING_MPS:
-                falling, trough = True, (time, speed)
+    since = 0  # no peak before this sample: the last swing's end
+    fallen = None  # the time the speed had fallen by SWING_MPS
+    trough = lowest = None  # the lowest (time, speed) since then, and its index
+
+    def peak_before(i):
+        """The highest speed of samples[since..=i] within SWING_LEG_S before samples[i]."""
+        return max(s[1] for s in samples[since:i + 1] if s[0] >= samples[i][0] - SWING_LEG_S)
+
+    for i, (time, speed) in enumerate(samples):
+        if fallen is None:
+            if peak_before(i) - speed >= SWING_MPS:
+                fallen, trough, lowest = time, (time, speed), i
         elif speed <= trough[1]:
-            trough = (time, speed)
+            trough, lowest = (time, speed), i
         elif speed - trough[1] >= SWING_MPS:
-            if trough[0] - peak[0] <= SWING_LEG_S and time - trough[0] <= SWING_LEG_S:
-                swings.append((peak[0], time))
-            falling, peak = False, (time, speed)
+            if peak_before(lowest) - trough[1] >= SWING_MPS and time - trough[0] <= SWING_LEG_S:
+                swings.append((fallen, time))
+            since, fallen = i, None
     return swings
 
 

@@ -439,6 +439,20 @@ traci.close()
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The truth functions of `scripts/sumo-scenarios.py` (which situations happened, from SUMO's own
+/// floating car data) keep the examples written in their docstrings (Python's doctest).
+#[test]
+fn the_scenario_scripts_truth_keeps_its_examples() {
+    let Some(python) = python() else { return };
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/sumo-scenarios.py");
+    let output =
+        std::process::Command::new(&python).args(["-m", "doctest", "-v"]).arg(&script).output().unwrap();
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{text}{}", String::from_utf8_lossy(&output.stderr));
+    let passed = text.lines().find_map(|line| line.strip_suffix(" passed and 0 failed."));
+    assert!(passed.is_some_and(|n| n.parse::<u32>().is_ok_and(|n| n >= 5)), "{text}");
+}
+
 /// SUMO of the test environment makes a grid scenario afresh with `scripts/sumo-scenarios.py`,
 /// and it reads as the shipped one does: a network, and vehicles on its lanes (catches changes
 /// of SUMO's formats).
