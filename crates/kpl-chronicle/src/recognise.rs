@@ -74,13 +74,17 @@ pub struct Stats {
     /// Complete instances whose `hold` or `never` condition failed.
     pub failed_conditions: u64,
     pub recognitions: u64,
-    /// Steps refused because their time was before the previous step's.
+    /// Steps refused because their time was not after the previous step's.
     pub late_steps: u64,
 }
 
-/// A step before the previous one: events must come in time order.
+/// A step at or before the previous one: steps must come in increasing time, all the events of
+/// an instant in one step (two steps at one instant would split its events, and a `hold` or
+/// `never` condition could not tell which of them came first).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
-#[error("events at {time} us arrived after the recogniser reached {now} us")]
+#[error(
+    "events at {time} us arrived when the recogniser had stepped at {now} us (steps must come in increasing time)"
+)]
 pub struct Late {
     pub time: Time,
     pub now: Time,
@@ -200,10 +204,11 @@ impl<O: Clone + Eq + Hash> Recogniser<O> {
 
     /// Processes the events that occurred at `time`, in their order (an event's `time` field is
     /// ignored: they are all at `time`), and returns the chronicles recognised at `time`. A step
-    /// with no events only lets deadlines pass.
+    /// with no events only lets deadlines pass. A step at or before the previous one's time is
+    /// refused ([`Late`], counted in [`Stats::late_steps`]) and changes nothing.
     pub fn step(&mut self, time: Time, events: Vec<Event<O>>) -> Result<Vec<Recognition<O>>, Late> {
         if let Some(now) = self.now
-            && time < now
+            && time <= now
         {
             self.stats.late_steps += 1;
             return Err(Late { time, now });

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)] // tests
 
 use kpl_chronicle::model::{Chronicle, Event, Hold, ModelError, Never, Pattern, SourceId};
-use kpl_chronicle::recognise::{Config, Recogniser, Recognition};
+use kpl_chronicle::recognise::{Config, Late, Recogniser, Recognition};
 use kpl_chronicle::stn::{Constraint, Stn};
 use kpl_core::Time;
 use proptest::prelude::*;
@@ -296,6 +296,19 @@ fn the_instance_bound_is_kept_and_counted() {
     assert_eq!(r.stats().refused, 2);
 }
 
+/// Steps come in increasing time: a second step at an instant (or an earlier one) is refused,
+/// counted, and changes nothing; the instant's events belong in one step.
+#[test]
+fn a_step_not_after_the_last_is_refused_and_changes_nothing() {
+    let mut r = Recogniser::new(vec![two_step(1, 5).compile().unwrap()], Config::default()).unwrap();
+    r.step(10, vec![ev(2, 1)]).unwrap();
+    assert_eq!(r.stats().instances, 1);
+    assert_eq!(r.step(10, vec![ev(2, 2), ev(3, 1)]), Err(Late { time: 10, now: 10 }));
+    assert_eq!(r.step(9, vec![ev(3, 1)]), Err(Late { time: 9, now: 10 }));
+    assert_eq!((r.stats().late_steps, r.stats().instances), (2, 1));
+    assert_eq!(r.step(11, vec![ev(3, 1)]).unwrap().len(), 1);
+}
+
 /// A partial instance whose `hold` fails before its `to` event is dropped then (it could only
 /// complete into a failure), not kept to its deadline; a hold failing on other objects keeps it.
 #[test]
@@ -326,27 +339,22 @@ fn an_instance_that_a_never_forbids_is_dropped_at_the_next_instant() {
     let mut c = two_step(1, 1000);
     c.nevers =
         vec![Never { pattern: Pattern { source: SourceId(4), args: vec![0], value: true }, from: 0, to: 1 }];
-    let run = |forbidden: Option<u8>, to_at: Time| {
+    let run = |forbidden: Option<u8>| {
         let mut r = Recogniser::new(vec![c.clone().compile().unwrap()], Config::default()).unwrap();
         r.step(0, vec![ev(2, 1)]).unwrap();
         r.step(5, forbidden.map(|o| ev(4, o)).into_iter().collect()).unwrap();
         let instances = r.stats().instances;
-        // A second step at the same instant, or a later one, with the `to` event.
-        let found = r.step(to_at, vec![ev(3, 1)]).unwrap();
+        let found = r.step(6, vec![ev(3, 1)]).unwrap();
         (instances, r.stats().broken, found.len())
     };
-    assert_eq!(run(None, 6), (1, 0, 1));
-    assert_eq!(run(Some(2), 6), (1, 0, 1));
-    assert_eq!(run(Some(1), 5), (1, 0, 1), "the `to` event at the forbidden event's instant");
-    assert_eq!(run(Some(1), 6), (1, 1, 0));
-}
-
-#[test]
-fn late_steps_are_refused() {
-    let mut r = Recogniser::new(vec![two_step(1, 5).compile().unwrap()], Config::default()).unwrap();
-    r.step(10, vec![]).unwrap();
-    assert!(r.step(9, vec![ev(2, 0)]).is_err());
-    assert_eq!(r.stats().late_steps, 1);
+    assert_eq!(run(None), (1, 0, 1));
+    assert_eq!(run(Some(2)), (1, 0, 1));
+    assert_eq!(run(Some(1)), (1, 1, 0));
+    // The `to` event at the forbidden event's instant (after it, in the same step).
+    let mut r = Recogniser::new(vec![c.clone().compile().unwrap()], Config::default()).unwrap();
+    r.step(0, vec![ev(2, 1)]).unwrap();
+    assert_eq!(r.step(5, vec![ev(4, 1), ev(3, 1)]).unwrap().len(), 1);
+    assert_eq!(r.stats().broken, 0);
 }
 
 #[test]
