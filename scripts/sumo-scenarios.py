@@ -893,7 +893,9 @@ def weaving_truth(folder):
         origin = time if origin is None else origin
         for v in re.finditer(r"<vehicle ([^>]*)/>", block.group(2)):
             a = dict(re.findall(r'(\w+)="([^"]*)"', v.group(1)))
-            series.setdefault(a["id"], []).append((time, abs(float(a["posLat"])), a["lane"], float(a["speed"])))
+            # Without SUMO's sublane model there is no posLat: departures are the lane switches.
+            lateral = abs(float(a.get("posLat", 0.0)))
+            series.setdefault(a["id"], []).append((time, lateral, a["lane"], float(a["speed"])))
     lines = []
     for vehicle, samples in series.items():
         first = samples[0][0]

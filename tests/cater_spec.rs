@@ -46,7 +46,7 @@ fn the_spec_predicts_what_kpl_cater_eval_predicts() {
         for perception in ["perfect", "detector"] {
             // The spec reads ../../out/cater-video relative to itself: lay the same tree out in a
             // temporary directory.
-            let dir = std::env::temp_dir()
+            let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
                 .join(format!("kpl-cater-spec-{seed}-{perception}-{}", std::process::id()));
             let _ = std::fs::remove_dir_all(&dir);
             std::fs::create_dir_all(dir.join("specs/cater")).unwrap();

@@ -13,7 +13,8 @@ struct Run {
 }
 
 fn trace_file(name: &str, lines: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("kpl-mtl-cli-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kpl-mtl-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
     std::fs::write(&path, lines.iter().map(|l| format!("{l}\n")).collect::<String>()).unwrap();
@@ -235,7 +236,8 @@ fn long_formulas_come_from_a_file() {
 
 #[test]
 fn invalid_utf8_is_an_input_error_with_its_line_and_a_byte_order_mark_is_skipped() {
-    let dir = std::env::temp_dir().join(format!("kpl-mtl-cli-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kpl-mtl-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bad = dir.join("latin1.jsonl");
     let mut bytes = b"{\"t\": 0, \"p\": true}\n{\"t\": 1, \"p\": true, \"name\": \"M".to_vec();

@@ -35,7 +35,8 @@ fn situations_run(spec: &str, seed: u32) -> PathBuf {
     if let Some(dir) = RUNS.lock().unwrap().get(&key) {
         return dir.clone();
     }
-    let dir = std::env::temp_dir().join(format!("kpl-situations-cli-{}-{spec}-{seed}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("kpl-situations-cli-{}-{spec}-{seed}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let spec_file = format!("specs/traffic/{spec}.kpl");
     let seed_text = seed.to_string();
@@ -118,7 +119,8 @@ fn overtakes_and_speeding_are_recognised_with_precision_and_recall_over_0_9() {
     // A recording with overtakes alone (a spec with no speeding monitor, and no summary.json
     // beside it) is not scored as a speeding recall of 0: the kind is named under the table.
     let run = situations_run("sumo_situations", 0);
-    let only = std::env::temp_dir().join(format!("kpl-situations-cli-{}-only-overtakes", std::process::id()));
+    let only = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("kpl-situations-cli-{}-only-overtakes", std::process::id()));
     let _ = std::fs::remove_dir_all(&only);
     std::fs::create_dir_all(&only).unwrap();
     let lines: String = std::fs::read_to_string(run.join("situations.jsonl"))
@@ -272,6 +274,18 @@ fn bad_input_gets_clear_errors() {
         kpl(&["situations", &run, "--traffic", "nope.xml", "--network", &format!("{OVERTAKE}/net.xml.gz")]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("nope.xml"), "{}", stderr(&out));
+    // ... also without --network: the traffic file is named, not the network it would be beside.
+    let out = kpl(&["situations", &run, "--traffic", "/nonexistent/fcd.xml.gz"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("/nonexistent/fcd.xml.gz: no such traffic file"), "{}", stderr(&out));
+    // A traffic file with no network beside it: where it was looked for, and the option.
+    let lone = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kpl-lone-fcd-{}", std::process::id()));
+    std::fs::create_dir_all(&lone).unwrap();
+    std::fs::copy(workspace().join(OVERTAKE).join("fcd.xml.gz"), lone.join("fcd.xml.gz")).unwrap();
+    let out = kpl(&["situations", &run, "--traffic", lone.join("fcd.xml.gz").to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("net.xml.gz") && stderr(&out).contains("--network"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&lone).unwrap();
     // A car stream the recording does not have.
     let out = score("sumo_situations", 0, OVERTAKE, &["--stream", "no_such_stream"]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));

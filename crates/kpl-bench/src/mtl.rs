@@ -202,7 +202,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
         }
         out
     };
-    let scratch = std::env::temp_dir().join(format!("kpl-bench-r2u2-{}", std::process::id()));
+    // R2U2's compiled specs; removed when dropped, however the run ends.
+    let scratch = tempfile::Builder::new()
+        .prefix("kpl-bench-r2u2-")
+        .tempdir()
+        .map_err(|e| BenchError::Failed(e.to_string()))?;
     writeln!(
         out,
         "Timescales properties, {} states per trace, {} pairs of runs; times are {}.\n",
@@ -222,7 +226,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
         let mut first_ns = None;
         let mut last_ns = None;
         for &b in &args.bounds {
-            let case = run_case(args, *property, b, &scratch)
+            let case = run_case(args, *property, b, scratch.path())
                 .map_err(|e| BenchError::Failed(format!("{} bound {b}: {e}", property.name())))?;
             first_ns.get_or_insert(case.kpl_ns);
             last_ns = Some(case.kpl_ns);
@@ -264,7 +268,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
             flatness.push((*property, first, last));
         }
     }
-    let _ = std::fs::remove_dir_all(&scratch);
     if let Some((ratio, case)) = worst_ratio {
         writeln!(
             out,

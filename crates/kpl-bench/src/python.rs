@@ -142,8 +142,12 @@ fn run_once(
 const MODULE: &str = "def identity(x):\n    return x\n";
 
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
-    let dir = std::env::temp_dir().join(format!("kpl-bench-python-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| BenchError::Failed(e.to_string()))?;
+    // Removed when dropped, however the run ends.
+    let scratch = tempfile::Builder::new()
+        .prefix("kpl-bench-python-")
+        .tempdir()
+        .map_err(|e| BenchError::Failed(e.to_string()))?;
+    let dir = scratch.path();
     std::fs::write(dir.join("kpl_bench_unit.py"), MODULE).map_err(|e| BenchError::Failed(e.to_string()))?;
     let python_unit =
         "python.unit(src, module: \"kpl_bench_unit\", function: \"identity\", arrays: \"list\")";
@@ -153,7 +157,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
         let mut best = f64::INFINITY;
         for _ in 0..args.repeat.max(1) {
             best =
-                best.min(run_once(unit, ty, length, calls, &dir, &args.python).map_err(BenchError::Failed)?);
+                best.min(run_once(unit, ty, length, calls, dir, &args.python).map_err(BenchError::Failed)?);
         }
         Ok(best)
     };
@@ -187,6 +191,5 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
             n / python
         )?;
     }
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

@@ -118,9 +118,21 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
     let slack = args.slack;
     let config = Config::new(args.max_distance).map_err(|e| (2, e.to_string()))?;
     let beside = |name: &str| args.traffic.parent().map_or_else(|| PathBuf::from(name), |dir| dir.join(name));
+    if !args.traffic.is_file() {
+        return Err((
+            2,
+            format!("{}: no such traffic file (SUMO's floating car data)", args.traffic.display()),
+        ));
+    }
     let network_path = args.network.clone().unwrap_or_else(|| beside("net.xml.gz"));
-    let network =
-        RoadNetwork::load(&network_path).map_err(|e| (2, format!("{}: {e}", network_path.display())))?;
+    let network = RoadNetwork::load(&network_path).map_err(|e| {
+        let hint = if args.network.is_none() {
+            " (looked for beside the traffic file; --network names it)"
+        } else {
+            ""
+        };
+        (2, format!("{}: {e}{hint}", network_path.display()))
+    })?;
     let vtypes = args.vtypes.clone().or_else(|| Some(beside("vtypes.xml")).filter(|p| p.is_file()));
     let types = match &vtypes {
         Some(path) => VehicleTypes::read(path).map_err(|e| (2, e.to_string()))?,
