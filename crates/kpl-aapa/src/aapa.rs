@@ -409,6 +409,7 @@ impl Aapa {
                         symbol: work[i].anchor.symbol.clone(),
                         start: centre(&work[i].anchor.bbox),
                         onset: None,
+                        moving_at_start: moved_this_cycle(&work[i]),
                     })
                     .collect();
                 bindings.push(Binding {
@@ -1468,6 +1469,12 @@ fn bound_symbols(bindings: &[Binding]) -> Vec<Symbol> {
 /// having started moving.
 const ONSET_PX: f64 = 1.0;
 
+/// Whether an anchor was seen this cycle at least ONSET_PX from where it was the cycle before.
+fn moved_this_cycle(w: &Work) -> bool {
+    let (before, now) = (centre(&w.box_before), centre(&w.anchor.bbox));
+    w.aligned && (now[0] - before[0]).hypot(now[1] - before[1]) >= ONSET_PX
+}
+
 /// How far a candidate is from where it was when the action started (`None` if it is gone).
 fn displacement(c: &Candidate, work: &[Work]) -> Option<f64> {
     let w = work.iter().find(|w| !w.removed && w.anchor.symbol == c.symbol)?;
@@ -1477,8 +1484,9 @@ fn displacement(c: &Candidate, work: &[Work]) -> Option<f64> {
 
 /// The candidate of a binding that started moving first (ties: the one that moved furthest), once
 /// it has moved at least `min_move` pixels and no other candidate started in the same cycle unless
-/// it moved less than half as far. With `min_move` 0 (the action is over), simply that candidate,
-/// or the one that moved furthest if none was seen to start.
+/// it moved less than half as far; candidates already moving when the action started are left
+/// out. With `min_move` 0 (the action is over), simply that candidate (one already moving then
+/// only if no other was seen to start), or the one that moved furthest if none was seen to start.
 fn first_mover(binding: &Binding, work: &[Work], taken: &[Symbol], min_move: f64) -> Option<Symbol> {
     let mut moves: Vec<(Option<Time>, f64, &Symbol)> = binding
         .candidates
@@ -1486,6 +1494,13 @@ fn first_mover(binding: &Binding, work: &[Work], taken: &[Symbol], min_move: f64
         .filter(|c| !taken.contains(&c.symbol))
         .filter_map(|c| Some((c.onset, displacement(c, work)?, &c.symbol)))
         .collect();
+    // A candidate that was moving already when the action started moves for an earlier action:
+    // it is the action's only if none that was still starts to move before the action ends.
+    let fresh =
+        |symbol: &Symbol| binding.candidates.iter().any(|c| c.symbol == *symbol && !c.moving_at_start);
+    if min_move > 0.0 || moves.iter().any(|m| m.0.is_some() && fresh(m.2)) {
+        moves.retain(|m| fresh(m.2));
+    }
     // Earliest onset first (none last), then the furthest.
     moves.sort_by(|a, b| {
         let onset = |o: Option<Time>| o.unwrap_or(Time::MAX);

@@ -291,14 +291,19 @@ pub struct Candidate {
     /// When it was first seen to have moved from there.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub onset: Option<Time>,
+    /// Whether it was moving already when the action started (it moved in that cycle): that
+    /// motion is an earlier action's.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub moving_at_start: bool,
 }
 
 /// An action whose first argument (the object it moves) names a type several anchors have, from its
 /// `started` event to its `completed` one. Its started effects wait until the anchor is known: for an
 /// action that names another, single object (`_contain(cone, snitch)`), the candidate nearest that
 /// object when the action completes; otherwise the candidate that started moving first after the
-/// action started (the earlier of two open actions on such a type takes the earlier mover; two
-/// started at once wait for their completion), or at completion the one that moved most.
+/// action started, not one already moving then (the earlier of two open actions on such a type
+/// takes the earlier mover; two started at once wait for their completion), or at completion the
+/// one that moved most.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Binding {
     /// The `started` event.

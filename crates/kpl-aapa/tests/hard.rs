@@ -627,3 +627,61 @@ fn a_carried_object_scales_with_its_carriers_width_and_height_apart() {
     let h = 14.0 * 52.0 / 42.0;
     assert!((s.height() - h).abs() < 0.5, "height {:.2}, the cone's grew to {h:.2}", s.height());
 }
+
+/// The scene of [`a_cone_lifted_off_the_snitch_is_told_from_its_moving_twin`] with the lift starting
+/// `lift_delay` frames after the pick-up's action; every world.
+fn lifted_off_while_the_twin_moves(aapa: &Aapa, lift_delay: usize) -> Vec<WorldState> {
+    // Two identical cones. `b` comes over the snitch (10..20) and stays. At frame 40 `a` starts a
+    // contain onto a ball (40..70: it slides from x = 80 to 140); at frame 43, while `a` moves, a
+    // pick-up of a cone starts (43..70): `b` is lifted off the snitch, carried to x = 300 and put
+    // down. The snitch stays where it was and is seen again once `b` is up.
+    let snitch = at(220.0, 150.0, 14.0, 14.0);
+    let ball = at(140.0, 150.0, 14.0, 14.0);
+    let lift = 43 + lift_delay;
+    run(aapa, 80, |f| {
+        let a = lerp(at(80.0, 152.0, 34.0, 42.0), at(140.0, 152.0, 34.0, 42.0), 40, 70, f);
+        let b = if f <= 20 {
+            lerp(at(260.0, 152.0, 34.0, 42.0), at(220.0, 152.0, 34.0, 42.0), 10, 20, f)
+        } else if f <= lift + 10 {
+            // Up, slowly at first (CATER's easing).
+            let y = along(|u| u * u, 152.0, 100.0, lift, lift + 10, f);
+            at(220.0, y, 34.0, 42.0)
+        } else if f <= lift + 20 {
+            at(along(|u| u, 220.0, 300.0, lift + 10, lift + 20, f), 100.0, 34.0, 42.0)
+        } else {
+            at(300.0, along(|u| u, 100.0, 152.0, lift + 20, lift + 25, f), 34.0, 42.0)
+        };
+        let mut percepts = vec![p("a", "cone", a), p("b", "cone", b)];
+        if f < 17 || f >= lift + 5 {
+            percepts.push(p("s", "snitch", snitch));
+        }
+        if f < 66 {
+            percepts.push(p("ball", "ball", ball));
+        }
+        let actions = [
+            starts(f, 10, 20, "_contain", &["cone", "snitch"]),
+            ends(f, 20, "_contain", &["cone", "snitch"]),
+            starts(f, 40, 70, "_contain", &["cone", "ball"]),
+            ends(f, 70, "_contain", &["cone", "ball"]),
+            starts(f, 43, 70, "_pick_place", &["cone"]),
+            ends(f, 70, "_pick_place", &["cone"]),
+        ];
+        (percepts, actions.into_iter().flatten().collect())
+    })
+}
+
+#[test]
+fn a_cone_lifted_off_the_snitch_is_told_from_its_moving_twin() {
+    // The twin `a` was already moving when the pick-up started; `b` starts after it (one to three
+    // frames later). The pick-up is `b`'s: the snitch is released where it stands, not carried off.
+    for delay in [1, 3] {
+        let worlds = lifted_off_while_the_twin_moves(&cater(), delay);
+        for f in [50, 60, 79] {
+            let x = centre_of(&worlds[f], "snitch");
+            assert!(
+                (x[0] - 220.0).abs() < 2.0 && (x[1] - 143.0).abs() < 2.0,
+                "lift {delay} frames late, frame {f}: the snitch at {x:?}, it stands at [220, 143]"
+            );
+        }
+    }
+}
