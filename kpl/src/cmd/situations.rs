@@ -118,7 +118,7 @@ fn score(args: &Args) -> Result<ExitCode, (u8, String)> {
     let slack = args.slack;
     let config = Config::new(args.max_distance).map_err(|e| (2, e.to_string()))?;
     let beside = |name: &str| args.traffic.parent().map_or_else(|| PathBuf::from(name), |dir| dir.join(name));
-    if !args.traffic.is_file() {
+    if !args.traffic.exists() {
         return Err((
             2,
             format!("{}: no such traffic file (SUMO's floating car data)", args.traffic.display()),
