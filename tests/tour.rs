@@ -180,16 +180,21 @@ fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
-/// `bash -c COMMAND` in `dir` with `dir/bin` first on the PATH, in its own process group.
+/// `bash -c COMMAND` in `dir` with `dir/bin` first on the PATH, in its own process group, with
+/// `dir/tmp` as its temporary folder (a benchmark stopped with SIGKILL cannot remove its scratch
+/// folder; it goes with `dir`).
 fn shell(dir: &Path, command: &str) -> Command {
     use std::os::unix::process::CommandExt;
     let path = format!("{}:{}", dir.join("bin").display(), std::env::var("PATH").unwrap_or_default());
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
     let mut shell = Command::new("bash");
     shell
         .args(["-c", &format!("set -eo pipefail\n{command}")])
         .current_dir(dir)
         .env("PATH", path)
         .env("NO_COLOR", "1")
+        .env("TMPDIR", tmp)
         .env("KPL_ZENOH_PORT_BASE", free_ports(2).to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())

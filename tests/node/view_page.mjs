@@ -7,7 +7,7 @@
 //     node tests/node/view_page.mjs URL OUT_DIR SECONDS MONITOR
 //
 // KPL_CHROMIUM names the browser (default /usr/bin/chromium).
-import { mkdtempSync } from 'node:fs';
+import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
@@ -64,5 +64,6 @@ try {
   report.errors.push(String(e));
 } finally {
   await context.close();
+  rmSync(profile, { recursive: true, force: true });
 }
 console.log(JSON.stringify(report));
