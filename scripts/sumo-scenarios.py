@@ -864,8 +864,13 @@ def speed_swings(samples):
     trough = lowest = None  # the lowest (time, speed) since then, and its index
 
     def peak_before(i):
-        """The highest speed of samples[since..=i] within SWING_LEG_S before samples[i]."""
-        return max(s[1] for s in samples[since:i + 1] if s[0] >= samples[i][0] - SWING_LEG_S)
+        """The highest speed of samples[since..=i] within SWING_LEG_S before samples[i] (walks back
+        over those SWING_LEG_S only, not over everything since the last swing)."""
+        j, peak = i, samples[i][1]
+        while j > since and samples[j - 1][0] >= samples[i][0] - SWING_LEG_S:
+            j -= 1
+            peak = max(peak, samples[j][1])
+        return peak
 
     for i, (time, speed) in enumerate(samples):
         if fallen is None:
