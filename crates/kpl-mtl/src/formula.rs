@@ -185,6 +185,7 @@ pub struct Formula {
     pub(crate) slot_names: Arc<[Arc<str>]>,
     pub(crate) domain_names: Arc<[Arc<str>]>,
     source: Mtl,
+    fingerprint: u64,
 }
 
 impl Formula {
@@ -201,7 +202,7 @@ impl Formula {
         let Compiler { nodes, atoms, .. } = compiler;
         let info = template_info(&nodes);
         let plans = atoms.iter().map(|atom| AtomPlan::of(atom, &functions)).collect();
-        Ok(Formula {
+        let mut formula = Formula {
             nodes,
             info,
             atoms,
@@ -211,7 +212,23 @@ impl Formula {
             slot_names: context.slot_names().into(),
             domain_names: context.domain_names().into(),
             source: mtl.clone(),
-        })
+            fingerprint: 0,
+        };
+        formula.fingerprint = formula.compute_fingerprint();
+        Ok(formula)
+    }
+
+    /// A 64-bit FNV-1a hash of the compiled formula (its nodes, its text with the atoms, the
+    /// names of its slots and domains): equal for the same formula compiled against the same
+    /// names, in any process of the same build, so that a [`crate::Handover`] finds out whether
+    /// it is taken over by a group of its own formula.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    fn compute_fingerprint(&self) -> u64 {
+        let text = format!("{:?}\n{self}\n{:?}\n{:?}", self.nodes, self.slot_names, self.domain_names);
+        text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
     }
 
     /// The formula as it was given.

@@ -14,6 +14,7 @@ use kpl_core::Time;
 use crate::engine::{Engine, EngineConfig, EngineStats};
 use crate::error::EvalError;
 use crate::formula::Formula;
+use crate::handover::{self, Handover, HandoverError};
 use crate::progress::elapsed;
 use crate::residual::{FALSE, NodeId, TRUE};
 use crate::state::State;
@@ -222,6 +223,61 @@ impl ProgressorGroup {
             let _ = self.engine.arena.write(&self.engine.formula, &mut out, slot.root);
         }
         out
+    }
+
+    /// Instance `id`'s progress, to be taken over by a group of the same formula
+    /// ([`ProgressorGroup::take_over`], possibly in another process); the instance stays here
+    /// until [`ProgressorGroup::remove`]. `None` for an id the group does not hold.
+    pub fn hand_over(&self, id: InstanceId) -> Option<Handover> {
+        let slot = self.slot(id)?;
+        Some(Handover {
+            formula: self.engine.formula.fingerprint(),
+            last_time: slot.last_time,
+            verdict: slot.verdict,
+            decided_at: slot.decided_at,
+            nodes: handover::write_out(&self.engine.arena, slot.root),
+        })
+    }
+
+    /// A new instance that goes on from where a handed-over one was: its next state must be
+    /// after the handover's last, and it reaches the verdicts the instance would have reached in
+    /// its own group. A handover of another formula, or one that is not well formed (it may come
+    /// from the network), is refused and the group is unchanged (but for residual nodes that
+    /// nothing refers to).
+    pub fn take_over(&mut self, handover: &Handover) -> Result<InstanceId, HandoverError> {
+        let expected = self.engine.formula.fingerprint();
+        if handover.formula != expected {
+            return Err(HandoverError::OtherFormula { expected, found: handover.formula });
+        }
+        let formula = self.engine.formula.clone();
+        let root = handover::read_in(&mut self.engine.arena, &formula, self.start, &handover.nodes)?;
+        let decided = root <= FALSE;
+        match handover.verdict {
+            Some(v) if !decided || v != (root == TRUE) => {
+                return Err(HandoverError::Inconsistent("has a verdict its residual does not have"));
+            }
+            None if decided => {
+                return Err(HandoverError::Inconsistent("has a decided residual but no verdict"));
+            }
+            _ => {}
+        }
+        if handover.verdict.is_some() != handover.decided_at.is_some() {
+            return Err(HandoverError::Inconsistent(
+                "has a verdict without the time it was decided, or the reverse",
+            ));
+        }
+        if (root == self.start) != handover.last_time.is_none() {
+            return Err(HandoverError::Inconsistent(
+                "has seen states but has the whole formula as its residual, or the reverse",
+            ));
+        }
+        let id = self.start();
+        let slot = &mut self.slots[id.index as usize];
+        slot.root = root;
+        slot.last_time = handover.last_time;
+        slot.verdict = handover.verdict;
+        slot.decided_at = handover.decided_at;
+        Ok(id)
     }
 
     /// What the engine did so far.
