@@ -79,6 +79,9 @@ pub enum Cause {
     Forgotten,
     /// A partial object whose identification resolved to an existing object.
     Resolved,
+    /// The object went to (`removed`, `unlinked`) or came from (`created`, `linked`) another
+    /// engine with its structure (`crate::handover`).
+    HandedOver,
 }
 
 impl Cause {
@@ -99,6 +102,7 @@ impl Cause {
             Cause::Forgotten => "forgotten",
             Cause::Resolved => "resolved",
             Cause::Pruned => "pruned",
+            Cause::HandedOver => "handed_over",
         }
     }
 }

@@ -59,6 +59,8 @@ pub struct AnchorConfig {
     /// The host's functions that conditions may call besides the built-ins and their unit's
     /// predicates (the runtime's registry: `in_view`, `pixel`, `footprint`).
     pub functions: Vec<kpl_mtl::Function>,
+    /// The numbers of new symbols (one region's of several: [`crate::store::Numbering::region`]).
+    pub numbering: crate::store::Numbering,
 }
 
 /// A problem with one object or condition during a step; the step went on without it.
@@ -212,7 +214,7 @@ impl Anchoring {
         config: AnchorConfig,
         only: Option<&[String]>,
     ) -> Result<Anchoring, BuildError> {
-        let AnchorConfig { implementations, mut networks, functions } = config;
+        let AnchorConfig { implementations, mut networks, functions, numbering } = config;
         // The streams the conditions name (the links' `env` inputs and the forget conditions'),
         // one slot each, the same in every condition.
         let mut env_names: Vec<Arc<str>> = spec
@@ -376,7 +378,8 @@ impl Anchoring {
             }
         }
 
-        let store = Store::new(types.iter().map(|t| t.record.symbol.clone()).collect());
+        let mut store = Store::new(types.iter().map(|t| t.record.symbol.clone()).collect());
+        store.set_numbering(numbering);
         let mut engine = Anchoring {
             types,
             type_order,
@@ -943,7 +946,7 @@ impl Anchoring {
     }
 
     /// Removes branch objects (`removed`, cause `pruned`).
-    fn prune(&mut self, mut branches: Vec<ObjectKey>, time: Time, out: &mut StepOutput) {
+    pub(crate) fn prune(&mut self, mut branches: Vec<ObjectKey>, time: Time, out: &mut StepOutput) {
         branches.sort_by_key(|k| self.store.get(*k).map(|o| o.seq));
         for key in branches {
             let owner = self.store.get(key).and_then(|b| b.branch_of).and_then(|o| self.store.get(o));

@@ -27,6 +27,7 @@ use crate::change::{Cause, Change, ChangeKind};
 pub use crate::conditions::Condition;
 use crate::conditions::{LinkConditions, LinkState};
 use crate::engine::{Anchoring, Identification, StepCtx};
+use crate::handover::HandedCondition;
 use crate::records::{position, value_position, velocity};
 use crate::stateful::{UnitCall, UnitMemory};
 use crate::status;
@@ -76,6 +77,29 @@ impl Groups {
 
     fn linked(&mut self, to: ObjectKey) -> InstanceState {
         InstanceState::Linked { to, maintain: self.take(MAINTAIN) }
+    }
+
+    fn hand_over(&self, kind: usize, condition: &Condition) -> HandedCondition {
+        match condition {
+            Condition::Pending(id) => match self.by_kind[kind].hand_over(*id) {
+                Some(handover) => HandedCondition::Pending(handover),
+                // (Never: a pending condition's instance is in its group.)
+                None => HandedCondition::Restart,
+            },
+            Condition::Decided(v) => HandedCondition::Decided(*v),
+        }
+    }
+
+    fn take_over(
+        &mut self,
+        kind: usize,
+        condition: &HandedCondition,
+    ) -> Result<Condition, kpl_mtl::HandoverError> {
+        Ok(match condition {
+            HandedCondition::Pending(handover) => Condition::Pending(self.by_kind[kind].take_over(handover)?),
+            HandedCondition::Decided(v) => Condition::Decided(*v),
+            HandedCondition::Restart => self.take(kind),
+        })
     }
 }
 
@@ -261,6 +285,37 @@ impl LinkProcess {
             self.stats.instances_removed += 1;
             self.give_state(instance.state);
         }
+    }
+
+    /// The instance of `from` as a handover carries it: the object it is linked to and its
+    /// maintain condition, or its establish condition while unlinked (its candidates and
+    /// identifications stay behind: they are about objects of this engine). `None` without one.
+    pub(crate) fn hand_over_instance(&self, from: ObjectKey) -> Option<(Option<ObjectKey>, HandedCondition)> {
+        let instance = self.instances.get(from.index())?.as_ref().filter(|i| i.from == from)?;
+        Some(match &instance.state {
+            InstanceState::Linked { to, maintain } => (Some(*to), self.groups.hand_over(MAINTAIN, maintain)),
+            InstanceState::Unlinked(u) => (None, self.groups.hand_over(ESTABLISH, &u.establish)),
+        })
+    }
+
+    /// Makes the instance of `from` (an object just taken over) go on from a handed-over one.
+    pub(crate) fn take_over_instance(
+        &mut self,
+        from: ObjectKey,
+        to: Option<ObjectKey>,
+        condition: &HandedCondition,
+    ) -> Result<(), kpl_mtl::HandoverError> {
+        let state = match to {
+            Some(to) => InstanceState::Linked { to, maintain: self.groups.take_over(MAINTAIN, condition)? },
+            None => InstanceState::Unlinked(Unlinked {
+                establish: self.groups.take_over(ESTABLISH, condition)?,
+                candidates: Vec::new(),
+                identifications: Vec::new(),
+            }),
+        };
+        self.stats.instances_created += 1;
+        self.set_state(from, state);
+        Ok(())
     }
 
     /// Puts the instance of `from` back to unlinked (its linked-to object was removed).

@@ -250,8 +250,33 @@ pub struct Store {
     symbols: Vec<HashMap<Arc<str>, ObjectKey>>,
     counters: Vec<u64>,
     prefixes: Vec<Arc<str>>,
+    numbering: Numbering,
     next_seq: u64,
     len: usize,
+}
+
+/// Which numbers a store gives its new symbols: `first`, `first + stride`, `first + 2 stride`, ...
+/// (`wo1`, `wo2`, ... by default). Stores of several regions or hosts that each take their own
+/// `first` of a common `stride` never make the same symbol, without asking each other, so a
+/// structure handed from one to another keeps its symbols (`crate::handover`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Numbering {
+    pub first: u64,
+    pub stride: u64,
+}
+
+impl Default for Numbering {
+    fn default() -> Numbering {
+        Numbering { first: 1, stride: 1 }
+    }
+}
+
+impl Numbering {
+    /// Region `index` (from 0) of `count`: numbers `index + 1` modulo `count`.
+    pub fn region(index: u64, count: u64) -> Numbering {
+        let stride = count.max(1);
+        Numbering { first: index % stride + 1, stride }
+    }
 }
 
 impl Store {
@@ -265,6 +290,7 @@ impl Store {
             symbols: vec![HashMap::new(); n],
             counters: vec![0; n],
             prefixes,
+            numbering: Numbering::default(),
             next_seq: 0,
             len: 0,
         }
@@ -317,12 +343,20 @@ impl Store {
         }
     }
 
-    /// A fresh symbol of a type: its prefix and the next number not in use.
+    /// Gives new symbols numbers of `numbering` (before the first object is made).
+    pub fn set_numbering(&mut self, numbering: Numbering) {
+        self.numbering = Numbering { first: numbering.first.max(1), stride: numbering.stride.max(1) };
+    }
+
+    /// A fresh symbol of a type: its prefix and the next number of the store's [`Numbering`]
+    /// not in use.
     pub fn new_symbol(&mut self, ty: TypeId) -> Arc<str> {
         let t = ty as usize;
+        let Numbering { first, stride } = self.numbering;
         loop {
             self.counters[t] += 1;
-            let symbol: Arc<str> = Arc::from(format!("{}{}", self.prefixes[t], self.counters[t]));
+            let number = first.saturating_add((self.counters[t] - 1).saturating_mul(stride));
+            let symbol: Arc<str> = Arc::from(format!("{}{}", self.prefixes[t], number));
             if !self.symbols[t].contains_key(&symbol) {
                 return symbol;
             }

@@ -149,6 +149,7 @@ impl Shared {
                 implementations: self.implementations.clone(),
                 networks: Networks::default().with_base_dir(&self.spec_dir),
                 functions: self.functions.clone(),
+                ..AnchorConfig::default()
             };
             let engine = Anchoring::from_spec_links(&self.spec, config, Some(&self.links))
                 .map_err(|e| ProcessError::failed(format!("anchoring: {e}")))?;
