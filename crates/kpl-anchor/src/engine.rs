@@ -181,8 +181,8 @@ pub struct Anchoring {
     pub(crate) links: Vec<LinkProcess>,
     link_order: Vec<LinkId>,
     pub(crate) store: Store,
-    source_ids: BTreeMap<String, u32>,
-    source_percepts: Vec<Vec<ObjectKey>>,
+    pub(crate) source_ids: BTreeMap<String, u32>,
+    pub(crate) source_percepts: Vec<Vec<ObjectKey>>,
     /// The valid time of each source's last snapshot taken in.
     source_times: Vec<Option<Time>>,
     pub(crate) identifications: Vec<Identification>,
@@ -557,7 +557,7 @@ impl Anchoring {
         self.store.get(key).map(|o| o.symbol.clone())
     }
 
-    fn source_id(&mut self, source: &str) -> u32 {
+    pub(crate) fn source_id(&mut self, source: &str) -> u32 {
         if let Some(id) = self.source_ids.get(source) {
             return *id;
         }

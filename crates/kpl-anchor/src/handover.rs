@@ -49,6 +49,12 @@ pub struct StructureHandover {
 pub struct HandedObject {
     pub ty: Arc<str>,
     pub symbol: Arc<str>,
+    /// A percept (the root of a structure handed over with the percept that feeds it, within one
+    /// process whose engines share their sources): the source that lists it, whether the last
+    /// snapshot listed it and when one last did.
+    pub source: Option<Arc<str>>,
+    pub present: bool,
+    pub last_seen: Time,
     pub created: Time,
     /// The state (a record whose `id` is the symbol) and its valid time.
     pub state: Value,
@@ -132,7 +138,12 @@ impl Anchoring {
         let t = self.type_id(ty).ok_or_else(no_object)?;
         let root = self.store.by_symbol(t, symbol).ok_or_else(no_object)?;
         let root_object = self.store.get(root).ok_or_else(no_object)?;
-        if root_object.origin != Origin::Derived || root_object.branch_of.is_some() {
+        let handable = match root_object.origin {
+            Origin::Derived => root_object.branch_of.is_none(),
+            Origin::Percept { .. } => true,
+            Origin::Partial => false,
+        };
+        if !handable {
             return Err(HandoverError::NotDerived(symbol.to_string()));
         }
         let time = self.last_time.unwrap_or(root_object.state_time);
@@ -168,9 +179,20 @@ impl Anchoring {
                         ended: run.ended,
                     })
                 });
+            let source = match object.origin {
+                Origin::Percept { source } => self
+                    .source_ids
+                    .iter()
+                    .find(|(_, id)| **id == source)
+                    .map(|(name, _)| Arc::from(name.as_str())),
+                _ => None,
+            };
             objects.push(HandedObject {
                 ty: self.types[object.ty as usize].name.clone(),
                 symbol: object.symbol.clone(),
+                source,
+                present: object.present,
+                last_seen: object.last_seen,
                 created: object.created,
                 state: object.value.clone(),
                 state_time: object.state_time,
@@ -266,14 +288,24 @@ impl Anchoring {
         let mut out = StepOutput { time, ..StepOutput::default() };
         let mut keys = Vec::with_capacity(handover.objects.len());
         for (object, ty) in handover.objects.iter().zip(&plan.types) {
+            let origin = match &object.source {
+                Some(name) => Origin::Percept { source: self.source_id(name) },
+                None => Origin::Derived,
+            };
             let key = self.store.insert(
                 *ty,
                 object.symbol.clone(),
-                Origin::Derived,
+                origin,
                 kpl_core::Record::default(),
                 object.created,
             );
+            if let Origin::Percept { source } = origin {
+                self.source_percepts[source as usize].push(key);
+            }
             if let Some(o) = self.store.get_mut(key) {
+                o.present = object.present;
+                o.last_seen = object.last_seen;
+                o.anchored = object.source.is_some();
                 o.value = object.state.clone();
                 o.state_time = object.state_time;
                 o.measured = object.measured;
@@ -356,7 +388,10 @@ impl Anchoring {
         for (i, object) in handover.objects.iter().enumerate() {
             let ty =
                 self.type_id(&object.ty).ok_or_else(|| HandoverError::UnknownType(object.ty.to_string()))?;
-            if self.types[ty as usize].links_into.is_empty() {
+            // A percept only with its source, as the root; a derived object only of a type links
+            // make here.
+            let percept_type = self.types[ty as usize].links_into.is_empty();
+            if percept_type != object.source.is_some() || (object.source.is_some() && i != 0) {
                 return Err(HandoverError::NotDerived(object.symbol.to_string()));
             }
             if self.store.by_symbol(ty, &object.symbol).is_some()

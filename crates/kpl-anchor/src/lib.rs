@@ -74,6 +74,7 @@ pub mod link;
 pub mod networks;
 pub mod predict;
 pub mod records;
+pub mod regions;
 pub mod registry;
 pub mod relations;
 pub mod smoother;
