@@ -230,12 +230,13 @@ impl Anchoring {
         let mut types: Vec<TypeInfo> = spec
             .types
             .iter()
+            .map(|record| own_names(record))
             .map(|record| TypeInfo {
                 name: record.name.clone(),
-                record: record.clone(),
+                forget: spec.forget.after(&record.name),
+                record,
                 links_into: Vec::new(),
                 model: None,
-                forget: spec.forget.after(&record.name),
                 sooner: None,
                 made_elsewhere: false,
             })
@@ -1385,6 +1386,22 @@ impl Anchoring {
 }
 
 /// `an int`, `a list`.
+/// A copy of a record type whose names are this engine's own: the states it makes share their
+/// attribute names (reference counts touched at every state), and engines of several regions
+/// stepping on different threads must not share those counters.
+fn own_names(record: &RecordType) -> Arc<RecordType> {
+    Arc::new(RecordType {
+        name: Arc::from(&*record.name),
+        parent: record.parent.as_deref().map(Arc::from),
+        symbol: Arc::from(&*record.symbol),
+        fields: record
+            .fields
+            .iter()
+            .map(|f| kpl_core::FieldType { name: Arc::from(&*f.name), ty: f.ty.clone() })
+            .collect(),
+    })
+}
+
 fn with_article(kind: &str) -> String {
     let vowel = kind.starts_with(['a', 'e', 'i', 'o', 'u']);
     format!("{} {kind}", if vowel { "an" } else { "a" })

@@ -27,8 +27,9 @@
 //! modulo n ([`crate::store::Numbering::region`]). Handovers happen between steps in a fixed order
 //! (regions in index order, objects in creation order).
 
-use std::collections::HashMap;
 use std::sync::Arc;
+
+use rustc_hash::FxHashMap;
 
 use kpl_core::{Time, Value};
 use kpl_semantic::hir;
@@ -101,6 +102,9 @@ impl RegionGrid {
     }
 }
 
+/// A source's percepts: id -> (region, time last listed).
+type Routes = FxHashMap<Arc<str>, (usize, Time)>;
+
 /// Counts over a run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RegionStats {
@@ -119,8 +123,8 @@ pub struct RegionStats {
 pub struct Regional {
     pub grid: RegionGrid,
     pub engines: Vec<Anchoring>,
-    /// (source, percept id) -> (region, time last listed).
-    routes: HashMap<(Arc<str>, Arc<str>), (usize, Time)>,
+    /// Per source (by name): its percepts' routes.
+    routes: Vec<(Arc<str>, Routes)>,
     /// The types a structure is handed over by: those linked from percept types.
     roots: Vec<Arc<str>>,
     pub stats: RegionStats,
@@ -170,12 +174,24 @@ impl Regional {
                 }
                 acc
             });
-        Ok(Regional { grid, engines, routes: HashMap::new(), roots, stats: RegionStats::default() })
+        Ok(Regional { grid, engines, routes: Vec::new(), roots, stats: RegionStats::default() })
     }
 
     /// The region a source's percept is in now (after the last step), if it was routed.
     pub fn region_of_percept(&self, source: &str, id: &str) -> Option<usize> {
-        self.routes.get(&(Arc::from(source), Arc::from(id))).map(|(r, _)| *r)
+        let (_, routes) = self.routes.iter().find(|(s, _)| &**s == source)?;
+        routes.get(id).map(|(r, _)| *r)
+    }
+
+    /// The routes of a source's percepts (made when it is first seen).
+    fn routes_of(&mut self, source: &str) -> usize {
+        match self.routes.iter().position(|(s, _)| &**s == source) {
+            Some(i) => i,
+            None => {
+                self.routes.push((Arc::from(source), FxHashMap::default()));
+                self.routes.len() - 1
+            }
+        }
     }
 
     /// One step of every region at `time` with these snapshots of percepts, on up to `workers`
@@ -201,34 +217,38 @@ impl Regional {
                 }
                 continue;
             };
-            let source: Arc<str> = Arc::from(input.source);
+            let source = self.routes_of(input.source);
+            let grid = self.grid;
+            let routes = &mut self.routes[source].1;
             for item in items.iter() {
-                let id = item.as_record().and_then(|r| r.id.clone());
+                let id = item.as_record().and_then(|r| r.id.as_ref());
                 let position = value_position(item);
-                let here = position.map_or(0, |p| self.grid.region_of(p));
-                let region = match &id {
-                    Some(id) => {
-                        let key = (source.clone(), id.clone());
-                        let region = match self.routes.get(&key) {
-                            Some((r, last)) if time - *last <= FORGET_ROUTE => {
-                                if position.is_none_or(|p| self.grid.holds(*r, p)) {
-                                    *r
-                                } else {
-                                    moves.push((*r, here, input.ty, id.clone()));
-                                    here
-                                }
+                let here = position.map_or(0, |p| grid.region_of(p));
+                let region = match id {
+                    Some(id) => match routes.get_mut(&**id) {
+                        Some((r, last)) => {
+                            if time - *last > FORGET_ROUTE {
+                                *r = here;
+                            } else if position.is_some_and(|p| !grid.holds(*r, p)) {
+                                moves.push((*r, here, input.ty, id.clone()));
+                                *r = here;
                             }
-                            _ => here,
-                        };
-                        self.routes.insert(key, (region, time));
-                        region
-                    }
+                            *last = time;
+                            *r
+                        }
+                        None => {
+                            routes.insert(id.clone(), (here, time));
+                            here
+                        }
+                    },
                     None => here,
                 };
                 routed[region][s].push(item.clone());
             }
         }
-        self.routes.retain(|_, (_, last)| time - *last <= FORGET_ROUTE);
+        for (_, routes) in &mut self.routes {
+            routes.retain(|_, (_, last)| time - *last <= FORGET_ROUTE);
+        }
         // 2. Percepts move with their structures.
         for (from, to, ty, id) in moves {
             self.stats.percepts_moved += 1;
@@ -243,7 +263,9 @@ impl Regional {
             .map(|region| region.into_iter().map(|items| Value::List(items.into())).collect())
             .collect();
         let results = self.step_engines(time, inputs, &lists, workers);
-        for (out, result) in outputs.iter_mut().zip(results) {
+        let mut drifts = Vec::with_capacity(n);
+        for (out, (result, drift)) in outputs.iter_mut().zip(results) {
+            drifts.push(drift);
             // The handovers before the step, then the step's changes.
             let mut stepped = result?;
             let mut changes = std::mem::take(&mut out.changes);
@@ -253,12 +275,13 @@ impl Regional {
         }
         // 4. Predicted structures that drift out, and the routes of their absent percepts with
         // them (so that a percept seen again goes where its structure is).
-        for r in 0..n {
-            for drift in self.drifting(r) {
+        for (r, drift) in drifts.into_iter().enumerate() {
+            for drift in drift {
                 if self.move_structure(r, drift.to, &drift.ty, &drift.symbol, &mut outputs) {
                     self.stats.drifted += 1;
-                    for key in drift.percepts {
-                        if let Some(route) = self.routes.get_mut(&key) {
+                    for (source, id) in drift.percepts {
+                        let routes = self.routes.iter_mut().find(|(s, _)| *s == source);
+                        if let Some(route) = routes.and_then(|(_, routes)| routes.get_mut(&id)) {
                             route.0 = drift.to;
                         }
                     }
@@ -268,27 +291,32 @@ impl Regional {
         Ok(RegionalStep { outputs })
     }
 
+    /// Each region's step and, after it, the structures drifting out of it (worked out on the
+    /// region's thread).
     fn step_engines(
         &mut self,
         time: Time,
         inputs: &[Snapshot<'_>],
         lists: &[Vec<Value>],
         workers: usize,
-    ) -> Vec<Result<StepOutput, StepError>> {
-        let step = |engine: &mut Anchoring, lists: &[Value]| {
+    ) -> Vec<(Result<StepOutput, StepError>, Vec<Drift>)> {
+        let (grid, roots) = (self.grid, &self.roots);
+        let step = |r: usize, engine: &mut Anchoring| {
             let snapshots: Vec<Snapshot<'_>> = inputs
                 .iter()
-                .zip(lists)
+                .zip(&lists[r])
                 .map(|(input, objects)| Snapshot { source: input.source, ty: input.ty, objects })
                 .collect();
-            engine.step(time, &snapshots)
+            let result = engine.step(time, &snapshots);
+            let drift = if result.is_ok() { drifting(engine, r, &grid, roots) } else { Vec::new() };
+            (result, drift)
         };
         let workers = workers.clamp(1, self.engines.len().max(1));
         if workers == 1 {
-            return self.engines.iter_mut().zip(lists).map(|(engine, lists)| step(engine, lists)).collect();
+            return self.engines.iter_mut().enumerate().map(|(r, engine)| step(r, engine)).collect();
         }
         // Region i on thread i mod workers; results put back in region order.
-        let mut done: Vec<(usize, Result<StepOutput, StepError>)> = Vec::with_capacity(self.engines.len());
+        let mut done = Vec::with_capacity(self.engines.len());
         let mut shares: Vec<Vec<(usize, &mut Anchoring)>> = (0..workers).map(|_| Vec::new()).collect();
         for (i, engine) in self.engines.iter_mut().enumerate() {
             shares[i % workers].push((i, engine));
@@ -298,7 +326,7 @@ impl Regional {
                 .into_iter()
                 .map(|share| {
                     scope.spawn(move || {
-                        share.into_iter().map(|(i, engine)| (i, step(engine, &lists[i]))).collect::<Vec<_>>()
+                        share.into_iter().map(|(i, engine)| (i, step(i, engine))).collect::<Vec<_>>()
                     })
                 })
                 .collect();
@@ -311,45 +339,6 @@ impl Regional {
         });
         done.sort_by_key(|(i, _)| *i);
         done.into_iter().map(|(_, result)| result).collect()
-    }
-
-    /// Structures of region `r` that no present percept feeds and whose root left the region's
-    /// widened cell.
-    fn drifting(&self, r: usize) -> Vec<Drift> {
-        let engine = &self.engines[r];
-        let mut out = Vec::new();
-        for ty in &self.roots {
-            let Some(t) = engine.type_id(ty) else { continue };
-            for key in engine.store.objects_of(t) {
-                let Some(object) = engine.store.get(key) else { continue };
-                if object.origin != Origin::Derived || object.branch_of.is_some() {
-                    continue;
-                }
-                let fed =
-                    object.incoming.iter().any(|(_, p)| engine.store.get(*p).is_some_and(|p| p.present));
-                let Some(position) = value_position(&object.value) else { continue };
-                if fed || self.grid.holds(r, position) {
-                    continue;
-                }
-                let percepts = object
-                    .incoming
-                    .iter()
-                    .filter_map(|(_, p)| {
-                        let p = engine.store.get(*p)?;
-                        let Origin::Percept { source } = p.origin else { return None };
-                        let name = engine.source_ids.iter().find(|(_, id)| **id == source)?.0;
-                        Some((Arc::from(name.as_str()), p.symbol.clone()))
-                    })
-                    .collect();
-                out.push(Drift {
-                    ty: ty.clone(),
-                    symbol: object.symbol.clone(),
-                    to: self.grid.region_of(position),
-                    percepts,
-                });
-            }
-        }
-        out
     }
 
     /// Hands a structure from region `from` to `to`; refused by `to`, it goes back. Whether it
@@ -391,4 +380,41 @@ impl Regional {
             None => Vec::new(),
         }
     }
+}
+
+/// Structures of region `r` that no present percept feeds and whose root left the region's
+/// widened cell.
+fn drifting(engine: &Anchoring, r: usize, grid: &RegionGrid, roots: &[Arc<str>]) -> Vec<Drift> {
+    let mut out = Vec::new();
+    for ty in roots {
+        let Some(t) = engine.type_id(ty) else { continue };
+        for key in engine.store.objects_of(t) {
+            let Some(object) = engine.store.get(key) else { continue };
+            if object.origin != Origin::Derived || object.branch_of.is_some() {
+                continue;
+            }
+            let fed = object.incoming.iter().any(|(_, p)| engine.store.get(*p).is_some_and(|p| p.present));
+            let Some(position) = value_position(&object.value) else { continue };
+            if fed || grid.holds(r, position) {
+                continue;
+            }
+            let percepts = object
+                .incoming
+                .iter()
+                .filter_map(|(_, p)| {
+                    let p = engine.store.get(*p)?;
+                    let Origin::Percept { source } = p.origin else { return None };
+                    let name = engine.source_ids.iter().find(|(_, id)| **id == source)?.0;
+                    Some((Arc::from(name.as_str()), p.symbol.clone()))
+                })
+                .collect();
+            out.push(Drift {
+                ty: ty.clone(),
+                symbol: object.symbol.clone(),
+                to: grid.region_of(position),
+                percepts,
+            });
+        }
+    }
+    out
 }

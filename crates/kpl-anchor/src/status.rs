@@ -113,19 +113,21 @@ pub fn write_status_of(target: &mut Arc<Record>, record: &Record, status: Object
     true
 }
 
-/// The names of the status attributes, made once: every state's record shares them.
-fn status_names() -> &'static (Arc<str>, Arc<str>) {
-    static NAMES: std::sync::OnceLock<(Arc<str>, Arc<str>)> = std::sync::OnceLock::new();
-    NAMES.get_or_init(|| (Arc::from(MEASURED), Arc::from(PREDICTED_SINCE)))
+thread_local! {
+    /// The names of the status attributes, made once per thread: every state's record made on
+    /// the thread shares them (and engines stepping on different threads, regions', do not share
+    /// their reference counts).
+    static STATUS_NAMES: (Arc<str>, Arc<str>) = (Arc::from(MEASURED), Arc::from(PREDICTED_SINCE));
 }
 
 fn push_status(fields: &mut Vec<(Arc<str>, Value)>, status: ObjectStatus) {
-    let (measured, predicted_since) = status_names();
-    fields.reserve(2);
-    fields.push((measured.clone(), Value::Bool(status.measured)));
-    if let Some(since) = status.predicted_since.filter(|_| !status.measured) {
-        fields.push((predicted_since.clone(), Value::Int(since)));
-    }
+    STATUS_NAMES.with(|(measured, predicted_since)| {
+        fields.reserve(2);
+        fields.push((measured.clone(), Value::Bool(status.measured)));
+        if let Some(since) = status.predicted_since.filter(|_| !status.measured) {
+            fields.push((predicted_since.clone(), Value::Int(since)));
+        }
+    });
 }
 
 /// Whether an object value says it was measured (`measured: true`); a record without the

@@ -52,7 +52,9 @@ fn structure_states(grid: RegionGrid) -> Vec<Vec<(String, Vec<Value>)>> {
     let mut out = Vec::new();
     for i in 0..240 {
         let objects = percepts(i);
-        regional.step(i * 100_000, &[Snapshot { source: "tracker", ty: "VisionPercept", objects: &objects }], 1).unwrap();
+        regional
+            .step(i * 100_000, &[Snapshot { source: "tracker", ty: "VisionPercept", objects: &objects }], 1)
+            .unwrap();
         let Value::List(items) = &objects else { unreachable!() };
         let mut states = Vec::new();
         for item in items.iter() {
@@ -182,7 +184,9 @@ fn without_a_margin_a_car_on_the_border_goes_back_and_forth_and_keeps_its_symbol
 #[test]
 fn the_partition_changes_no_state_of_any_structure() {
     let single = structure_states(RegionGrid { cols: 1, ..GRID });
-    for grid in [GRID, RegionGrid { margin: 0.0, ..GRID }, RegionGrid { cols: 3, rows: 2, margin: 2.0, ..GRID }] {
+    for grid in
+        [GRID, RegionGrid { margin: 0.0, ..GRID }, RegionGrid { cols: 3, rows: 2, margin: 2.0, ..GRID }]
+    {
         let partitioned = structure_states(grid);
         for (i, (a, b)) in single.iter().zip(&partitioned).enumerate() {
             assert_eq!(a, b, "step {i}, {grid:?}");

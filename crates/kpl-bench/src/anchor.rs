@@ -29,7 +29,7 @@ use crate::clock::CpuClock;
 use kpl_roads::scenarios::GridTownSize;
 
 use kpl_anchor::{AnchorConfig, Anchoring, StepOutput};
-use kpl_std::driver::{DriverError, SimDriver};
+use kpl_std::driver::{DriverError, RegionalDriver, SimDriver};
 
 /// The parameters of one run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,7 +100,7 @@ pub fn emit(engine: &Anchoring, output: &StepOutput) -> usize {
 
 #[derive(Debug, ClapArgs)]
 #[command(
-    after_help = "Examples:\n  kpl bench anchor                         # 100 to 10,000 cars\n  kpl bench anchor --cars 5000 --seconds 30"
+    after_help = "Examples:\n  kpl bench anchor                         # 100 to 10,000 cars\n  kpl bench anchor --cars 5000 --seconds 30\n  kpl bench anchor --cars 10000 --regions 2x1 --workers 1,2"
 )]
 pub struct Args {
     /// Numbers of cars to run.
@@ -118,6 +118,27 @@ pub struct Args {
     pub dropout: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Anchoring partitioned by region over a grid of COLSxROWS cells of the town (`2x1`), one
+    /// engine per region stepped on worker threads (kpl_anchor::regions); times are wall clock.
+    #[arg(long, value_name = "COLSxROWS", value_parser = parse_regions)]
+    pub regions: Option<(u32, u32)>,
+    /// With --regions: the numbers of worker threads to run each size with.
+    #[arg(long, value_delimiter = ',', requires = "regions")]
+    pub workers: Vec<usize>,
+    /// With --regions: how far (m) a percept may go past its region's border before it moves.
+    #[arg(long, requires = "regions")]
+    pub margin: Option<f64>,
+}
+
+fn parse_regions(text: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{text}`: expected COLSxROWS with both at least 1, such as `2x1`");
+    let (cols, rows) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (cols, rows): (u32, u32) =
+        (cols.trim().parse().map_err(|_| bad())?, rows.trim().parse().map_err(|_| bad())?);
+    if cols == 0 || rows == 0 || cols.saturating_mul(rows) > 1024 {
+        return Err(bad());
+    }
+    Ok((cols, rows))
 }
 
 struct Row {
@@ -194,8 +215,131 @@ fn run_one(args: &Args, cars: u32) -> Result<Row, String> {
     })
 }
 
+/// One size with anchoring partitioned by region, on `workers` threads.
+struct RegionalRow {
+    cars: u32,
+    workers: usize,
+    frames: usize,
+    /// Wall-clock seconds of the regions' steps (handovers included), and of making the frames.
+    anchor_s: f64,
+    source_s: f64,
+    objects: usize,
+    /// The largest region's objects over the mean (1: balanced).
+    imbalance: f64,
+    stats: kpl_anchor::regions::RegionStats,
+    switches: usize,
+    coverage: f64,
+}
+
+#[allow(clippy::disallowed_methods)] // a benchmark times its work (wall clock: several threads)
+fn run_regional(
+    args: &Args,
+    cars: u32,
+    (cols, rows): (u32, u32),
+    workers: usize,
+) -> Result<RegionalRow, String> {
+    let setup = ScaleSetup { dropout: args.dropout, seed: args.seed, ..ScaleSetup::new(cars) };
+    let spec = spec(&setup)?;
+    let single = driver(&setup).map_err(|e| e.to_string())?;
+    let (min, max) = single.sources.first().ok_or("no tracker")?.sim.network().bounds();
+    let margin = args.margin.unwrap_or(10.0);
+    let grid = kpl_anchor::regions::RegionGrid { min, max, cols, rows, margin };
+    let mut driver = RegionalDriver::new(single, &spec, grid, workers).map_err(|e| e.to_string())?;
+    let warmup = (args.warmup * 1e6) as i64;
+    let end = warmup + (args.seconds * 1e6) as i64;
+    let (mut anchor_s, mut source_s, mut frames) = (0.0, 0.0, 0);
+    let mut score = IdentityScore::default();
+    loop {
+        let start = std::time::Instant::now();
+        let Some(batch) = driver.next_frames(end) else { break };
+        let made = std::time::Instant::now();
+        let step = driver.step(&batch).map_err(|e| e.to_string())?;
+        let stepped = std::time::Instant::now();
+        std::hint::black_box(&step);
+        if batch.time >= warmup {
+            source_s += (made - start).as_secs_f64();
+            anchor_s += (stepped - made).as_secs_f64();
+            frames += 1;
+            let seen: Vec<_> =
+                batch.frames.iter().map(|(i, f)| (driver.sources[*i].name.as_str(), f)).collect();
+            score.record_with(&seen, |source, id| driver.regional.chain(source, id));
+        }
+    }
+    let detected: u64 = score.detected.values().sum();
+    let with_both: u64 =
+        score.anchored.iter().filter(|((_, ty), _)| ty == "OnRoadObject").map(|(_, n)| *n).sum();
+    Ok(RegionalRow {
+        cars,
+        workers,
+        frames,
+        anchor_s,
+        source_s,
+        objects: driver.regional.engines.iter().map(Anchoring::n_objects).sum(),
+        imbalance: {
+            let counts: Vec<usize> = driver.regional.engines.iter().map(Anchoring::n_objects).collect();
+            let mean = counts.iter().sum::<usize>() as f64 / counts.len().max(1) as f64;
+            counts.iter().copied().max().unwrap_or(0) as f64 / mean.max(1.0)
+        },
+        stats: driver.regional.stats,
+        switches: score.switches("WorldObject"),
+        coverage: if detected == 0 { 0.0 } else { with_both as f64 / detected as f64 },
+    })
+}
+
+fn run_regions(args: &Args, regions: (u32, u32), out: &mut dyn Write) -> Result<(), BenchError> {
+    let workers = if args.workers.is_empty() { vec![1, 2] } else { args.workers.clone() };
+    writeln!(
+        out,
+        "Anchoring partitioned into {}x{} regions (kpl_anchor::regions, margin {} m): the workload of `kpl bench anchor`, {:.0} s warm-up, {:.0} s timed; times are wall clock (the regions step on worker threads), the frames' making excluded; speed-up against the first worker count of the same size.\n",
+        regions.0,
+        regions.1,
+        args.margin.unwrap_or(10.0),
+        args.warmup,
+        args.seconds
+    )?;
+    writeln!(
+        out,
+        "| cars | workers | frames | anchoring per frame | per object-update | speed-up | real-time factor | simulator per frame | objects | largest region / mean | percepts moved | structures handed with them | drifted | refused | world-object switches | anchored through both levels |"
+    )?;
+    writeln!(out, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    for &cars in &args.cars {
+        let mut first = None;
+        for &w in &workers {
+            let row = run_regional(args, cars, regions, w)
+                .map_err(|e| BenchError::Failed(format!("{cars} cars, {w} workers: {e}")))?;
+            let frames = row.frames.max(1) as f64;
+            let per_frame = row.anchor_s / frames;
+            let base = *first.get_or_insert(per_frame);
+            writeln!(
+                out,
+                "| {} | {} | {} | {:.2} ms | {:.2} µs | {:.2} | {:.1} x | {:.2} ms | {} | {:.2} | {} | {} | {} | {} | {} | {:.1} % |",
+                row.cars,
+                row.workers,
+                row.frames,
+                per_frame * 1e3,
+                per_frame / f64::from(row.cars.max(1)) * 1e6,
+                base / per_frame,
+                0.1 / per_frame,
+                row.source_s / frames * 1e3,
+                row.objects,
+                row.imbalance,
+                row.stats.percepts_moved,
+                row.stats.followed,
+                row.stats.drifted,
+                row.stats.refused,
+                row.switches,
+                row.coverage * 100.0,
+            )?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs the benchmark and writes its table to `out`.
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<(), BenchError> {
+    if let Some(regions) = args.regions {
+        return run_regions(args, regions, out);
+    }
     writeln!(
         out,
         "Anchoring at scale: two link levels (the paper's conditions, kpl_bench::anchor), 10 Hz, {:.0} % missed detections, {:.0} s warm-up, {:.0} s timed, one thread; times are {} (what one core spends).\n",

@@ -31,6 +31,7 @@ use kpl_core::{Time, Value};
 use kpl_semantic::hir;
 use kpl_sim::{CarId, Frame, Params, PerceptSource, UavTrackerSim};
 
+use kpl_anchor::regions::{RegionGrid, Regional, RegionalStep};
 use kpl_anchor::{AnchorConfig, Anchoring, BuildError, Snapshot, StepError, StepOutput};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -61,6 +62,41 @@ pub struct SimDriver {
     pub sources: Vec<SimSource>,
     /// Processes of the spec the driver does not run (computational units, monitors, sinks).
     pub skipped: Vec<String>,
+    /// What the engine was built with (the trackers' networks included).
+    pub config: AnchorConfig,
+}
+
+/// A spec's trackers and its anchoring partitioned by region ([`Regional`]), stepped on up to
+/// `workers` threads.
+#[derive(Debug)]
+pub struct RegionalDriver {
+    pub regional: Regional,
+    pub sources: Vec<SimSource>,
+    pub workers: usize,
+}
+
+impl RegionalDriver {
+    /// The trackers of `driver` (which has not stepped) and one engine per region of `grid`.
+    pub fn new(
+        driver: SimDriver,
+        spec: &hir::Spec,
+        grid: RegionGrid,
+        workers: usize,
+    ) -> Result<RegionalDriver, DriverError> {
+        let regional = Regional::from_spec(spec, &driver.config, grid)?;
+        Ok(RegionalDriver { regional, sources: driver.sources, workers })
+    }
+
+    /// As [`SimDriver::next_frames`].
+    pub fn next_frames(&mut self, until: Time) -> Option<Frames> {
+        next_frames(&mut self.sources, until)
+    }
+
+    /// One step of every region with these frames.
+    pub fn step(&mut self, frames: &Frames) -> Result<RegionalStep, DriverError> {
+        let snapshots = snapshots(&self.sources, frames);
+        Ok(self.regional.step(frames.time, &snapshots, self.workers)?)
+    }
 }
 
 /// What one step saw and did.
@@ -141,43 +177,19 @@ impl SimDriver {
                 _ => skipped.push(process.name.clone()),
             }
         }
-        let engine = Anchoring::from_spec(spec, config)?;
-        Ok(SimDriver { engine, sources, skipped })
+        let engine = Anchoring::from_spec(spec, config.clone())?;
+        Ok(SimDriver { engine, sources, skipped, config })
     }
 
     /// The frames of the trackers that report next, if that is at or before `until` (trackers of
     /// recorded traffic that has ended report no more).
     pub fn next_frames(&mut self, until: Time) -> Option<Frames> {
-        let time =
-            self.sources.iter().filter(|s| !s.sim.finished()).map(|s| s.sim.next_frame_time()).min()?;
-        if time > until {
-            return None;
-        }
-        let mut frames = Vec::new();
-        for (i, source) in self.sources.iter_mut().enumerate() {
-            if !source.sim.finished() && source.sim.next_frame_time() == time {
-                frames.push((i, source.sim.next_frame()));
-            }
-        }
-        let values = frames
-            .iter()
-            .map(|(_, frame)| Value::List(frame.percepts.iter().map(|p| p.to_value()).collect()))
-            .collect();
-        Some(Frames { time, frames, values })
+        next_frames(&mut self.sources, until)
     }
 
     /// One engine step with these frames.
     pub fn step(&mut self, frames: &Frames) -> Result<StepOutput, DriverError> {
-        let snapshots: Vec<Snapshot<'_>> = frames
-            .frames
-            .iter()
-            .zip(&frames.values)
-            .map(|((i, _), objects)| Snapshot {
-                source: &self.sources[*i].name,
-                ty: &self.sources[*i].ty,
-                objects,
-            })
-            .collect();
+        let snapshots = snapshots(&self.sources, frames);
         Ok(self.engine.step(frames.time, &snapshots)?)
     }
 
@@ -201,6 +213,35 @@ impl SimDriver {
         }
         Ok(())
     }
+}
+
+/// The frames of the trackers that report next, if that is at or before `until`.
+fn next_frames(sources: &mut [SimSource], until: Time) -> Option<Frames> {
+    let time = sources.iter().filter(|s| !s.sim.finished()).map(|s| s.sim.next_frame_time()).min()?;
+    if time > until {
+        return None;
+    }
+    let mut frames = Vec::new();
+    for (i, source) in sources.iter_mut().enumerate() {
+        if !source.sim.finished() && source.sim.next_frame_time() == time {
+            frames.push((i, source.sim.next_frame()));
+        }
+    }
+    let values = frames
+        .iter()
+        .map(|(_, frame)| Value::List(frame.percepts.iter().map(|p| p.to_value()).collect()))
+        .collect();
+    Some(Frames { time, frames, values })
+}
+
+/// The frames as the snapshots of their sources.
+fn snapshots<'a>(sources: &'a [SimSource], frames: &'a Frames) -> Vec<Snapshot<'a>> {
+    frames
+        .frames
+        .iter()
+        .zip(&frames.values)
+        .map(|((i, _), objects)| Snapshot { source: &sources[*i].name, ty: &sources[*i].ty, objects })
+        .collect()
 }
 
 /// The frames of one time: (index of the source, frame), and each frame's percepts as the
@@ -229,11 +270,21 @@ pub struct IdentityScore {
 impl IdentityScore {
     /// Records one step.
     pub fn record(&mut self, step: &DriverStep<'_>) {
-        for (_, frame) in &step.frames {
+        self.record_with(&step.frames, |_, id| step.engine.chain(id));
+    }
+
+    /// Records one step whose structures `chain` gives: (source, percept id) -> the (type,
+    /// symbol) of each object reached from the percept, as [`Anchoring::chain`].
+    pub fn record_with(
+        &mut self,
+        frames: &[(&str, &Frame)],
+        chain: impl Fn(&str, &str) -> Vec<(Arc<str>, Arc<str>)>,
+    ) {
+        for (source, frame) in frames {
             for percept in &frame.percepts {
                 let PerceptSource::Car(car) = percept.source else { continue };
                 *self.detected.entry(car).or_default() += 1;
-                for (ty, symbol) in step.engine.chain(&percept.id.to_string()) {
+                for (ty, symbol) in chain(source, &percept.id.to_string()) {
                     *self.anchored.entry((car, ty.to_string())).or_default() += 1;
                     let list = self.symbols.entry((car, ty.to_string())).or_default();
                     if list.last() != Some(&symbol) {
