@@ -418,4 +418,40 @@ mod tests {
         assert!(score.cars_with("WorldObject") * 100 >= cars * 95, "{}", score.cars_with("WorldObject"));
         assert!(score.cars_with("OnRoadObject") * 100 >= cars * 90, "{}", score.cars_with("OnRoadObject"));
     }
+
+    /// Anchoring partitioned by region: cars cross the border with their symbols, and the result
+    /// does not depend on the number of workers.
+    #[test]
+    fn regions_keep_symbols_and_workers_change_nothing() {
+        let args = Args {
+            cars: vec![300],
+            warmup: 3.0,
+            seconds: 6.0,
+            dropout: 0.1,
+            seed: 1,
+            regions: Some((2, 2)),
+            workers: vec![1, 2],
+            margin: Some(5.0),
+        };
+        let one = run_regional(&args, 300, (2, 2), 1).unwrap();
+        let two = run_regional(&args, 300, (2, 2), 2).unwrap();
+        assert!(one.stats.percepts_moved > 5, "{:?}", one.stats);
+        assert_eq!(one.stats.refused, 0);
+        assert_eq!(one.switches, 0);
+        assert!(one.coverage > 0.8, "{}", one.coverage);
+        assert_eq!((two.stats, two.switches, two.objects, two.frames), (one.stats, one.switches, one.objects, one.frames));
+        let mut out = Vec::new();
+        run(&Args { seconds: 1.0, warmup: 1.0, cars: vec![100], ..args }, &mut out).unwrap();
+        let table = String::from_utf8(out).unwrap();
+        assert_eq!(table.lines().filter(|l| l.starts_with("| 100 |")).count(), 2, "{table}");
+    }
+
+    #[test]
+    fn region_grids_are_read_as_cols_x_rows() {
+        assert_eq!(parse_regions("2x1"), Ok((2, 1)));
+        assert_eq!(parse_regions("4X3"), Ok((4, 3)));
+        for bad in ["2", "0x1", "x", "2x-1", "100x100", ""] {
+            assert!(parse_regions(bad).is_err(), "{bad}");
+        }
+    }
 }
