@@ -14,25 +14,7 @@ use kpl_anchor::store::Numbering;
 use kpl_anchor::{AnchorConfig, Anchoring, Cause, ChangeKind, HandoverError, InstanceView, StepOutput};
 use kpl_core::Value;
 
-const SPEC: &str = r#"
-type VisionPercept symbol vp { pos: vec2, vel: vec2, size: float }
-type WorldObject   symbol wo { pos: vec2, vel: vec2 }
-type OnRoadObject  : WorldObject symbol oo { road: int, lane_offset: float }
-source tracker : list<VisionPercept> = engine.input()
-link vision_world : VisionPercept -> WorldObject via anchor.world_from_percept {
-  establish   eventually[1s, inf] true
-  reestablish eventually[0, 1s] (xydist(from.pos, to.pos) < 10.0 and norm(from.vel - to.vel) < 5.0)
-  maintain    true
-}
-link world_onroad : WorldObject -> OnRoadObject via anchor.snap_to_lane(scenario: "crossing") {
-  establish   eventually[1s, inf] always[0, 1s] on_road(from.pos)
-  reestablish eventually[0, 1s] xydist(from.pos, to.pos) < 10.0
-  maintain    always eventually[0, 10s] always[0, 1s] on_road(from.pos)
-}
-predict WorldObject  = constant_velocity
-predict OnRoadObject = along_roads(scenario: "crossing")
-forget after 30s
-"#;
+const SPEC: &str = common::CROSSING_SPEC;
 
 fn region(index: u64) -> Anchoring {
     let spec = kpl_anchor::registry::check_text(SPEC).unwrap();

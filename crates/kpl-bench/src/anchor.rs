@@ -439,7 +439,10 @@ mod tests {
         assert_eq!(one.stats.refused, 0);
         assert_eq!(one.switches, 0);
         assert!(one.coverage > 0.8, "{}", one.coverage);
-        assert_eq!((two.stats, two.switches, two.objects, two.frames), (one.stats, one.switches, one.objects, one.frames));
+        assert_eq!(
+            (two.stats, two.switches, two.objects, two.frames),
+            (one.stats, one.switches, one.objects, one.frames)
+        );
         let mut out = Vec::new();
         run(&Args { seconds: 1.0, warmup: 1.0, cars: vec![100], ..args }, &mut out).unwrap();
         let table = String::from_utf8(out).unwrap();
