@@ -211,10 +211,8 @@ impl Regional {
         let mut moves: Vec<(usize, usize, &str, Arc<str>)> = Vec::new();
         for (s, input) in inputs.iter().enumerate() {
             let Value::List(items) = input.objects else {
-                // Not a list: every region's engine says so.
-                for region in &mut routed {
-                    region[s].push(input.objects.clone());
-                }
+                // Not a list: the first region's engine says so (its warning names the item).
+                routed[0][s].push(input.objects.clone());
                 continue;
             };
             let source = self.routes_of(input.source);
