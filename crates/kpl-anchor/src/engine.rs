@@ -181,7 +181,7 @@ pub struct Anchoring {
     pub(crate) links: Vec<LinkProcess>,
     link_order: Vec<LinkId>,
     pub(crate) store: Store,
-    pub(crate) source_ids: BTreeMap<String, u32>,
+    source_ids: BTreeMap<String, u32>,
     pub(crate) source_percepts: Vec<Vec<ObjectKey>>,
     /// The valid time of each source's last snapshot taken in.
     source_times: Vec<Option<Time>>,
@@ -558,6 +558,11 @@ impl Anchoring {
         self.store.get(key).map(|o| o.symbol.clone())
     }
 
+    /// The name of the source a percept's `Origin::Percept { source }` refers to.
+    pub(crate) fn source_name(&self, source: u32) -> Option<&str> {
+        self.source_ids.iter().find(|(_, id)| **id == source).map(|(name, _)| name.as_str())
+    }
+
     pub(crate) fn source_id(&mut self, source: &str) -> u32 {
         if let Some(id) = self.source_ids.get(source) {
             return *id;
@@ -729,8 +734,7 @@ impl Anchoring {
         let ty = self.links[l as usize].from_ty;
         let fed = self.types[ty as usize].links_into.is_empty();
         let read_by = |source: u32, link: &LinkProcess| {
-            let name = self.source_ids.iter().find(|(_, id)| **id == source).map(|(n, _)| n.as_str());
-            name.is_some_and(|n| link.from_sources.iter().any(|s| s == n))
+            self.source_name(source).is_some_and(|n| link.from_sources.iter().any(|s| s == n))
         };
         for key in self.store.objects_of(ty) {
             let Some(object) = self.store.get(key) else { continue };
@@ -1385,7 +1389,6 @@ impl Anchoring {
     }
 }
 
-/// `an int`, `a list`.
 /// A copy of a record type whose names are this engine's own: the states it makes share their
 /// attribute names (reference counts touched at every state), and engines of several regions
 /// stepping on different threads must not share those counters.
@@ -1402,6 +1405,7 @@ fn own_names(record: &RecordType) -> Arc<RecordType> {
     })
 }
 
+/// `an int`, `a list`.
 fn with_article(kind: &str) -> String {
     let vowel = kind.starts_with(['a', 'e', 'i', 'o', 'u']);
     format!("{} {kind}", if vowel { "an" } else { "a" })

@@ -100,9 +100,6 @@ pub struct HandedInstance {
 pub enum HandedCondition {
     Pending(kpl_mtl::Handover),
     Decided(bool),
-    /// Starts over in the receiving engine (a pending condition whose instance its group no
-    /// longer held; not made by a consistent engine).
-    Restart,
 }
 
 /// Why a structure could not be handed over or taken over; the engine is unchanged.
@@ -180,11 +177,7 @@ impl Anchoring {
                     })
                 });
             let source = match object.origin {
-                Origin::Percept { source } => self
-                    .source_ids
-                    .iter()
-                    .find(|(_, id)| **id == source)
-                    .map(|(name, _)| Arc::from(name.as_str())),
+                Origin::Percept { source } => self.source_name(source).map(Arc::from),
                 _ => None,
             };
             objects.push(HandedObject {

@@ -79,15 +79,12 @@ impl Groups {
         InstanceState::Linked { to, maintain: self.take(MAINTAIN) }
     }
 
-    fn hand_over(&self, kind: usize, condition: &Condition) -> HandedCondition {
-        match condition {
-            Condition::Pending(id) => match self.by_kind[kind].hand_over(*id) {
-                Some(handover) => HandedCondition::Pending(handover),
-                // (Never: a pending condition's instance is in its group.)
-                None => HandedCondition::Restart,
-            },
+    /// `None` only for a pending condition its group does not hold (not made by the engine).
+    fn hand_over(&self, kind: usize, condition: &Condition) -> Option<HandedCondition> {
+        Some(match condition {
+            Condition::Pending(id) => HandedCondition::Pending(self.by_kind[kind].hand_over(*id)?),
             Condition::Decided(v) => HandedCondition::Decided(*v),
-        }
+        })
     }
 
     fn take_over(
@@ -98,7 +95,6 @@ impl Groups {
         Ok(match condition {
             HandedCondition::Pending(handover) => Condition::Pending(self.by_kind[kind].take_over(handover)?),
             HandedCondition::Decided(v) => Condition::Decided(*v),
-            HandedCondition::Restart => self.take(kind),
         })
     }
 }
@@ -292,10 +288,12 @@ impl LinkProcess {
     /// identifications stay behind: they are about objects of this engine). `None` without one.
     pub(crate) fn hand_over_instance(&self, from: ObjectKey) -> Option<(Option<ObjectKey>, HandedCondition)> {
         let instance = self.instances.get(from.index())?.as_ref().filter(|i| i.from == from)?;
-        Some(match &instance.state {
-            InstanceState::Linked { to, maintain } => (Some(*to), self.groups.hand_over(MAINTAIN, maintain)),
-            InstanceState::Unlinked(u) => (None, self.groups.hand_over(ESTABLISH, &u.establish)),
-        })
+        match &instance.state {
+            InstanceState::Linked { to, maintain } => {
+                Some((Some(*to), self.groups.hand_over(MAINTAIN, maintain)?))
+            }
+            InstanceState::Unlinked(u) => Some((None, self.groups.hand_over(ESTABLISH, &u.establish)?)),
+        }
     }
 
     /// Makes the instance of `from` (an object just taken over) go on from a handed-over one.

@@ -37,7 +37,7 @@ use kpl_semantic::hir;
 use crate::engine::{AnchorConfig, Anchoring, Snapshot, StepOutput};
 use crate::error::{BuildError, StepError};
 use crate::records::value_position;
-use crate::store::{Numbering, Origin};
+use crate::store::{Numbering, Origin, TypeId};
 
 /// A percept not listed for this long is routed afresh by its position.
 pub const FORGET_ROUTE: Time = 2_000_000;
@@ -126,7 +126,7 @@ pub struct Regional {
     /// Per source (by name): its percepts' routes.
     routes: Vec<(Arc<str>, Routes)>,
     /// The types a structure is handed over by: those linked from percept types.
-    roots: Vec<Arc<str>>,
+    roots: Vec<TypeId>,
     pub stats: RegionStats,
 }
 
@@ -162,18 +162,16 @@ impl Regional {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
+        // The same in every region's engine: they are built from one spec.
         let first = &engines[0];
-        let roots = first
+        let mut roots: Vec<TypeId> = first
             .links
             .iter()
             .filter(|l| first.types[l.from_ty as usize].links_into.is_empty())
-            .map(|l| first.types[l.to_ty as usize].name.clone())
-            .fold(Vec::new(), |mut acc: Vec<Arc<str>>, t| {
-                if !acc.contains(&t) {
-                    acc.push(t);
-                }
-                acc
-            });
+            .map(|l| l.to_ty)
+            .collect();
+        roots.sort_unstable();
+        roots.dedup();
         Ok(Regional { grid, engines, routes: Vec::new(), roots, stats: RegionStats::default() })
     }
 
@@ -382,10 +380,9 @@ impl Regional {
 
 /// Structures of region `r` that no present percept feeds and whose root left the region's
 /// widened cell.
-fn drifting(engine: &Anchoring, r: usize, grid: &RegionGrid, roots: &[Arc<str>]) -> Vec<Drift> {
+fn drifting(engine: &Anchoring, r: usize, grid: &RegionGrid, roots: &[TypeId]) -> Vec<Drift> {
     let mut out = Vec::new();
-    for ty in roots {
-        let Some(t) = engine.type_id(ty) else { continue };
+    for &t in roots {
         for key in engine.store.objects_of(t) {
             let Some(object) = engine.store.get(key) else { continue };
             if object.origin != Origin::Derived || object.branch_of.is_some() {
@@ -402,12 +399,11 @@ fn drifting(engine: &Anchoring, r: usize, grid: &RegionGrid, roots: &[Arc<str>])
                 .filter_map(|(_, p)| {
                     let p = engine.store.get(*p)?;
                     let Origin::Percept { source } = p.origin else { return None };
-                    let name = engine.source_ids.iter().find(|(_, id)| **id == source)?.0;
-                    Some((Arc::from(name.as_str()), p.symbol.clone()))
+                    Some((Arc::from(engine.source_name(source)?), p.symbol.clone()))
                 })
                 .collect();
             out.push(Drift {
-                ty: ty.clone(),
+                ty: engine.types[t as usize].name.clone(),
                 symbol: object.symbol.clone(),
                 to: grid.region_of(position),
                 percepts,

@@ -240,7 +240,7 @@ fn run_regional(
 ) -> Result<RegionalRow, String> {
     let setup = ScaleSetup { dropout: args.dropout, seed: args.seed, ..ScaleSetup::new(cars) };
     let spec = spec(&setup)?;
-    let single = driver(&setup).map_err(|e| e.to_string())?;
+    let single = SimDriver::from_spec(&spec, AnchorConfig::default()).map_err(|e| e.to_string())?;
     let (min, max) = single.sources.first().ok_or("no tracker")?.sim.network().bounds();
     let margin = args.margin.unwrap_or(10.0);
     let grid = kpl_anchor::regions::RegionGrid { min, max, cols, rows, margin };

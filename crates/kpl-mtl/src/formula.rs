@@ -185,7 +185,8 @@ pub struct Formula {
     pub(crate) slot_names: Arc<[Arc<str>]>,
     pub(crate) domain_names: Arc<[Arc<str>]>,
     source: Mtl,
-    fingerprint: u64,
+    /// Worked out when a handover first asks for it.
+    fingerprint: std::sync::OnceLock<u64>,
 }
 
 impl Formula {
@@ -202,7 +203,7 @@ impl Formula {
         let Compiler { nodes, atoms, .. } = compiler;
         let info = template_info(&nodes);
         let plans = atoms.iter().map(|atom| AtomPlan::of(atom, &functions)).collect();
-        let mut formula = Formula {
+        Ok(Formula {
             nodes,
             info,
             atoms,
@@ -212,10 +213,8 @@ impl Formula {
             slot_names: context.slot_names().into(),
             domain_names: context.domain_names().into(),
             source: mtl.clone(),
-            fingerprint: 0,
-        };
-        formula.fingerprint = formula.compute_fingerprint();
-        Ok(formula)
+            fingerprint: std::sync::OnceLock::new(),
+        })
     }
 
     /// A 64-bit FNV-1a hash of the compiled formula (its nodes, its text with the atoms, the
@@ -223,7 +222,7 @@ impl Formula {
     /// names, in any process of the same build, so that a [`crate::Handover`] finds out whether
     /// it is taken over by a group of its own formula.
     pub fn fingerprint(&self) -> u64 {
-        self.fingerprint
+        *self.fingerprint.get_or_init(|| self.compute_fingerprint())
     }
 
     fn compute_fingerprint(&self) -> u64 {

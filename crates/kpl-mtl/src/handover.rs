@@ -15,7 +15,7 @@
 //! with a [`HandoverError`] instead of trusting it; a checked handover cannot make the engine
 //! panic. One of another formula is refused by the formula's fingerprint.
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 use std::sync::Arc;
 
 use kpl_core::Time;
@@ -119,20 +119,17 @@ pub(crate) fn write_out(arena: &Arena, root: NodeId) -> Vec<HandedNode> {
     // Children have smaller ids than their parents, so the reachable nodes in increasing id are
     // in an order where each comes after its children.
     let mut reachable = Vec::new();
-    let mut seen: HashMap<NodeId, u32> = HashMap::new();
+    let mut seen: HashSet<NodeId> = HashSet::new();
     let mut stack = vec![root];
     while let Some(id) = stack.pop() {
-        if seen.insert(id, 0).is_some() {
-            continue;
+        if seen.insert(id) {
+            reachable.push(id);
+            stack.extend_from_slice(arena.kids_of(&arena.nodes[id as usize]));
         }
-        reachable.push(id);
-        stack.extend_from_slice(arena.kids_of(&arena.nodes[id as usize]));
     }
     reachable.sort_unstable();
-    for (index, id) in reachable.iter().enumerate() {
-        seen.insert(*id, index as u32);
-    }
-    let index = |id: &NodeId| seen[id];
+    // A child's index in the list: where it is in the sorted ids (it is there: it was reached).
+    let index = |id: &NodeId| reachable.binary_search(id).unwrap_or_default() as u32;
     reachable
         .iter()
         .map(|id| {
